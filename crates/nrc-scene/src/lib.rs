@@ -2,3 +2,4 @@
 //! lights, camera, glTF loading, BVH ray queries, sampling and images.
 
 pub mod bsdf;
+pub mod sampling;
