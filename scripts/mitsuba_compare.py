@@ -1,0 +1,262 @@
+#!/usr/bin/env python3
+"""Cross-check `nrc render` against Mitsuba 3's `path` integrator (variant `scalar_rgb`).
+
+Loads a glTF scene of diffuse materials and area lights (the Cornell box), rebuilds it in
+Mitsuba (geometry exported to PLY, same camera, box pixel filter, same max_depth and
+Russian-roulette start depth), renders it with both programs at equal resolution, depth and
+samples per pixel, and reports:
+
+* the render times of both (Mitsuba's `mi.render` call; nrc's closing line),
+* whether the two images' mean radiance agrees within noise. Under the hypothesis that both
+  renderers are unbiased for the same pixel values, the per-pixel differences d_i have mean
+  0 and are independent across pixels, so mean(d) has standard error sqrt(sum d_i^2) / N;
+  |z| < 4 (a 99.99% two-sided bound) counts as agreement.
+
+Usage (from the repository root, after `cargo build --release`):
+
+    pip install mitsuba numpy
+    python3 scripts/mitsuba_compare.py --scene scenes/cornell-box.gltf \
+        --width 256 --height 256 --spp 64 --max-depth 8 --threads 2
+
+Only what the Cornell box needs is translated: meshes under node transforms, base colour
+factors (Lambertian), emissive factor times KHR_materials_emissive_strength (area lights),
+and the first perspective camera (or --camera-* overrides, as in `nrc render`).
+"""
+
+import argparse
+import base64
+import json
+import math
+import os
+import re
+import struct
+import subprocess
+import sys
+import tempfile
+import time
+
+import numpy as np
+
+
+def quat_to_mat(q):
+    x, y, z, w = q
+    return np.array([
+        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+    ])
+
+
+def node_matrix(node):
+    if "matrix" in node:
+        return np.array(node["matrix"], dtype=np.float64).reshape(4, 4).T
+    m = np.eye(4)
+    s = np.array(node.get("scale", [1, 1, 1]), dtype=np.float64)
+    m[:3, :3] = quat_to_mat(node.get("rotation", [0, 0, 0, 1])) * s[None, :]
+    m[:3, 3] = node.get("translation", [0, 0, 0])
+    return m
+
+
+def load_gltf(path):
+    """Returns (json document, list of buffers as bytes)."""
+    data = open(path, "rb").read()
+    if data[:4] == b"glTF":
+        jlen = struct.unpack("<I", data[12:16])[0]
+        doc = json.loads(data[20:20 + jlen])
+        rest = data[20 + jlen:]
+        bin_chunk = rest[8:8 + struct.unpack("<I", rest[:4])[0]] if len(rest) >= 8 else b""
+    else:
+        doc = json.loads(data)
+        bin_chunk = None
+    buffers = []
+    for b in doc.get("buffers", []):
+        uri = b.get("uri")
+        if uri is None:
+            buffers.append(bin_chunk)
+        elif uri.startswith("data:"):
+            buffers.append(base64.b64decode(uri.split(",", 1)[1]))
+        else:
+            buffers.append(open(os.path.join(os.path.dirname(path), uri), "rb").read())
+    return doc, buffers
+
+
+COMPONENT = {5120: np.int8, 5121: np.uint8, 5122: np.int16, 5123: np.uint16, 5125: np.uint32, 5126: np.float32}
+WIDTH = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4}
+
+
+def accessor(doc, buffers, i):
+    a = doc["accessors"][i]
+    v = doc["bufferViews"][a["bufferView"]]
+    dt = np.dtype(COMPONENT[a["componentType"]])
+    n = WIDTH[a["type"]]
+    stride = v.get("byteStride", dt.itemsize * n)
+    base = v.get("byteOffset", 0) + a.get("byteOffset", 0)
+    raw = buffers[v["buffer"]]
+    out = np.empty((a["count"], n), dtype=dt)
+    for k in range(a["count"]):
+        out[k] = np.frombuffer(raw, dtype=dt, count=n, offset=base + k * stride)
+    return out
+
+
+def walk(doc, roots, parent=np.eye(4)):
+    for i in roots:
+        node = doc["nodes"][i]
+        m = parent @ node_matrix(node)
+        yield node, m
+        yield from walk(doc, node.get("children", []), m)
+
+
+def gather(doc, buffers):
+    """World-space triangles grouped by material, and the first camera (pos, target, up, fov_y)."""
+    groups = {}
+    camera = None
+    scene = doc.get("scenes", [{"nodes": list(range(len(doc.get("nodes", []))))}])[doc.get("scene", 0)]
+    for node, m in walk(doc, scene["nodes"]):
+        if "camera" in node and camera is None:
+            cam = doc["cameras"][node["camera"]]
+            pos = m[:3, 3]
+            fwd = -m[:3, 2] / np.linalg.norm(m[:3, 2])
+            up = m[:3, 1] / np.linalg.norm(m[:3, 1])
+            camera = (pos, pos + fwd, up, math.degrees(cam["perspective"]["yfov"]))
+        if "mesh" not in node:
+            continue
+        for prim in doc["meshes"][node["mesh"]]["primitives"]:
+            if prim.get("mode", 4) != 4:
+                continue
+            p = accessor(doc, buffers, prim["attributes"]["POSITION"]).astype(np.float64)
+            p = (np.c_[p, np.ones(len(p))] @ m.T)[:, :3]
+            if "indices" in prim:
+                idx = accessor(doc, buffers, prim["indices"]).reshape(-1, 3).astype(np.int64)
+            else:
+                idx = np.arange(len(p)).reshape(-1, 3)
+            if np.linalg.det(m[:3, :3]) < 0:
+                idx = idx[:, ::-1]
+            groups.setdefault(prim.get("material", -1), []).append(p[idx])
+    return {k: np.concatenate(v) for k, v in groups.items()}, camera
+
+
+def write_ply(path, tris):
+    v = tris.reshape(-1, 3).astype(np.float32)
+    with open(path, "wb") as f:
+        f.write(("ply\nformat binary_little_endian 1.0\nelement vertex %d\nproperty float x\nproperty float y\n"
+                 "property float z\nelement face %d\nproperty list uchar int vertex_indices\nend_header\n"
+                 % (len(v), len(tris))).encode())
+        f.write(v.tobytes())
+        faces = np.empty(len(tris), dtype=[("n", "u1"), ("i", "<i4", 3)])
+        faces["n"] = 3
+        faces["i"] = np.arange(len(v), dtype=np.int32).reshape(-1, 3)
+        f.write(faces.tobytes())
+
+
+def material_of(doc, i):
+    """(base colour, emitted radiance) of glTF material i, with a warning for non-diffuse ones."""
+    if i < 0:
+        return np.ones(3), np.zeros(3)
+    m = doc["materials"][i]
+    pbr = m.get("pbrMetallicRoughness", {})
+    ext = m.get("extensions", {})
+    base = np.array(pbr.get("baseColorFactor", [1, 1, 1, 1])[:3])
+    le = np.array(m.get("emissiveFactor", [0, 0, 0])) * ext.get("KHR_materials_emissive_strength", {}).get("emissiveStrength", 1.0)
+    spec = ext.get("KHR_materials_specular", {}).get("specularFactor", 1.0)
+    if pbr.get("metallicFactor", 1.0) != 0 or spec != 0 or "baseColorTexture" in pbr:
+        print("warning: material %r is not a plain diffuse colour; Mitsuba gets a Lambertian of its base colour" % m.get("name", i), file=sys.stderr)
+    return base, le
+
+
+def vec3(s):
+    return np.array([float(x) for x in s.split(",")])
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--scene", required=True)
+    ap.add_argument("--width", type=int, default=256)
+    ap.add_argument("--height", type=int, default=256)
+    ap.add_argument("--spp", type=int, default=64)
+    ap.add_argument("--max-depth", type=int, default=8)
+    ap.add_argument("--rr-depth", type=int, default=5)
+    ap.add_argument("--threads", type=int, default=os.cpu_count())
+    ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--camera-pos", type=vec3)
+    ap.add_argument("--camera-target", type=vec3)
+    ap.add_argument("--camera-up", type=vec3)
+    ap.add_argument("--fov-y", type=float)
+    ap.add_argument("--two-sided-emitters", action="store_true",
+                    help="emit from both faces of emissive triangles (Mitsuba's area lights are one-sided)")
+    ap.add_argument("--nrc", default="target/release/nrc", help="path of the nrc binary")
+    ap.add_argument("--keep", help="folder to keep both EXRs in")
+    args = ap.parse_args()
+
+    import drjit as dr
+    import mitsuba as mi
+    mi.set_variant("scalar_rgb")
+    dr.set_thread_count(args.threads)
+
+    doc, buffers = load_gltf(args.scene)
+    groups, camera = gather(doc, buffers)
+    if args.camera_pos is not None:
+        camera = (args.camera_pos, args.camera_target, args.camera_up, args.fov_y)
+    if camera is None:
+        sys.exit("error: %s has no camera; pass --camera-pos/--camera-target/--camera-up/--fov-y" % args.scene)
+    pos, target, up, fov = camera
+
+    work = args.keep or tempfile.mkdtemp(prefix="nrc-mitsuba-")
+    os.makedirs(work, exist_ok=True)
+    scene = {
+        "type": "scene",
+        "integrator": {"type": "path", "max_depth": args.max_depth, "rr_depth": args.rr_depth},
+        "sensor": {
+            "type": "perspective", "fov": fov, "fov_axis": "y",
+            "to_world": mi.ScalarTransform4f().look_at(origin=list(pos), target=list(target), up=list(up)),
+            "sampler": {"type": "independent", "sample_count": args.spp},
+            "film": {"type": "hdrfilm", "width": args.width, "height": args.height,
+                     "rfilter": {"type": "box"}, "pixel_format": "rgb"},
+        },
+    }
+    for k, tris in groups.items():
+        base, le = material_of(doc, k)
+        sides = [tris, tris[:, ::-1]] if (args.two_sided_emitters and le.max() > 0) else [tris]
+        for s, t in enumerate(sides):
+            ply = os.path.join(work, "mesh%d_%d.ply" % (k + 1, s))
+            write_ply(ply, t)
+            shape = {"type": "ply", "filename": ply, "face_normals": True,
+                     "bsdf": {"type": "twosided", "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": list(base)}}}}
+            if le.max() > 0:
+                shape["emitter"] = {"type": "area", "radiance": {"type": "rgb", "value": list(le)}}
+            scene["shape%d_%d" % (k + 1, s)] = shape
+    ms = mi.load_dict(scene)
+    t0 = time.perf_counter()
+    img = np.array(mi.render(ms, spp=args.spp, seed=args.seed))
+    t_mitsuba = time.perf_counter() - t0
+    mi.Bitmap(img).write(os.path.join(work, "mitsuba.exr"))
+
+    ours = os.path.join(work, "nrc.exr")
+    cmd = [args.nrc, "render", "--scene", args.scene, "--width", str(args.width), "--height", str(args.height),
+           "--spp", str(args.spp), "--max-depth", str(args.max_depth), "--rr-depth", str(args.rr_depth),
+           "--threads", str(args.threads), "--seed", str(args.seed), "--out", ours,
+           "--camera-pos", ",".join(map(str, pos)), "--camera-target", ",".join(map(str, target)),
+           "--camera-up", ",".join(map(str, up)), "--fov-y", str(fov)]
+    run = subprocess.run(cmd, capture_output=True, text=True)
+    if run.returncode != 0:
+        sys.exit("error: nrc render failed: " + run.stderr.strip())
+    m = re.search(r"in ([0-9.]+) s", run.stderr + run.stdout)
+    t_nrc = float(m.group(1)) if m else float("nan")
+    a = np.array(mi.Bitmap(ours))[:, :, :3].astype(np.float64)
+    b = img[:, :, :3].astype(np.float64)
+
+    d = a - b
+    n = d.shape[0] * d.shape[1]
+    mean_d = d.reshape(-1, 3).mean(0)
+    se = np.sqrt((d.reshape(-1, 3) ** 2).sum(0)) / n
+    z = mean_d / se
+    print("scene %s, %dx%d, %d spp, max_depth %d, rr_depth %d, %d threads" % (
+        args.scene, args.width, args.height, args.spp, args.max_depth, args.rr_depth, args.threads))
+    print("time: nrc %.3f s, mitsuba scalar_rgb %.3f s (nrc %.2fx faster)" % (t_nrc, t_mitsuba, t_mitsuba / t_nrc))
+    print("mean radiance (r,g,b): nrc %s, mitsuba %s" % (np.round(a.reshape(-1, 3).mean(0), 5), np.round(b.reshape(-1, 3).mean(0), 5)))
+    print("difference z-scores (r,g,b): %s -> %s" % (np.round(z, 2), "agree" if np.all(np.abs(z) < 4) else "DISAGREE"))
+    print("images in %s" % work)
+    return 0 if np.all(np.abs(z) < 4) else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
