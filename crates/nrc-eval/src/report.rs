@@ -1,0 +1,326 @@
+//! The comparison report: one row per method (time per frame, samples, MSE, relMSE, MAPE, FLIP,
+//! bias², variance), optional temporal statistics, sweeps and time-to-error tables; written as
+//! `report.md` (a table a person reads at a glance, the best value of each error column in bold)
+//! and `report.json` (the same data, serde).
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+
+use crate::atomic::atomic_write;
+use crate::bias_variance::BiasVariance;
+use crate::error::{EvalError, Result};
+use crate::metrics::{ErrorMetrics, MAPE_EPSILON, REL_MSE_EPSILON};
+use crate::sweep::{SweepSeries, TimeToErrorTable, TimeToReach};
+use crate::temporal::TemporalStats;
+
+/// One method's results.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ReportRow {
+    pub method: String,
+    /// Mean wall time per frame, milliseconds.
+    pub time_per_frame_ms: f64,
+    /// Samples per pixel per frame (or the method's budget unit).
+    pub samples_per_pixel: f64,
+    #[serde(flatten)]
+    pub metrics: ErrorMetrics,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub bias_variance: Option<BiasVariance>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub temporal: Option<TemporalStats>,
+}
+
+/// A whole comparison.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Report {
+    pub title: String,
+    #[serde(default)]
+    pub scene: Option<String>,
+    pub width: usize,
+    pub height: usize,
+    /// How the reference was made, e.g. "path tracer, 4096 spp".
+    #[serde(default)]
+    pub reference: Option<String>,
+    /// ε of relMSE used for the rows.
+    pub rel_mse_epsilon: f64,
+    /// ε of MAPE used for the rows.
+    pub mape_epsilon: f64,
+    #[serde(default)]
+    pub notes: Vec<String>,
+    pub rows: Vec<ReportRow>,
+    #[serde(default)]
+    pub sweeps: Vec<SweepSeries>,
+    #[serde(default)]
+    pub time_to_error: Vec<TimeToErrorTable>,
+}
+
+impl Report {
+    /// An empty report with the default metric settings.
+    pub fn new(title: impl Into<String>, width: usize, height: usize) -> Self {
+        Self {
+            title: title.into(),
+            scene: None,
+            width,
+            height,
+            reference: None,
+            rel_mse_epsilon: REL_MSE_EPSILON,
+            mape_epsilon: MAPE_EPSILON,
+            notes: Vec::new(),
+            rows: Vec::new(),
+            sweeps: Vec::new(),
+            time_to_error: Vec::new(),
+        }
+    }
+
+    /// The report as Markdown.
+    pub fn to_markdown(&self) -> String {
+        let mut md = String::new();
+        let _ = writeln!(md, "# {}\n", self.title);
+        let mut facts = Vec::new();
+        if let Some(s) = &self.scene {
+            facts.push(format!("scene `{s}`"));
+        }
+        facts.push(format!("{}×{} pixels", self.width, self.height));
+        if let Some(r) = &self.reference {
+            facts.push(format!("reference: {r}"));
+        }
+        let _ = writeln!(md, "{}.\n", facts.join(", "));
+
+        if !self.rows.is_empty() {
+            self.rows_table(&mut md);
+        }
+        if self.rows.iter().any(|r| r.temporal.is_some()) {
+            self.temporal_table(&mut md);
+        }
+        for t in &self.time_to_error {
+            time_to_error_markdown(t, &mut md);
+        }
+        if !self.sweeps.is_empty() {
+            self.sweep_table(&mut md);
+        }
+        let _ = writeln!(
+            md,
+            "Errors per colour channel, averaged over pixels: MSE (x−y)², relMSE (x−y)²/(y²+{}), MAPE |x−y|/(y+{}); \
+             FLIP is mean HDR-FLIP (ACES exposures from the reference). bias² is corrected for the noise of the mean of R renders; \
+             variance is that of one render. Best value per column in **bold**.",
+            self.rel_mse_epsilon, self.mape_epsilon
+        );
+        for n in &self.notes {
+            let _ = writeln!(md, "\n{n}");
+        }
+        md
+    }
+
+    fn rows_table(&self, md: &mut String) {
+        let bv = |r: &ReportRow, f: fn(&BiasVariance) -> f64| r.bias_variance.as_ref().map(f);
+        let columns: [(&str, Vec<Option<f64>>, bool); 6] = [
+            (
+                "MSE",
+                self.rows.iter().map(|r| Some(r.metrics.mse)).collect(),
+                false,
+            ),
+            (
+                "relMSE",
+                self.rows.iter().map(|r| Some(r.metrics.rel_mse)).collect(),
+                false,
+            ),
+            (
+                "MAPE",
+                self.rows.iter().map(|r| Some(r.metrics.mape)).collect(),
+                false,
+            ),
+            (
+                "FLIP",
+                self.rows.iter().map(|r| r.metrics.flip).collect(),
+                false,
+            ),
+            (
+                "bias²",
+                self.rows.iter().map(|r| bv(r, |b| b.bias_sq)).collect(),
+                true,
+            ),
+            (
+                "variance",
+                self.rows.iter().map(|r| bv(r, |b| b.variance)).collect(),
+                false,
+            ),
+        ];
+        let _ = write!(md, "| method | time/frame (ms) | spp |");
+        for (name, _, _) in &columns {
+            let _ = write!(md, " {name} |");
+        }
+        let _ = write!(md, "\n|---|---:|---:|");
+        for _ in &columns {
+            let _ = write!(md, "---:|");
+        }
+        md.push('\n');
+        // The best of a column is its smallest value (for bias², the one closest to zero).
+        let best: Vec<Option<f64>> = columns
+            .iter()
+            .map(|(_, v, by_abs)| {
+                v.iter()
+                    .flatten()
+                    .map(|&x| if *by_abs { x.abs() } else { x })
+                    .fold(None, |m: Option<f64>, x| Some(m.map_or(x, |m| m.min(x))))
+            })
+            .collect();
+        for (i, r) in self.rows.iter().enumerate() {
+            let _ = write!(
+                md,
+                "| {} | {} | {} |",
+                r.method,
+                fmt_num(r.time_per_frame_ms),
+                fmt_num(r.samples_per_pixel)
+            );
+            for ((_, v, by_abs), b) in columns.iter().zip(&best) {
+                let cell = match v[i] {
+                    None => "–".to_string(),
+                    Some(x) => {
+                        let key = if *by_abs { x.abs() } else { x };
+                        if self.rows.len() > 1 && Some(key) == *b {
+                            format!("**{}**", fmt_num(x))
+                        } else {
+                            fmt_num(x)
+                        }
+                    }
+                };
+                let _ = write!(md, " {cell} |");
+            }
+            md.push('\n');
+        }
+        md.push('\n');
+    }
+
+    fn temporal_table(&self, md: &mut String) {
+        let _ = writeln!(md, "## Temporal stability\n");
+        let _ = writeln!(
+            md,
+            "| method | frames | mean abs. change | abs. error E | abs. error change E′ |\n|---|---:|---:|---:|---:|"
+        );
+        for r in &self.rows {
+            if let Some(t) = &r.temporal {
+                let opt = |v: Option<f64>| v.map_or("–".to_string(), fmt_num);
+                let _ = writeln!(
+                    md,
+                    "| {} | {} | {} | {} | {} |",
+                    r.method,
+                    t.frames,
+                    fmt_num(t.mean_abs_change),
+                    opt(t.mean_abs_error),
+                    opt(t.mean_abs_error_change)
+                );
+            }
+        }
+        md.push('\n');
+    }
+
+    fn sweep_table(&self, md: &mut String) {
+        let _ = writeln!(md, "## Sweep: error against time\n");
+        let _ = writeln!(
+            md,
+            "| method | time/frame (ms) | spp | MSE | relMSE | MAPE | FLIP |\n|---|---:|---:|---:|---:|---:|---:|"
+        );
+        for s in &self.sweeps {
+            for p in &s.points {
+                let m = &p.metrics;
+                let _ = writeln!(
+                    md,
+                    "| {} | {} | {} | {} | {} | {} | {} |",
+                    s.method,
+                    fmt_num(p.time_ms),
+                    fmt_num(p.samples_per_pixel),
+                    fmt_num(m.mse),
+                    fmt_num(m.rel_mse),
+                    fmt_num(m.mape),
+                    m.flip.map_or("–".to_string(), fmt_num)
+                );
+            }
+        }
+        md.push('\n');
+    }
+}
+
+fn time_to_error_markdown(t: &TimeToErrorTable, md: &mut String) {
+    let _ = writeln!(
+        md,
+        "## Time to reach the {} of {} at {} ms ({})\n",
+        t.metric.label(),
+        t.baseline,
+        fmt_num(t.baseline_time_ms),
+        fmt_num(t.target_error)
+    );
+    let _ = writeln!(md, "| method | time (ms) | speed-up |\n|---|---:|---:|");
+    for r in &t.rows {
+        let time = match r.time {
+            TimeToReach::Interpolated(v) => fmt_num(v),
+            TimeToReach::AtMost(v) => format!("≤ {}", fmt_num(v)),
+            TimeToReach::NotReached => "not reached".to_string(),
+        };
+        let _ = writeln!(
+            md,
+            "| {} | {} | {} |",
+            r.method,
+            time,
+            r.speedup.map_or("–".to_string(), |s| format!("{:.2}×", s))
+        );
+    }
+    md.push('\n');
+}
+
+/// Four significant digits; scientific notation outside [1e-3, 1e5).
+pub fn fmt_num(v: f64) -> String {
+    if !v.is_finite() {
+        return v.to_string();
+    }
+    if v == 0.0 {
+        return "0".to_string();
+    }
+    let a = v.abs();
+    if (1e-3..1e5).contains(&a) {
+        let decimals = (3 - a.log10().floor() as i32).max(0) as usize;
+        format!("{v:.decimals$}")
+    } else {
+        format!("{v:.3e}")
+    }
+}
+
+/// Paths of a written report.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct ReportFiles {
+    pub markdown: PathBuf,
+    pub json: PathBuf,
+}
+
+/// Writes `report.md` and `report.json` into `dir` (created if missing), each atomically.
+pub fn write_report(dir: &Path, report: &Report) -> Result<ReportFiles> {
+    std::fs::create_dir_all(dir).map_err(|source| EvalError::Io {
+        action: "creating directory",
+        path: dir.to_path_buf(),
+        source,
+    })?;
+    let files = ReportFiles {
+        markdown: dir.join("report.md"),
+        json: dir.join("report.json"),
+    };
+    let json = serde_json::to_string_pretty(report).map_err(|source| EvalError::Json {
+        path: files.json.clone(),
+        source,
+    })?;
+    atomic_write(&files.json, json.as_bytes())?;
+    atomic_write(&files.markdown, report.to_markdown().as_bytes())?;
+    Ok(files)
+}
+
+/// Reads a `report.json` written by [`write_report`].
+pub fn read_report_json(path: &Path) -> Result<Report> {
+    let text = std::fs::read_to_string(path).map_err(|source| EvalError::Io {
+        action: "reading",
+        path: path.to_path_buf(),
+        source,
+    })?;
+    serde_json::from_str(&text).map_err(|source| EvalError::Json {
+        path: path.to_path_buf(),
+        source,
+    })
+}
