@@ -1,0 +1,766 @@
+//! glTF 2.0 loading (`.gltf` + external or embedded buffers, `.glb`) into a
+//! [`SceneDescription`]: meshes flattened to world space through the node hierarchy,
+//! materials with their textures, and the first perspective camera.
+//!
+//! Every problem in the input is reported as a [`SceneError`] naming the file, buffer,
+//! image or mesh at fault; nothing in the input can make the loader panic (accessor types
+//! and ranges are checked before the `gltf` crate's readers see them).
+
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+
+use glam::{Mat3, Mat4, Vec2, Vec3, Vec4};
+use gltf::accessor::{DataType, Dimensions};
+use gltf::mesh::Mode;
+
+use crate::camera::Camera;
+use crate::error::{Result, SceneError};
+use crate::material::Material;
+use crate::scene::{Scene, SceneDescription};
+use crate::texture::{Texture, TextureRef, UvTransform, WrapMode, srgb_to_linear};
+
+/// Extensions this loader implements; a file may require them.
+pub const SUPPORTED_EXTENSIONS: [&str; 5] = [
+    "KHR_materials_emissive_strength",
+    "KHR_materials_transmission",
+    "KHR_materials_ior",
+    "KHR_materials_specular",
+    "KHR_texture_transform",
+];
+
+/// Loads a `.gltf` or `.glb` file into a [`Scene`].
+pub fn load(path: &Path) -> Result<Scene> {
+    Scene::from_description(load_description(path)?)
+}
+
+/// Loads a `.gltf` or `.glb` file into a [`SceneDescription`] (world-space meshes).
+pub fn load_description(path: &Path) -> Result<SceneDescription> {
+    let bytes = std::fs::read(path).map_err(|source| SceneError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    let parse = |message: String| SceneError::Parse {
+        path: path.to_path_buf(),
+        message,
+    };
+    check_glb_header(&bytes).map_err(parse)?;
+    let gltf::Gltf { document, blob } = gltf::Gltf::from_slice(&bytes).map_err(|e| {
+        parse(match e {
+            gltf::Error::Deserialize(e) => format!("invalid JSON: {e}"),
+            gltf::Error::Binary(e) => format!("corrupt .glb container: {e}"),
+            gltf::Error::Validation(errors) => format!(
+                "invalid glTF document: {}",
+                errors
+                    .iter()
+                    .map(|(p, e)| format!("{}: {e}", p.as_str()))
+                    .collect::<Vec<_>>()
+                    .join("; ")
+            ),
+            e => e.to_string(),
+        })
+    })?;
+    let mut loader = Loader {
+        path: path.to_path_buf(),
+        base: path.parent().map(Path::to_path_buf).unwrap_or_default(),
+        document: &document,
+        buffers: Vec::new(),
+        images: HashMap::new(),
+        textures: Vec::new(),
+        texture_keys: HashMap::new(),
+        warnings: Vec::new(),
+    };
+    loader.check_extensions()?;
+    loader.load_buffers(blob)?;
+    loader.build()
+}
+
+/// Checks the 12-byte `.glb` header against the file length, so that a truncated file is
+/// reported as such (the `gltf` crate's message for it is vague).
+fn check_glb_header(bytes: &[u8]) -> std::result::Result<(), String> {
+    if !bytes.starts_with(b"glTF") {
+        return Ok(());
+    }
+    if bytes.len() < 12 {
+        return Err(format!(
+            "truncated .glb: {} bytes, shorter than the 12-byte header",
+            bytes.len()
+        ));
+    }
+    let declared = u32::from_le_bytes([bytes[8], bytes[9], bytes[10], bytes[11]]) as usize;
+    if declared > bytes.len() {
+        return Err(format!(
+            "truncated .glb: header declares {declared} bytes but the file has {}",
+            bytes.len()
+        ));
+    }
+    Ok(())
+}
+
+/// Decodes `%XX` escapes of a relative URI.
+fn percent_decode(uri: &str) -> String {
+    let hex = |c: u8| (c as char).to_digit(16).map(|d| d as u8);
+    let b = uri.as_bytes();
+    let mut out = Vec::with_capacity(b.len());
+    let mut i = 0;
+    while i < b.len() {
+        if b[i] == b'%'
+            && i + 2 < b.len()
+            && let (Some(h), Some(l)) = (hex(b[i + 1]), hex(b[i + 2]))
+        {
+            out.push(h * 16 + l);
+            i += 3;
+            continue;
+        }
+        out.push(b[i]);
+        i += 1;
+    }
+    String::from_utf8_lossy(&out).into_owned()
+}
+
+struct Loader<'a> {
+    path: PathBuf,
+    base: PathBuf,
+    document: &'a gltf::Document,
+    buffers: Vec<gltf::buffer::Data>,
+    /// Decoded images by glTF image index.
+    images: HashMap<usize, gltf::image::Data>,
+    textures: Vec<Texture>,
+    /// (glTF texture index, sRGB) → index into `textures`.
+    texture_keys: HashMap<(usize, bool), u32>,
+    warnings: Vec<String>,
+}
+
+impl Loader<'_> {
+    fn warn(&mut self, message: String) {
+        eprintln!("warning: {}: {message}", self.path.display());
+        self.warnings.push(message);
+    }
+
+    fn mesh_error(&self, mesh: &gltf::Mesh, message: String) -> SceneError {
+        SceneError::Mesh {
+            path: self.path.clone(),
+            mesh: mesh
+                .name()
+                .map(str::to_string)
+                .unwrap_or_else(|| format!("#{}", mesh.index())),
+            message,
+        }
+    }
+
+    fn invalid(&self, message: String) -> SceneError {
+        SceneError::Invalid {
+            path: self.path.clone(),
+            message,
+        }
+    }
+
+    /// Unsupported required extensions are errors; unknown used ones are warnings.
+    fn check_extensions(&mut self) -> Result<()> {
+        if let Some(name) = self
+            .document
+            .extensions_required()
+            .find(|e| !SUPPORTED_EXTENSIONS.contains(e))
+        {
+            return Err(SceneError::UnsupportedExtension {
+                path: self.path.clone(),
+                name: name.to_string(),
+            });
+        }
+        let ignored: Vec<String> = self
+            .document
+            .extensions_used()
+            .filter(|e| !SUPPORTED_EXTENSIONS.contains(e))
+            .map(str::to_string)
+            .collect();
+        for e in ignored {
+            self.warn(format!("ignoring unsupported glTF extension `{e}`"));
+        }
+        Ok(())
+    }
+
+    fn load_buffers(&mut self, mut blob: Option<Vec<u8>>) -> Result<()> {
+        for buffer in self.document.buffers() {
+            let index = buffer.index();
+            let err = |uri: &str, message: String| SceneError::Buffer {
+                path: self.path.clone(),
+                index,
+                uri: uri.to_string(),
+                message,
+            };
+            let data = match buffer.source() {
+                gltf::buffer::Source::Bin => blob
+                    .take()
+                    .ok_or_else(|| err("GLB BIN chunk", "the .glb has no BIN chunk".into()))?,
+                gltf::buffer::Source::Uri(uri) if uri.starts_with("data:") => {
+                    gltf::buffer::Data::from_source(buffer.source(), None)
+                        .map_err(|e| err("data URI", format!("cannot decode data URI: {e}")))?
+                        .0
+                }
+                gltf::buffer::Source::Uri(uri) => {
+                    let file = self.base.join(percent_decode(uri));
+                    std::fs::read(&file).map_err(|e| {
+                        err(uri, format!("cannot read buffer file {}: {e}", file.display()))
+                    })?
+                }
+            };
+            if data.len() < buffer.length() {
+                let uri = match buffer.source() {
+                    gltf::buffer::Source::Uri(u) if !u.starts_with("data:") => u,
+                    gltf::buffer::Source::Uri(_) => "data URI",
+                    gltf::buffer::Source::Bin => "GLB BIN chunk",
+                };
+                return Err(err(
+                    uri,
+                    format!(
+                        "truncated buffer: {} bytes, the document declares {}",
+                        data.len(),
+                        buffer.length()
+                    ),
+                ));
+            }
+            self.buffers.push(gltf::buffer::Data(data));
+        }
+        Ok(())
+    }
+
+    fn build(mut self) -> Result<SceneDescription> {
+        let document = self.document;
+        let mut desc = SceneDescription {
+            source: self.path.clone(),
+            ..Default::default()
+        };
+
+        // Materials; the glTF default material goes last for primitives without one.
+        for m in document.materials() {
+            let material = self.material(&m)?;
+            desc.materials.push(material);
+        }
+        let default_material = desc.materials.len() as u32;
+        desc.materials.push(Material::default());
+
+        // Walk the node hierarchy of the default scene (or the first, or every root node).
+        let roots: Vec<gltf::Node> = match document.default_scene().or_else(|| document.scenes().next()) {
+            Some(s) => s.nodes().collect(),
+            None => {
+                let mut is_child = vec![false; document.nodes().len()];
+                for n in document.nodes() {
+                    for c in n.children() {
+                        is_child[c.index()] = true;
+                    }
+                }
+                document.nodes().filter(|n| !is_child[n.index()]).collect()
+            }
+        };
+        let mut stack: Vec<(gltf::Node, Mat4, usize)> =
+            roots.into_iter().rev().map(|n| (n, Mat4::IDENTITY, 0)).collect();
+        let mut has_normals = false;
+        let mut has_uvs = false;
+        let mut vertex_normals: Vec<Option<Vec3>> = Vec::new();
+        let mut vertex_uvs: Vec<Option<Vec2>> = Vec::new();
+        while let Some((node, parent, depth)) = stack.pop() {
+            if depth > 256 {
+                return Err(self.invalid("node hierarchy deeper than 256 levels (a cycle?)".into()));
+            }
+            let local = Mat4::from_cols_array_2d(&node.transform().matrix());
+            let world = parent * local;
+            if !world.is_finite() {
+                return Err(self.invalid(format!(
+                    "node {} has a non-finite transform",
+                    node.name().map(str::to_string).unwrap_or_else(|| format!("#{}", node.index()))
+                )));
+            }
+            if let Some(cam) = node.camera()
+                && desc.camera.is_none()
+            {
+                match cam.projection() {
+                    gltf::camera::Projection::Perspective(p) => {
+                        match Camera::from_world_matrix(&world, p.yfov()) {
+                            Ok(c) => desc.camera = Some(c),
+                            Err(e) => self.warn(format!("ignoring camera {}: {e}", cam.index())),
+                        }
+                    }
+                    gltf::camera::Projection::Orthographic(_) => {
+                        self.warn(format!("ignoring orthographic camera {}", cam.index()))
+                    }
+                }
+            }
+            if let Some(mesh) = node.mesh() {
+                for prim in mesh.primitives() {
+                    self.primitive(
+                        &mesh,
+                        &prim,
+                        &world,
+                        default_material,
+                        &mut desc,
+                        &mut vertex_normals,
+                        &mut vertex_uvs,
+                        &mut has_normals,
+                        &mut has_uvs,
+                    )?;
+                }
+            }
+            for child in node.children() {
+                stack.push((child, world, depth + 1));
+            }
+        }
+        if has_normals {
+            desc.normals = vertex_normals.iter().map(|n| n.unwrap_or(Vec3::ZERO)).collect();
+        }
+        if has_uvs {
+            desc.uvs = vertex_uvs.iter().map(|t| t.unwrap_or(Vec2::ZERO)).collect();
+        }
+        desc.textures = std::mem::take(&mut self.textures);
+        desc.warnings = std::mem::take(&mut self.warnings);
+        Ok(desc)
+    }
+
+    /// Appends one primitive's triangles, transformed to world space.
+    fn primitive(
+        &mut self,
+        mesh: &gltf::Mesh,
+        prim: &gltf::Primitive,
+        world: &Mat4,
+        default_material: u32,
+        desc: &mut SceneDescription,
+        vertex_normals: &mut Vec<Option<Vec3>>,
+        vertex_uvs: &mut Vec<Option<Vec2>>,
+        has_normals: &mut bool,
+        has_uvs: &mut bool,
+    ) -> Result<()> {
+        let mode = prim.mode();
+        if !matches!(mode, Mode::Triangles | Mode::TriangleStrip | Mode::TriangleFan) {
+            self.warn(format!(
+                "mesh `{}`: skipping a primitive of mode {mode:?} (only triangles are rendered)",
+                mesh.name().unwrap_or("")
+            ));
+            return Ok(());
+        }
+        let buffers = &self.buffers;
+        let reader = prim.reader(|b| buffers.get(b.index()).map(|d| d.0.as_slice()));
+
+        // Check accessor types and sizes first: the gltf readers assume them.
+        let pos_acc = prim.get(&gltf::Semantic::Positions).ok_or_else(|| {
+            self.mesh_error(mesh, "primitive has no POSITION attribute".into())
+        })?;
+        self.check_accessor(mesh, &pos_acc, "POSITION", &[DataType::F32], &[Dimensions::Vec3])?;
+        let n_vertices = pos_acc.count();
+        let normal_acc = prim.get(&gltf::Semantic::Normals);
+        if let Some(a) = &normal_acc {
+            self.check_accessor(mesh, a, "NORMAL", &[DataType::F32], &[Dimensions::Vec3])?;
+        }
+        let uv_acc = prim.get(&gltf::Semantic::TexCoords(0));
+        if let Some(a) = &uv_acc {
+            self.check_accessor(
+                mesh,
+                a,
+                "TEXCOORD_0",
+                &[DataType::F32, DataType::U8, DataType::U16],
+                &[Dimensions::Vec2],
+            )?;
+        }
+        if let Some(a) = prim.indices() {
+            self.check_accessor(
+                mesh,
+                &a,
+                "indices",
+                &[DataType::U8, DataType::U16, DataType::U32],
+                &[Dimensions::Scalar],
+            )?;
+        }
+
+        let out_of_range =
+            |what: &str| self.mesh_error(mesh, format!("{what} accessor lies outside its buffer"));
+        let positions: Vec<Vec3> = reader
+            .read_positions()
+            .ok_or_else(|| out_of_range("POSITION"))?
+            .map(Vec3::from)
+            .collect();
+        if positions.len() != n_vertices {
+            return Err(out_of_range("POSITION"));
+        }
+        if let Some(bad) = positions.iter().position(|p| !p.is_finite()) {
+            return Err(self.mesh_error(
+                mesh,
+                format!("non-finite (NaN or infinite) vertex position at vertex {bad}"),
+            ));
+        }
+        let normals: Option<Vec<Vec3>> = match normal_acc {
+            Some(a) => {
+                let n: Vec<Vec3> = reader
+                    .read_normals()
+                    .ok_or_else(|| out_of_range("NORMAL"))?
+                    .map(Vec3::from)
+                    .collect();
+                if n.len() != n_vertices || a.count() != n_vertices {
+                    return Err(self.mesh_error(mesh, "NORMAL and POSITION counts differ".into()));
+                }
+                Some(n)
+            }
+            None => None,
+        };
+        let uvs: Option<Vec<Vec2>> = match uv_acc {
+            Some(a) => {
+                let t: Vec<Vec2> = reader
+                    .read_tex_coords(0)
+                    .ok_or_else(|| out_of_range("TEXCOORD_0"))?
+                    .into_f32()
+                    .map(Vec2::from)
+                    .collect();
+                if t.len() != n_vertices || a.count() != n_vertices {
+                    return Err(
+                        self.mesh_error(mesh, "TEXCOORD_0 and POSITION counts differ".into())
+                    );
+                }
+                Some(t)
+            }
+            None => None,
+        };
+        let indices: Vec<u32> = match prim.indices() {
+            Some(_) => reader
+                .read_indices()
+                .ok_or_else(|| out_of_range("indices"))?
+                .into_u32()
+                .collect(),
+            None => (0..n_vertices as u32).collect(),
+        };
+        if let Some(&bad) = indices.iter().find(|&&i| i as usize >= n_vertices) {
+            return Err(self.mesh_error(
+                mesh,
+                format!("vertex index {bad} out of range ({n_vertices} vertices)"),
+            ));
+        }
+        let triangles: Vec<[u32; 3]> = match mode {
+            Mode::Triangles => {
+                if indices.len() % 3 != 0 {
+                    self.warn(format!(
+                        "mesh `{}`: index count {} is not a multiple of 3; ignoring the rest",
+                        mesh.name().unwrap_or(""),
+                        indices.len()
+                    ));
+                }
+                indices.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect()
+            }
+            // Strips alternate winding so that every triangle keeps the first one's.
+            Mode::TriangleStrip => (0..indices.len().saturating_sub(2))
+                .map(|i| {
+                    if i % 2 == 0 {
+                        [indices[i], indices[i + 1], indices[i + 2]]
+                    } else {
+                        [indices[i + 1], indices[i], indices[i + 2]]
+                    }
+                })
+                .collect(),
+            _ => (1..indices.len().saturating_sub(1))
+                .map(|i| [indices[i], indices[i + 1], indices[0]])
+                .collect(),
+        };
+
+        // World transform; normals by the inverse transpose. A mirroring transform
+        // (negative determinant) flips the winding, which glTF says defines the front face.
+        let m3 = Mat3::from_mat4(*world);
+        let det = m3.determinant();
+        let normal_matrix = if det != 0.0 { m3.inverse().transpose() } else { Mat3::ZERO };
+        let base = desc.positions.len() as u32;
+        for p in &positions {
+            let q = world.transform_point3(*p);
+            if !q.is_finite() {
+                return Err(self.mesh_error(
+                    mesh,
+                    "vertex position becomes non-finite under its node transform".into(),
+                ));
+            }
+            desc.positions.push(q);
+        }
+        match &normals {
+            Some(n) => {
+                *has_normals = true;
+                vertex_normals.extend(n.iter().map(|&n| {
+                    let w = (normal_matrix * n).normalize_or_zero();
+                    (w.is_finite() && w != Vec3::ZERO).then_some(w)
+                }))
+            }
+            None => vertex_normals.extend(std::iter::repeat_n(None, n_vertices)),
+        }
+        match &uvs {
+            Some(t) => {
+                *has_uvs = true;
+                vertex_uvs.extend(t.iter().map(|&t| t.is_finite().then_some(t)))
+            }
+            None => vertex_uvs.extend(std::iter::repeat_n(None, n_vertices)),
+        }
+        let material = prim.material().index().map_or(default_material, |i| i as u32);
+        let mesh_id = desc.mesh_names.len() as u32;
+        desc.mesh_names.push(
+            mesh.name()
+                .map(str::to_string)
+                .unwrap_or_else(|| format!("#{}", mesh.index())),
+        );
+        for t in triangles {
+            let t = if det < 0.0 { [t[0], t[2], t[1]] } else { t };
+            desc.triangles.push(t.map(|i| base + i));
+            desc.triangle_materials.push(material);
+            desc.triangle_meshes.push(mesh_id);
+        }
+        Ok(())
+    }
+
+    /// Checks an accessor's component type, dimensions and non-zero count.
+    fn check_accessor(
+        &self,
+        mesh: &gltf::Mesh,
+        a: &gltf::Accessor,
+        what: &str,
+        types: &[DataType],
+        dims: &[Dimensions],
+    ) -> Result<()> {
+        if !types.contains(&a.data_type()) || !dims.contains(&a.dimensions()) {
+            return Err(self.mesh_error(
+                mesh,
+                format!(
+                    "{what} accessor has type {:?} {:?}, expected one of {types:?} {dims:?}",
+                    a.data_type(),
+                    a.dimensions()
+                ),
+            ));
+        }
+        if a.count() == 0 {
+            return Err(self.mesh_error(mesh, format!("{what} accessor is empty")));
+        }
+        if a.view().is_none() && a.sparse().is_none() {
+            return Err(self.mesh_error(mesh, format!("{what} accessor has no buffer view")));
+        }
+        Ok(())
+    }
+
+    fn material(&mut self, m: &gltf::Material) -> Result<Material> {
+        let name = m
+            .name()
+            .map(str::to_string)
+            .unwrap_or_else(|| format!("#{}", m.index().unwrap_or(usize::MAX)));
+        let pbr = m.pbr_metallic_roughness();
+        let [r, g, b, _a] = pbr.base_color_factor();
+        let mut out = Material {
+            name: name.clone(),
+            base_color: Vec3::new(r, g, b),
+            base_color_texture: self.texture_ref(pbr.base_color_texture(), true)?,
+            metallic: pbr.metallic_factor(),
+            roughness: pbr.roughness_factor(),
+            metallic_roughness_texture: self.texture_ref(pbr.metallic_roughness_texture(), false)?,
+            emissive: Vec3::from(m.emissive_factor()) * m.emissive_strength().unwrap_or(1.0),
+            emissive_texture: self.texture_ref(m.emissive_texture(), true)?,
+            double_sided: m.double_sided(),
+            ..Material::default()
+        };
+        if let Some(t) = m.transmission() {
+            out.transmission = t.transmission_factor();
+            out.transmission_texture = self.texture_ref(t.transmission_texture(), false)?;
+        }
+        if let Some(ior) = m.ior() {
+            out.ior = ior;
+        }
+        if let Some(s) = m.specular() {
+            out.specular = s.specular_factor();
+            out.specular_texture = self.texture_ref(s.specular_texture(), false)?;
+            out.specular_color = Vec3::from(s.specular_color_factor());
+            out.specular_color_texture = self.texture_ref(s.specular_color_texture(), true)?;
+        }
+        let finite = out.base_color.is_finite()
+            && out.emissive.is_finite()
+            && out.specular_color.is_finite()
+            && [out.metallic, out.roughness, out.transmission, out.specular, out.ior]
+                .iter()
+                .all(|v| v.is_finite());
+        if !finite {
+            return Err(self.invalid(format!("material `{name}` has a non-finite parameter")));
+        }
+        if out.emissive.min_element() < 0.0 {
+            return Err(self.invalid(format!("material `{name}` has negative emission")));
+        }
+        if out.ior < 1.0 {
+            // KHR_materials_ior allows 0 as a legacy "infinitely dense" value; no physical
+            // dielectric has an IOR below 1 here.
+            self.warn(format!(
+                "material `{name}`: ior {} below 1 replaced by the default 1.5",
+                out.ior
+            ));
+            out.ior = 1.5;
+        }
+        Ok(out)
+    }
+
+    /// A material's texture, loaded (and sRGB-decoded for colour textures) on first use.
+    fn texture_ref(
+        &mut self,
+        info: Option<gltf::texture::Info>,
+        srgb: bool,
+    ) -> Result<Option<TextureRef>> {
+        let Some(info) = info else { return Ok(None) };
+        let mut tex_coord = info.tex_coord();
+        let transform = info.texture_transform().map(|t| {
+            if let Some(tc) = t.tex_coord() {
+                tex_coord = tc;
+            }
+            UvTransform {
+                offset: Vec2::from(t.offset()),
+                rotation: t.rotation(),
+                scale: Vec2::from(t.scale()),
+            }
+        });
+        if tex_coord != 0 {
+            self.warn(format!(
+                "texture {} uses TEXCOORD_{tex_coord}; only TEXCOORD_0 is loaded, using it instead",
+                info.texture().index()
+            ));
+        }
+        let tex = info.texture();
+        let key = (tex.index(), srgb);
+        let index = match self.texture_keys.get(&key) {
+            Some(&i) => i,
+            None => {
+                let texture = self.decode_texture(&tex, srgb)?;
+                let i = self.textures.len() as u32;
+                self.textures.push(texture);
+                self.texture_keys.insert(key, i);
+                i
+            }
+        };
+        Ok(Some(TextureRef {
+            texture: index,
+            transform,
+        }))
+    }
+
+    fn decode_texture(&mut self, tex: &gltf::Texture, srgb: bool) -> Result<Texture> {
+        let image = tex.source();
+        let index = image.index();
+        let uri = match image.source() {
+            gltf::image::Source::Uri { uri, .. } if uri.starts_with("data:") => "data URI".into(),
+            gltf::image::Source::Uri { uri, .. } => uri.to_string(),
+            gltf::image::Source::View { .. } => "embedded in a buffer view".to_string(),
+        };
+        let err = |message: String| SceneError::Texture {
+            path: self.path.clone(),
+            index,
+            uri: uri.clone(),
+            message,
+        };
+        if !self.images.contains_key(&index) {
+            if let gltf::image::Source::Uri { uri, .. } = image.source()
+                && !uri.starts_with("data:")
+            {
+                let file = self.base.join(percent_decode(uri));
+                if !file.is_file() {
+                    return Err(err(format!("image file {} not found", file.display())));
+                }
+            }
+            let buffers = &self.buffers;
+            // Buffer-view images: check the range before the gltf crate slices it.
+            if let gltf::image::Source::View { view, .. } = image.source() {
+                let ok = buffers
+                    .get(view.buffer().index())
+                    .is_some_and(|b| view.offset() + view.length() <= b.0.len());
+                if !ok {
+                    return Err(err("image buffer view lies outside its buffer".into()));
+                }
+            }
+            let data = gltf::image::Data::from_source(image.source(), Some(&self.base), buffers)
+                .map_err(|e| err(format!("cannot decode image: {e}")))?;
+            self.images.insert(index, data);
+        }
+        let data = &self.images[&index];
+        let texels = image_texels(data, srgb).ok_or_else(|| err("unsupported pixel format".into()))?;
+        let mut texture = Texture::new(data.width, data.height, texels)
+            .ok_or_else(|| err(format!("image of size {}×{} is unusable", data.width, data.height)))?;
+        let sampler = tex.sampler();
+        let wrap = |w: gltf::texture::WrappingMode| match w {
+            gltf::texture::WrappingMode::ClampToEdge => WrapMode::ClampToEdge,
+            gltf::texture::WrappingMode::MirroredRepeat => WrapMode::MirroredRepeat,
+            gltf::texture::WrappingMode::Repeat => WrapMode::Repeat,
+        };
+        texture.wrap_s = wrap(sampler.wrap_s());
+        texture.wrap_t = wrap(sampler.wrap_t());
+        texture.nearest = sampler.mag_filter() == Some(gltf::texture::MagFilter::Nearest);
+        Ok(texture)
+    }
+}
+
+/// Converts decoded image data to linear RGBA texels (missing channels: G = B = R for
+/// grey images, A = 1). Colour data is sRGB-decoded when `srgb`; alpha never is.
+fn image_texels(data: &gltf::image::Data, srgb: bool) -> Option<Vec<Vec4>> {
+    use gltf::image::Format;
+    let (channels, bytes_per) = match data.format {
+        Format::R8 => (1, 1),
+        Format::R8G8 => (2, 1),
+        Format::R8G8B8 => (3, 1),
+        Format::R8G8B8A8 => (4, 1),
+        Format::R16 => (1, 2),
+        Format::R16G16 => (2, 2),
+        Format::R16G16B16 => (3, 2),
+        Format::R16G16B16A16 => (4, 2),
+        Format::R32G32B32FLOAT => (3, 4),
+        Format::R32G32B32A32FLOAT => (4, 4),
+    };
+    let n = data.width as usize * data.height as usize;
+    if data.pixels.len() < n * channels * bytes_per {
+        return None;
+    }
+    let is_float = matches!(data.format, Format::R32G32B32FLOAT | Format::R32G32B32A32FLOAT);
+    let value = |i: usize| -> f32 {
+        let o = i * bytes_per;
+        match bytes_per {
+            1 => data.pixels[o] as f32 / 255.0,
+            2 => u16::from_le_bytes([data.pixels[o], data.pixels[o + 1]]) as f32 / 65535.0,
+            _ => f32::from_le_bytes([
+                data.pixels[o],
+                data.pixels[o + 1],
+                data.pixels[o + 2],
+                data.pixels[o + 3],
+            ]),
+        }
+    };
+    // 8-bit sRGB decoding through a table.
+    let lut: Vec<f32> = (0..256).map(|i| srgb_to_linear(i as f32 / 255.0)).collect();
+    let decode = |i: usize| -> f32 {
+        if srgb && !is_float {
+            if bytes_per == 1 {
+                lut[data.pixels[i] as usize]
+            } else {
+                srgb_to_linear(value(i))
+            }
+        } else {
+            value(i)
+        }
+    };
+    let texels = (0..n)
+        .map(|p| {
+            let b = p * channels;
+            match channels {
+                1 => {
+                    let v = decode(b);
+                    Vec4::new(v, v, v, 1.0)
+                }
+                2 => {
+                    let v = decode(b);
+                    Vec4::new(v, v, v, value(b + 1))
+                }
+                3 => Vec4::new(decode(b), decode(b + 1), decode(b + 2), 1.0),
+                _ => Vec4::new(decode(b), decode(b + 1), decode(b + 2), value(b + 3)),
+            }
+        })
+        .map(|t| if t.is_finite() { t } else { Vec4::ZERO })
+        .collect();
+    Some(texels)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn percent_decoding() {
+        assert_eq!(percent_decode("a%20b.bin"), "a b.bin");
+        assert_eq!(percent_decode("100%"), "100%");
+        assert_eq!(percent_decode("x%2"), "x%2");
+        assert_eq!(percent_decode("plain.bin"), "plain.bin");
+    }
+}
