@@ -149,9 +149,10 @@ def write_ply(path, tris):
 
 
 def material_of(doc, i):
-    """(base colour, emitted radiance) of glTF material i, with a warning for non-diffuse ones."""
+    """(base colour, emitted radiance, double-sided) of glTF material i, with a warning for
+    non-diffuse ones."""
     if i < 0:
-        return np.ones(3), np.zeros(3)
+        return np.ones(3), np.zeros(3), False
     m = doc["materials"][i]
     pbr = m.get("pbrMetallicRoughness", {})
     ext = m.get("extensions", {})
@@ -160,7 +161,7 @@ def material_of(doc, i):
     spec = ext.get("KHR_materials_specular", {}).get("specularFactor", 1.0)
     if pbr.get("metallicFactor", 1.0) != 0 or spec != 0 or "baseColorTexture" in pbr:
         print("warning: material %r is not a plain diffuse colour; Mitsuba gets a Lambertian of its base colour" % m.get("name", i), file=sys.stderr)
-    return base, le
+    return base, le, bool(m.get("doubleSided", False))
 
 
 def vec3(s):
@@ -181,8 +182,6 @@ def main():
     ap.add_argument("--camera-target", type=vec3)
     ap.add_argument("--camera-up", type=vec3)
     ap.add_argument("--fov-y", type=float)
-    ap.add_argument("--two-sided-emitters", action="store_true",
-                    help="emit from both faces of emissive triangles (Mitsuba's area lights are one-sided)")
     ap.add_argument("--nrc", default="target/release/nrc", help="path of the nrc binary")
     ap.add_argument("--keep", help="folder to keep both EXRs in")
     args = ap.parse_args()
@@ -214,8 +213,17 @@ def main():
         },
     }
     for k, tris in groups.items():
-        base, le = material_of(doc, k)
-        sides = [tris, tris[:, ::-1]] if (args.two_sided_emitters and le.max() > 0) else [tris]
+        base, le, double_sided = material_of(doc, k)
+        sides = [tris]
+        if double_sided and le.max() > 0:
+            # nrc's double-sided materials emit from both faces; Mitsuba's area lights emit
+            # from the front face only. Add a flipped copy, moved a hair along its own normal
+            # so that each side's ray meets the copy facing it first.
+            e1, e2 = tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0]
+            n = np.cross(e1, e2)
+            n /= np.linalg.norm(n, axis=1, keepdims=True)
+            scale = np.abs(tris).max() + 1.0
+            sides.append(tris[:, ::-1] - 1e-5 * scale * n[:, None, :])
         for s, t in enumerate(sides):
             ply = os.path.join(work, "mesh%d_%d.ply" % (k + 1, s))
             write_ply(ply, t)

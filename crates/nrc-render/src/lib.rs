@@ -1,9 +1,15 @@
 //! Rendering for the neural radiance cache.
 //!
-//! Today: the unbiased reference path tracer that every cache estimator is judged against.
-//! Later: the cache inference passes (cache-terminated rendering) and the online frame loop.
+//! Today: the unbiased reference path tracer that every cache estimator is judged against
+//! ([`PathTracer`], whose per-path estimate [`PathTracer::radiance`] later passes reuse) and
+//! the image loop around it ([`render()`]). Later: the cache inference passes
+//! (cache-terminated rendering) and the online frame loop.
 
+pub mod path_tracer;
+pub mod render;
 pub mod sampler;
 pub mod tiles;
 
+pub use path_tracer::{LightStrategy, PathStats, PathTracer};
+pub use render::{RenderOutput, RenderSettings, RenderStats, render};
 pub use sampler::PixelSampler;

@@ -1,0 +1,201 @@
+//! The unbiased reference path tracer.
+//!
+//! Unidirectional path tracing with next-event estimation (NEE) over the scene's emissive
+//! triangles (chosen in proportion to emitted power, a point uniform on the triangle),
+//! BSDF importance sampling, and multiple importance sampling of the two with the power
+//! heuristic (Veach 1997, ch. 9). Specular (delta) scattering skips NEE, and emission
+//! found after it counts fully. Paths end by Russian roulette on the throughput, at the
+//! maximum depth, or when they escape to the constant background.
+//!
+//! Depth counts path *segments* as Mitsuba 3's `path` integrator does, so that a render
+//! agrees with Mitsuba's at the same `max_depth`: 1 shows emitters seen directly, 2 adds
+//! direct illumination, 3 one indirect bounce, and so on.
+
+use glam::Vec3;
+use nrc_scene::{
+    Ray, Scene,
+    bsdf::Bsdf,
+    sampling::{Frame, power_heuristic},
+    spawn_ray, spawn_ray_between,
+};
+
+use crate::sampler::PixelSampler;
+
+/// Which estimators of direct illumination a path uses.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum LightStrategy {
+    /// NEE and BSDF sampling combined by multiple importance sampling (the default).
+    #[default]
+    Mis,
+    /// BSDF sampling alone: emitters count only when a scattered ray hits them (NEE off).
+    BsdfOnly,
+    /// NEE alone: emitters hit by rays scattered from non-delta surfaces are ignored (they
+    /// are accounted for by the light sample). Emitters seen by the camera or through delta
+    /// scattering still count, as no light sample can reach them.
+    LightOnly,
+}
+
+/// Settings of the path tracer (per-path behaviour, not the image).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct PathTracer {
+    /// Maximum number of path segments, Mitsuba's convention: 1 = emitters seen directly,
+    /// 2 = plus direct illumination, ... `0` or negative: unlimited (Russian roulette ends
+    /// paths).
+    pub max_depth: i32,
+    /// Depth (in scattering events) from which Russian roulette may end a path; Mitsuba's
+    /// `rr_depth` (default 5).
+    pub rr_depth: u32,
+    /// Estimators of direct illumination.
+    pub strategy: LightStrategy,
+}
+
+impl Default for PathTracer {
+    fn default() -> Self {
+        Self {
+            max_depth: -1,
+            rr_depth: 5,
+            strategy: LightStrategy::Mis,
+        }
+    }
+}
+
+/// Counters a path adds to (for rays/s statistics).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct PathStats {
+    /// Closest-hit rays traced.
+    pub closest_rays: u64,
+    /// Shadow (occlusion) rays traced.
+    pub shadow_rays: u64,
+}
+
+impl PathStats {
+    /// All rays traced.
+    pub fn rays(&self) -> u64 {
+        self.closest_rays + self.shadow_rays
+    }
+
+    /// Adds another set of counters to this one.
+    pub fn add(&mut self, o: &PathStats) {
+        self.closest_rays += o.closest_rays;
+        self.shadow_rays += o.shadow_rays;
+    }
+}
+
+impl PathTracer {
+    /// The maximum number of segments as an unsigned bound (`u32::MAX` for unlimited).
+    fn segment_limit(&self) -> u32 {
+        if self.max_depth <= 0 { u32::MAX } else { self.max_depth as u32 }
+    }
+
+    /// One sample of the radiance arriving at `ray.o` along `-ray.d`: the estimate of one
+    /// path started with `ray`. Allocation-free; the random numbers come from `sampler`.
+    pub fn radiance(
+        &self,
+        scene: &Scene,
+        mut ray: Ray,
+        sampler: &mut PixelSampler,
+        stats: &mut PathStats,
+    ) -> Vec3 {
+        let limit = self.segment_limit();
+        let use_nee = self.strategy != LightStrategy::BsdfOnly && scene.light_count() > 0;
+        let mut radiance = Vec3::ZERO;
+        let mut throughput = Vec3::ONE;
+        // The previous scattering event, for the MIS weight of emission found by it:
+        // solid-angle density of the sampled direction, and whether it was a delta lobe.
+        // The camera ray counts as a delta event (no light sample could produce it).
+        let mut prev_pdf = 0.0f32;
+        let mut prev_delta = true;
+        // Scattering events so far; the current ray is segment `depth + 1`.
+        let mut depth: u32 = 0;
+        loop {
+            stats.closest_rays += 1;
+            let Some(hit) = scene.intersect(&ray) else {
+                // Escaped: constant background radiance (not light-sampled, so weight 1).
+                radiance += throughput * scene.background;
+                break;
+            };
+            let si = scene.interaction(&ray, &hit);
+
+            // Emission found by the ray.
+            let le = scene.emission(&si);
+            if le != Vec3::ZERO {
+                let weight = if prev_delta || !use_nee {
+                    1.0
+                } else if self.strategy == LightStrategy::LightOnly {
+                    0.0
+                } else {
+                    // Density with which NEE would have chosen this point, per solid angle
+                    // at the previous vertex.
+                    let cos_light = si.ng.dot(si.wo).abs();
+                    let dist = hit.t * ray.d.length();
+                    let pdf_light = scene.light_pdf_area(si.tri) * dist * dist / cos_light;
+                    power_heuristic(1.0, prev_pdf, 1.0, pdf_light)
+                };
+                radiance += throughput * le * weight;
+            }
+
+            // A further segment would exceed the maximum depth.
+            if depth + 1 >= limit {
+                break;
+            }
+
+            let bsdf = Bsdf::from_pbr(&scene.pbr(&si));
+            let frame = Frame::from_normal(si.ns);
+            let wo = frame.to_local(si.wo);
+
+            // Next-event estimation: one point on an emitter, chosen by power.
+            let u_light = sampler.next_1d();
+            let u_point = sampler.next_2d();
+            if use_nee && !bsdf.is_delta() {
+                if let Some(ls) = scene.sample_light(u_light, u_point) {
+                    let to_light = ls.p - si.p;
+                    let dist2 = to_light.length_squared();
+                    let wi = to_light / dist2.sqrt();
+                    let cos_light = ls.n.dot(-wi);
+                    let le = ls.le_toward(-wi);
+                    let wi_local = frame.to_local(wi);
+                    let f = bsdf.eval(wo, wi_local) * wi_local.z.abs();
+                    if ls.pdf_area > 0.0 && cos_light.abs() > 0.0 && le != Vec3::ZERO && f != Vec3::ZERO {
+                        stats.shadow_rays += 1;
+                        if !scene.occluded(&spawn_ray_between(si.p, si.ng, ls.p, ls.n)) {
+                            let pdf_light = ls.pdf_area * dist2 / cos_light.abs();
+                            let weight = if self.strategy == LightStrategy::Mis {
+                                power_heuristic(1.0, pdf_light, 1.0, bsdf.pdf(wo, wi_local))
+                            } else {
+                                1.0
+                            };
+                            radiance += throughput * f * le * (weight / pdf_light);
+                        }
+                    }
+                }
+            }
+
+            // BSDF sampling: the direction of the next segment.
+            let u_lobe = sampler.next_1d();
+            let u_dir = sampler.next_2d();
+            let Some(bs) = bsdf.sample(wo, u_dir, u_lobe) else {
+                break;
+            };
+            throughput *= bs.weight;
+            prev_pdf = bs.pdf;
+            prev_delta = bs.delta;
+            ray = spawn_ray(si.p, si.ng, frame.to_world(bs.wi));
+            depth += 1;
+
+            // Russian roulette (Mitsuba's rule): from `rr_depth` on, continue with
+            // probability min(max throughput, 0.95) and divide by it, which keeps the
+            // estimate unbiased.
+            if depth >= self.rr_depth {
+                let q = throughput.max_element().min(0.95);
+                if !(sampler.next_1d() < q) {
+                    break;
+                }
+                throughput /= q;
+            }
+            if throughput == Vec3::ZERO {
+                break;
+            }
+        }
+        radiance
+    }
+}

@@ -1,0 +1,184 @@
+//! `nrc bench`: measured throughput.
+//!
+//! `nrc bench trace` measures closest-hit queries on two kinds of rays, and the path tracer,
+//! each on one thread and on all threads (two separate rayon pools):
+//! - primary rays: one jittered camera ray per pixel sample (coherent);
+//! - incoherent rays: diffuse-bounce rays, cosine-distributed about the geometric normal
+//!   at the primary hits (what a path tracer traces after the first bounce);
+//! - path tracer: full paths per second (and rays per second) at the given size and spp.
+//!
+//! Each timing is the best of `--repeats` runs, so that a busy machine disturbs it less.
+
+use std::hint::black_box;
+use std::time::{Duration, Instant};
+
+use anyhow::{Result, bail};
+use glam::Vec2;
+use nrc_render::{PathTracer, PixelSampler, RenderSettings, render};
+use nrc_scene::{Ray, Scene, sampling::{Frame, sample_cosine_hemisphere}, spawn_ray};
+use rayon::prelude::*;
+
+use crate::render::{TracerArgs, thread_pool};
+use crate::scene_args::SceneArgs;
+
+#[derive(clap::Subcommand, Debug)]
+pub enum BenchCommand {
+    /// Closest-hit throughput (primary and incoherent rays, Mrays/s) and path-tracer
+    /// samples/s, on one thread and on all threads.
+    Trace(TraceArgs),
+}
+
+/// Arguments of `nrc bench trace`.
+#[derive(clap::Args, Debug)]
+pub struct TraceArgs {
+    #[command(flatten)]
+    pub scene: SceneArgs,
+
+    /// Image width in pixels.
+    #[arg(long, default_value_t = 512)]
+    pub width: u32,
+
+    /// Image height in pixels.
+    #[arg(long, default_value_t = 512)]
+    pub height: u32,
+
+    /// Samples per pixel (rays per pixel for the ray tests, paths per pixel for the path
+    /// tracer).
+    #[arg(long, default_value_t = 4)]
+    pub spp: u32,
+
+    /// Timed runs of each measurement; the best is reported.
+    #[arg(long, default_value_t = 3)]
+    pub repeats: u32,
+
+    /// Worker threads of the multi-threaded column (default: all cores).
+    #[arg(long)]
+    pub threads: Option<usize>,
+
+    #[command(flatten)]
+    pub tracer: TracerArgs,
+}
+
+pub fn run(cmd: &BenchCommand) -> Result<()> {
+    match cmd {
+        BenchCommand::Trace(a) => trace(a),
+    }
+}
+
+/// Rays handed to a worker at a time.
+const CHUNK: usize = 256;
+
+/// Traces every ray (closest hit) on the current pool; returns the number of hits.
+fn trace_all(scene: &Scene, rays: &[Ray]) -> usize {
+    rays.par_chunks(CHUNK)
+        .map(|c| c.iter().filter(|r| black_box(scene.intersect(r)).is_some()).count())
+        .sum()
+}
+
+/// Best wall-clock time of `repeats` runs of `f`.
+fn best_of<T>(repeats: u32, mut f: impl FnMut() -> T) -> (Duration, T) {
+    let mut best = Duration::MAX;
+    let mut last = None;
+    for _ in 0..repeats.max(1) {
+        let t = Instant::now();
+        let v = f();
+        best = best.min(t.elapsed());
+        last = Some(v);
+    }
+    (best, last.expect("at least one run"))
+}
+
+/// One jittered camera ray per pixel sample.
+fn primary_rays(scene: &Scene, w: u32, h: u32, spp: u32) -> Vec<Ray> {
+    let mut rays = Vec::with_capacity((w * h * spp) as usize);
+    for y in 0..h {
+        for x in 0..w {
+            for s in 0..spp {
+                let mut sampler = PixelSampler::new(0, (y * w + x) as u64, s as u64);
+                let film = Vec2::new(x as f32, y as f32) + sampler.next_2d();
+                rays.push(scene.camera.generate_ray(film, w, h));
+            }
+        }
+    }
+    rays
+}
+
+/// Diffuse-bounce rays: from each primary hit, a cosine-distributed direction about the
+/// geometric normal on the side the primary ray came from.
+fn bounce_rays(scene: &Scene, primary: &[Ray]) -> Vec<Ray> {
+    primary
+        .par_iter()
+        .enumerate()
+        .filter_map(|(i, ray)| {
+            let hit = scene.intersect(ray)?;
+            let si = scene.interaction(ray, &hit);
+            let n = if si.front_face() { si.ng } else { -si.ng };
+            let mut sampler = PixelSampler::new(1, i as u64, 0);
+            let d = Frame::from_normal(n).to_world(sample_cosine_hemisphere(sampler.next_2d()));
+            Some(spawn_ray(si.p, si.ng, d))
+        })
+        .collect()
+}
+
+fn trace(args: &TraceArgs) -> Result<()> {
+    if args.width == 0 || args.height == 0 || args.spp == 0 {
+        bail!("--width, --height and --spp must be at least 1");
+    }
+    let scene = args.scene.load()?;
+    let one = thread_pool(Some(1))?;
+    let all = thread_pool(args.threads)?;
+    let (w, h, spp) = (args.width, args.height, args.spp);
+
+    let primary = primary_rays(&scene, w, h, spp);
+    let bounce = all.install(|| bounce_rays(&scene, &primary));
+    let tracer: PathTracer = args.tracer.tracer();
+    let settings = RenderSettings { width: w, height: h, spp, seed: 1, variance: false };
+
+    struct Row {
+        name: &'static str,
+        unit: &'static str,
+        values: [f64; 2],
+    }
+    let mut rows = vec![
+        Row { name: "primary rays", unit: "Mrays/s", values: [0.0; 2] },
+        Row { name: "incoherent (diffuse-bounce) rays", unit: "Mrays/s", values: [0.0; 2] },
+        Row { name: "path tracer", unit: "M samples/s", values: [0.0; 2] },
+        Row { name: "path tracer rays", unit: "Mrays/s", values: [0.0; 2] },
+    ];
+    let mut hits = (0, 0);
+    for (col, pool) in [&one, &all].into_iter().enumerate() {
+        let (t, n) = best_of(args.repeats, || pool.install(|| trace_all(&scene, &primary)));
+        rows[0].values[col] = primary.len() as f64 / t.as_secs_f64() * 1e-6;
+        hits.0 = n;
+        let (t, n) = best_of(args.repeats, || pool.install(|| trace_all(&scene, &bounce)));
+        rows[1].values[col] = bounce.len() as f64 / t.as_secs_f64() * 1e-6;
+        hits.1 = n;
+        let (t, out) = best_of(args.repeats, || {
+            pool.install(|| render(&scene, &scene.camera, &tracer, &settings, &|_| {}))
+        });
+        rows[2].values[col] = out.stats.samples as f64 / t.as_secs_f64() * 1e-6;
+        rows[3].values[col] = out.stats.rays.rays() as f64 / t.as_secs_f64() * 1e-6;
+    }
+
+    println!(
+        "scene {}: {} triangles; {w}x{h}, {spp} spp; max_depth {}, rr_depth {}; best of {}",
+        args.scene.scene.display(),
+        scene.triangle_count(),
+        args.tracer.max_depth,
+        args.tracer.rr_depth,
+        args.repeats
+    );
+    println!(
+        "rays: {} primary ({} hit), {} incoherent ({} hit)",
+        primary.len(),
+        hits.0,
+        bounce.len(),
+        hits.1
+    );
+    let threads = all.current_num_threads();
+    println!("{:<34} {:>12} {:>12} {:>12}", "", "unit", "1 thread", format!("{threads} threads"));
+    for r in &rows {
+        println!("{:<34} {:>12} {:>12.3} {:>12.3}", r.name, r.unit, r.values[0], r.values[1]);
+    }
+    Ok(())
+}

@@ -1,0 +1,185 @@
+//! `nrc render`: the reference path tracer on a scene, written as EXR (and PNG preview).
+
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicU64, Ordering};
+
+use anyhow::{Context, Result, bail};
+use indicatif::{ProgressBar, ProgressStyle};
+use nrc_render::{LightStrategy, PathTracer, RenderSettings, render};
+
+use crate::scene_args::SceneArgs;
+
+/// Direct-illumination estimators, as named on the command line.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Strategy {
+    /// Next-event estimation and BSDF sampling combined by MIS (power heuristic).
+    Mis,
+    /// BSDF sampling only (next-event estimation off).
+    Bsdf,
+    /// Next-event estimation only.
+    Light,
+}
+
+impl From<Strategy> for LightStrategy {
+    fn from(s: Strategy) -> Self {
+        match s {
+            Strategy::Mis => LightStrategy::Mis,
+            Strategy::Bsdf => LightStrategy::BsdfOnly,
+            Strategy::Light => LightStrategy::LightOnly,
+        }
+    }
+}
+
+/// Path-tracer options shared by `render` and `bench trace`.
+#[derive(clap::Args, Debug, Clone)]
+pub struct TracerArgs {
+    /// Maximum number of path segments, as Mitsuba counts them: 1 shows emitters seen
+    /// directly, 2 adds direct illumination, 3 one indirect bounce, ...; 0 or -1: unlimited
+    /// (Russian roulette ends paths).
+    #[arg(long, default_value_t = -1, allow_negative_numbers = true)]
+    pub max_depth: i32,
+
+    /// Number of scattering events after which Russian roulette may end a path
+    /// (Mitsuba's rr_depth).
+    #[arg(long, default_value_t = 5)]
+    pub rr_depth: u32,
+
+    /// Estimators of direct illumination.
+    #[arg(long, value_enum, default_value_t = Strategy::Mis)]
+    pub strategy: Strategy,
+}
+
+impl TracerArgs {
+    pub fn tracer(&self) -> PathTracer {
+        PathTracer {
+            max_depth: self.max_depth,
+            rr_depth: self.rr_depth,
+            strategy: self.strategy.into(),
+        }
+    }
+}
+
+/// Arguments of `nrc render`.
+#[derive(clap::Args, Debug)]
+pub struct RenderArgs {
+    #[command(flatten)]
+    pub scene: SceneArgs,
+
+    /// Samples (paths) per pixel.
+    #[arg(long, default_value_t = 64)]
+    pub spp: u32,
+
+    /// Image width in pixels.
+    #[arg(long, default_value_t = 640)]
+    pub width: u32,
+
+    /// Image height in pixels.
+    #[arg(long, default_value_t = 480)]
+    pub height: u32,
+
+    /// Output image: OpenEXR, linear RGB, 32-bit float.
+    #[arg(long)]
+    pub out: PathBuf,
+
+    /// Also write a tone-mapped 8-bit PNG preview (ACES filmic, sRGB).
+    #[arg(long)]
+    pub png: Option<PathBuf>,
+
+    /// Exposure of the PNG preview in stops.
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    pub exposure: f32,
+
+    /// Also write the per-pixel sample variance of one path's estimate as OpenEXR
+    /// (divide by spp for the variance of the pixel mean).
+    #[arg(long)]
+    pub variance: Option<PathBuf>,
+
+    /// Seed of the random numbers; a seed gives the same image whatever the thread count.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+
+    /// Worker threads (default: all cores).
+    #[arg(long)]
+    pub threads: Option<usize>,
+
+    #[command(flatten)]
+    pub tracer: TracerArgs,
+}
+
+/// A rayon pool of `threads` workers (all cores when `None`).
+pub fn thread_pool(threads: Option<usize>) -> Result<rayon::ThreadPool> {
+    if threads == Some(0) {
+        bail!("--threads must be at least 1");
+    }
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(threads.unwrap_or(0))
+        .build()
+        .context("cannot start worker threads")
+}
+
+/// Renders and writes the image(s), with a progress bar and a closing line.
+pub fn run(args: &RenderArgs) -> Result<()> {
+    if args.width == 0 || args.height == 0 {
+        bail!("image size {}x{} is empty", args.width, args.height);
+    }
+    if args.spp == 0 {
+        bail!("--spp must be at least 1");
+    }
+    if !args.exposure.is_finite() {
+        bail!("--exposure must be a finite number");
+    }
+    let scene = args.scene.load()?;
+    for w in scene.warnings() {
+        eprintln!("warning: {w}");
+    }
+    let settings = RenderSettings {
+        width: args.width,
+        height: args.height,
+        spp: args.spp,
+        seed: args.seed,
+        variance: args.variance.is_some(),
+    };
+    let pool = thread_pool(args.threads)?;
+
+    let total = args.width as u64 * args.height as u64;
+    let bar = ProgressBar::new(total).with_style(
+        ProgressStyle::with_template("{elapsed_precise} [{bar:40}] {percent:>3}% ETA {eta}")
+            .expect("valid progress template")
+            .progress_chars("=> "),
+    );
+    // Updating the bar from every tile would contend on its lock; batch the counts.
+    let done = AtomicU64::new(0);
+    let out = pool.install(|| {
+        render(&scene, &scene.camera, &args.tracer.tracer(), &settings, &|n| {
+            let d = done.fetch_add(n, Ordering::Relaxed) + n;
+            bar.set_position(d);
+        })
+    });
+    bar.finish_and_clear();
+
+    out.mean.write_exr(&args.out)?;
+    if let Some(png) = &args.png {
+        out.mean.write_png_preview(png, args.exposure)?;
+    }
+    if let Some(path) = &args.variance {
+        match &out.variance {
+            Some(v) => v.write_exr(path)?,
+            None => bail!("--variance needs at least 2 samples per pixel"),
+        }
+    }
+    let s = &out.stats;
+    if s.invalid_samples > 0 {
+        eprintln!("warning: {} samples were NaN or infinite and counted as black", s.invalid_samples);
+    }
+    println!(
+        "rendered {}x{} at {} spp in {:.3} s on {} threads: {:.3} M samples/s, {:.2} M rays/s",
+        args.width,
+        args.height,
+        args.spp,
+        s.elapsed.as_secs_f64(),
+        pool.current_num_threads(),
+        s.samples_per_second() * 1e-6,
+        s.rays_per_second() * 1e-6
+    );
+    Ok(())
+}
