@@ -16,9 +16,8 @@
 //! `A` and `B` (checked by a test against a fresh quadrature). Regenerate it with
 //! `cargo test --release -p nrc-scene --lib -- --ignored regenerate_layer_albedo_table`.
 
-use super::fresnel::schlick_weight;
-use super::microfacet::Ggx;
-use glam::Vec2;
+#[cfg(test)]
+use {super::fresnel::schlick_weight, super::microfacet::Ggx, glam::Vec2};
 
 const N_ALPHA: usize = 32;
 const N_COS: usize = 32;
@@ -30,6 +29,7 @@ pub const TABLE_ERROR: f32 = 3e-3;
 static TABLE: [[f32; 2]; N_ALPHA * N_COS] = include!("layer_albedo_table.in");
 
 /// `α` of row `i`.
+#[cfg(test)]
 fn alpha_at(i: usize) -> f32 {
     let r = i as f32 / (N_ALPHA - 1) as f32;
     r * r
@@ -37,6 +37,7 @@ fn alpha_at(i: usize) -> f32 {
 
 /// Grid positions are spaced on `√α` (perceptual roughness) and on `√cos θ`, to resolve
 /// the smooth and the grazing ends.
+#[cfg(test)]
 fn cos_at(j: usize) -> f32 {
     let t = j as f32 / (N_COS - 1) as f32;
     (t * t).max(1e-4)
@@ -44,6 +45,8 @@ fn cos_at(j: usize) -> f32 {
 
 /// `(A, B)` at `(alpha, cos)` by `n × n` midpoint quadrature over the visible-normal
 /// sampling domain. `alpha` below the delta threshold gives the mirror's exact values.
+/// Used to bake and to check the table.
+#[cfg(test)]
 pub fn integrate(alpha: f32, cos: f32, n: usize) -> [f32; 2] {
     let cos = cos.clamp(1e-4, 1.0);
     if alpha < super::microfacet::ALPHA_DELTA {
