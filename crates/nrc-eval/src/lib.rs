@@ -2,13 +2,17 @@
 //! reference, how much of that is bias and how much noise, how stable it is over time, and how
 //! fast it gets there.
 //!
-//! - [`metrics`]: MSE, relMSE, MAPE; [`hdr_flip`] (with the LDR core in [`flip`]): HDR-FLIP,
+//! - [`metrics`]: MSE, relMSE, MAPE; [`hdr_flip`](mod@hdr_flip) (with the LDR core in [`flip`]): HDR-FLIP,
 //!   checked against NVIDIA's published tool on the fixtures in `tests/fixtures/flip`;
-//! - [`bias_variance`]: bias² and variance from R independent renders;
+//! - [`bias_variance`](mod@bias_variance): bias² and variance from R independent renders;
 //! - [`temporal`]: frame-to-frame change and the error measures |E|, |E′|;
 //! - [`sweep`]: error against time, "time to reach the error of X";
 //! - [`report`], [`plot`], [`png_output`]: `report.md` / `report.json`, error-against-time
 //!   plots (PNG and SVG), false-colour error images; every file written atomically ([`atomic`]).
+//!
+//! Examples: `synthetic_report` runs the whole pipeline on synthetic renders;
+//! `flip_bench` times HDR-FLIP and the other metrics (`cargo run --release -p nrc-eval
+//! --example flip_bench -- 1280 720 3`).
 //!
 //! Images are plain row-major `[[f32; 3]]` linear-RGB slices wrapped in an [`ImageView`], so any
 //! image type plugs in:

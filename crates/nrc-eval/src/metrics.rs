@@ -9,7 +9,7 @@
 //! - **MAPE** (mean absolute percentage error) as the DDGI-resampling paper defines it:
 //!   `|x − y| / (y + 0.01)` ([`MAPE_EPSILON`]).
 //!
-//! HDR-FLIP lives in [`crate::hdr_flip`]; [`compute_metrics`] bundles all four.
+//! HDR-FLIP lives in [`crate::hdr_flip`](mod@crate::hdr_flip); [`compute_metrics`] bundles all four.
 
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
