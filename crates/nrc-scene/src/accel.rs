@@ -74,10 +74,29 @@ impl IsectTriangle {
     }
 }
 
+/// Scale of the ray direction handed to `obvhs` (a power of two, so that every `t` and
+/// barycentric scales exactly). `obvhs`' CWBVH node test ignores boxes left before
+/// `t = 1e-4` in units of the direction it is given; with unit directions that would lose
+/// hits closer than 0.1 mm in metre-scale scenes (a ray leaving a wall next to the floor),
+/// so the direction is shortened by 2⁻²⁴ and that limit becomes `6·10⁻¹²` units.
+const DIRECTION_SCALE: f32 = 1.0 / 16_777_216.0;
+
+/// Bound on the inverse direction components handed to `obvhs`: large enough to be exact
+/// for every direction component above ~10⁻²³, small enough that slab distances stay
+/// finite (no `0 × ∞`) for scenes up to ~10⁸ units across.
+const MAX_INVERSE: f32 = 1e30;
+
+/// Relative slack of the traversal's box-culling distance (see `Accel::slack`): 2⁻¹⁸, a
+/// few dozen ULPs, far above the slab test's rounding and far below any geometric scale.
+const SLACK_ULPS: f32 = 1.0 / 262_144.0;
+
 /// The BVH over all scene triangles, with the triangles in BVH order.
 pub struct Accel {
     bvh: CwBvh,
     tris: Vec<IsectTriangle>,
+    /// Bounding sphere of the triangles (for the traversal slack).
+    center: Vec3,
+    radius: f32,
 }
 
 impl std::fmt::Debug for Accel {
@@ -108,14 +127,27 @@ impl Accel {
         debug_assert!(!params.pre_split);
         let bvh = build_cwbvh_from_tris(&input, params, &mut Duration::default());
         let order = bvh.primitive_indices.clone();
-        let tris = order
+        let bvh_tris = order
             .iter()
             .map(|&i| {
                 let t = &tris[i as usize];
                 IsectTriangle::new(t[0], t[1], t[2])
             })
             .collect();
-        (Self { bvh, tris }, order)
+        let (mut lo, mut hi) = (Vec3::INFINITY, Vec3::NEG_INFINITY);
+        for t in tris {
+            for &v in t {
+                lo = lo.min(v);
+                hi = hi.max(v);
+            }
+        }
+        let accel = Self {
+            bvh,
+            tris: bvh_tris,
+            center: 0.5 * (lo + hi),
+            radius: 0.5 * (hi - lo).length(),
+        };
+        (accel, order)
     }
 
     /// Number of triangles.
@@ -133,32 +165,70 @@ impl Accel {
         &self.tris[i]
     }
 
+    /// The `obvhs` ray for `ray`, with the direction scaled by [`DIRECTION_SCALE`] (see
+    /// there) and the inverse direction computed exactly (no epsilon clamping). Its `tmax`
+    /// is the scaled `t_max`.
     #[inline(always)]
     fn to_obvhs(ray: &Ray) -> obvhs::ray::Ray {
-        obvhs::ray::Ray::new(ray.o.into(), ray.d.into(), 0.0, ray.t_max)
+        // `+ 0.0` turns −0.0 into +0.0: obvhs picks near/far slab planes by `d < 0` and
+        // would otherwise pair them with a negative inverse (a ray straight down the −y axis
+        // with d.x = −0.0 then misses every box).
+        let d = Vec3A::from(ray.d + Vec3::ZERO) * DIRECTION_SCALE;
+        let inv = |x: f32| {
+            if x < 0.0 {
+                (1.0 / x).max(-MAX_INVERSE)
+            } else {
+                (1.0 / x).min(MAX_INVERSE)
+            }
+        };
+        obvhs::ray::Ray {
+            origin: ray.o.into(),
+            direction: d,
+            inv_direction: Vec3A::new(inv(d.x), inv(d.y), inv(d.z)),
+            tmin: 0.0,
+            tmax: ray.t_max / DIRECTION_SCALE,
+        }
+    }
+
+    /// Slack added to a distance before it bounds the traversal's box tests, so that
+    /// rounding in the slab test cannot cull a box holding a triangle hit at (almost) that
+    /// distance. The slab distances are differences of terms as large as the distance from
+    /// the origin to the far side of the scene, so the slack is a few ULPs of that plus a
+    /// few ULPs of `t` itself. Returns a function of the (scaled) distance.
+    #[inline(always)]
+    fn slack(&self, r: &obvhs::ray::Ray) -> impl Fn(f32) -> f32 + use<> {
+        let reach = (Vec3A::from(self.center) - r.origin).length() + self.radius;
+        let abs = SLACK_ULPS * reach / r.direction.length();
+        move |t: f32| t + (SLACK_ULPS * t + abs)
     }
 
     /// The closest hit along the ray with `0 ≤ t < ray.t_max`.
     #[inline]
     pub fn intersect(&self, ray: &Ray) -> Option<Hit> {
-        let mut hit = RayHit::none();
-        let (mut b1, mut b2) = (0.0, 0.0);
+        let mut r = Self::to_obvhs(ray);
+        let slack = self.slack(&r);
+        let mut best = r.tmax;
+        r.tmax = slack(best);
+        let (mut tri, mut b1, mut b2) = (u32::MAX, 0.0, 0.0);
         let tris = &self.tris;
-        // The traversal shrinks `r.tmax` to the closest hit so far and records a hit when
-        // the returned t is below it: the same test as here, so (b1, b2) belong to `hit`.
-        let found = self.bvh.ray_traverse(Self::to_obvhs(ray), &mut hit, |r, id| {
-            match tris[id].intersect(r.origin, r.direction, r.tmax) {
-                Some((t, u, v)) if t < r.tmax => {
+        let mut hit = RayHit::none();
+        // The closest hit is tracked here, exactly; the traversal only sees a slightly
+        // enlarged distance to cull boxes with (see `slack`).
+        self.bvh.ray_traverse(r, &mut hit, |r, id| {
+            match tris[id].intersect(r.origin, r.direction, best) {
+                Some((t, u, v)) if t < best => {
+                    best = t;
+                    tri = id as u32;
                     b1 = u;
                     b2 = v;
-                    t
+                    slack(t)
                 }
                 _ => f32::INFINITY,
             }
         });
-        found.then_some(Hit {
-            t: hit.t,
-            tri: hit.primitive_id,
+        (tri != u32::MAX).then_some(Hit {
+            t: best * DIRECTION_SCALE,
+            tri,
             b1,
             b2,
         })
@@ -168,11 +238,14 @@ impl Accel {
     /// that stops at the first intersection found).
     #[inline]
     pub fn occluded(&self, ray: &Ray) -> bool {
+        let mut r = Self::to_obvhs(ray);
+        let t_max = r.tmax;
+        r.tmax = self.slack(&r)(t_max);
         let tris = &self.tris;
-        !self.bvh.ray_traverse_miss(Self::to_obvhs(ray), |r, id| {
-            match tris[id].intersect(r.origin, r.direction, r.tmax) {
-                Some((t, _, _)) => t,
-                None => f32::INFINITY,
+        !self.bvh.ray_traverse_miss(r, |r, id| {
+            match tris[id].intersect(r.origin, r.direction, t_max) {
+                Some((t, _, _)) if t < t_max => t,
+                _ => f32::INFINITY,
             }
         })
     }

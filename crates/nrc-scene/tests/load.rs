@@ -65,7 +65,7 @@ fn cornell_box_glb() {
     assert!(scene.materials().iter().any(|m| m.specular == 0.0));
     // The default camera sees the box.
     let hits = check_camera_rays(&scene);
-    assert!(hits > 32 * 24 / 2, "default camera frames the scene: {hits} hits");
+    assert!(hits > 32 * 24 / 4, "default camera frames the scene: {hits} hits");
     // Sampled light points lie on their triangles and face into the box.
     let s = scene.sample_light(0.5, Vec2::new(0.3, 0.6)).unwrap();
     assert!(s.pdf_area > 0.0 && s.le.max_element() > 0.0);
