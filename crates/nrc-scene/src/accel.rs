@@ -81,10 +81,11 @@ impl IsectTriangle {
 /// so the direction is shortened by 2⁻²⁴ and that limit becomes `6·10⁻¹²` units.
 const DIRECTION_SCALE: f32 = 1.0 / 16_777_216.0;
 
-/// Bound on the inverse direction components handed to `obvhs`: large enough to be exact
-/// for every direction component above ~10⁻²³, small enough that slab distances stay
-/// finite (no `0 × ∞`) for scenes up to ~10⁸ units across.
-const MAX_INVERSE: f32 = 1e30;
+/// Bound on the inverse direction components handed to `obvhs`. Exact for every unit
+/// direction component above ~2·10⁻¹⁷ (smaller ones act as that: a drift of 10⁻¹⁴ over a
+/// thousand units), and slab distances stay finite (no `0 × ∞`) while ray origins and
+/// vertices stay within ~10¹⁴ units of each other (see [`crate::scene::MAX_COORDINATE`]).
+const MAX_INVERSE: f32 = 1e24;
 
 /// Relative slack of the traversal's box-culling distance (see `Accel::slack`): 2⁻¹⁸, a
 /// few dozen ULPs, far above the slab test's rounding and far below any geometric scale.

@@ -90,15 +90,20 @@ impl Camera {
     /// side, far enough away that its bounding sphere fits in the vertical field of view.
     pub fn framing(bounds: &Aabb) -> Self {
         const FOV_Y_DEGREES: f32 = 45.0;
+        let fallback = (Vec3::ZERO, 1.0);
         let (center, radius) = if bounds.is_empty() || !bounds.extent().is_finite() {
-            (Vec3::ZERO, 1.0)
+            fallback
         } else {
             (bounds.center(), (0.5 * bounds.extent().length()).max(1e-3))
         };
-        let distance = radius / (0.5 * FOV_Y_DEGREES.to_radians()).sin();
-        let position = center + Vec3::Z * distance;
-        Self::look_at(position, center, Vec3::Y, FOV_Y_DEGREES)
-            .expect("framing camera is well formed by construction")
+        let place = |(center, radius): (Vec3, f32)| {
+            let distance = radius / (0.5 * FOV_Y_DEGREES.to_radians()).sin();
+            Self::look_at(center + Vec3::Z * distance, center, Vec3::Y, FOV_Y_DEGREES)
+        };
+        // Bounds so large that the camera position overflows get the unit framing.
+        place((center, radius))
+            .or_else(|_| place(fallback))
+            .expect("the unit framing camera is well formed")
     }
 
     /// The primary ray through film position `film` (pixel coordinates: `x` right in

@@ -44,21 +44,40 @@ pub fn load_description(path: &Path) -> Result<SceneDescription> {
         message,
     };
     check_glb_header(&bytes).map_err(parse)?;
-    let gltf::Gltf { document, blob } = gltf::Gltf::from_slice(&bytes).map_err(|e| {
-        parse(match e {
-            gltf::Error::Deserialize(e) => format!("invalid JSON: {e}"),
-            gltf::Error::Binary(e) => format!("corrupt .glb container: {e}"),
-            gltf::Error::Validation(errors) => format!(
-                "invalid glTF document: {}",
-                errors
-                    .iter()
-                    .map(|(p, e)| format!("{}: {e}", p.as_str()))
-                    .collect::<Vec<_>>()
-                    .join("; ")
-            ),
-            e => e.to_string(),
-        })
-    })?;
+    let describe = |e: gltf::Error| match e {
+        gltf::Error::Deserialize(e) => format!("invalid JSON: {e}"),
+        gltf::Error::Binary(e) => format!("corrupt .glb container: {e}"),
+        gltf::Error::Validation(errors) => format!(
+            "invalid glTF document: {}",
+            errors
+                .iter()
+                .map(|(p, e)| format!("{}: {e}", p.as_str()))
+                .collect::<Vec<_>>()
+                .join("; ")
+        ),
+        e => e.to_string(),
+    };
+    let gltf::Gltf { document, blob } =
+        gltf::Gltf::from_slice_without_validation(&bytes).map_err(|e| parse(describe(e)))?;
+    // Before validation: required extensions get their own error (the gltf crate's
+    // validation would report them as a generic failure), and a POSITION accessor index
+    // out of range would make that validation panic.
+    check_required_extensions(path, &document)?;
+    let json = document.into_json();
+    let n_accessors = json.accessors.len();
+    for (m, mesh) in json.meshes.iter().enumerate() {
+        for prim in &mesh.primitives {
+            for (_, index) in prim.attributes.iter() {
+                if index.value() >= n_accessors {
+                    return Err(parse(format!(
+                        "invalid glTF document: mesh {m} refers to missing accessor {}",
+                        index.value()
+                    )));
+                }
+            }
+        }
+    }
+    let document = gltf::Document::from_json(json).map_err(|e| parse(describe(e)))?;
     let mut loader = Loader {
         path: path.to_path_buf(),
         base: path.parent().map(Path::to_path_buf).unwrap_or_default(),
@@ -69,9 +88,23 @@ pub fn load_description(path: &Path) -> Result<SceneDescription> {
         texture_keys: HashMap::new(),
         warnings: Vec::new(),
     };
-    loader.check_extensions()?;
+    loader.warn_unused_extensions();
     loader.load_buffers(blob)?;
     loader.build()
+}
+
+/// Unsupported required extensions are errors.
+fn check_required_extensions(path: &Path, document: &gltf::Document) -> Result<()> {
+    match document
+        .extensions_required()
+        .find(|e| !SUPPORTED_EXTENSIONS.contains(e))
+    {
+        Some(name) => Err(SceneError::UnsupportedExtension {
+            path: path.to_path_buf(),
+            name: name.to_string(),
+        }),
+        None => Ok(()),
+    }
 }
 
 /// Checks the 12-byte `.glb` header against the file length, so that a truncated file is
@@ -154,18 +187,9 @@ impl Loader<'_> {
         }
     }
 
-    /// Unsupported required extensions are errors; unknown used ones are warnings.
-    fn check_extensions(&mut self) -> Result<()> {
-        if let Some(name) = self
-            .document
-            .extensions_required()
-            .find(|e| !SUPPORTED_EXTENSIONS.contains(e))
-        {
-            return Err(SceneError::UnsupportedExtension {
-                path: self.path.clone(),
-                name: name.to_string(),
-            });
-        }
+    /// Unknown extensions that the file uses (but does not require) are ignored with a
+    /// warning.
+    fn warn_unused_extensions(&mut self) {
         let ignored: Vec<String> = self
             .document
             .extensions_used()
@@ -175,7 +199,6 @@ impl Loader<'_> {
         for e in ignored {
             self.warn(format!("ignoring unsupported glTF extension `{e}`"));
         }
-        Ok(())
     }
 
     fn load_buffers(&mut self, mut blob: Option<Vec<u8>>) -> Result<()> {

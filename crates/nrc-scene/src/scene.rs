@@ -46,6 +46,11 @@ pub struct SceneDescription {
     pub warnings: Vec<String>,
 }
 
+/// Largest vertex coordinate magnitude accepted: ray queries stay exact well beyond any
+/// real scene's size, but not near the float range's end (the BVH's slab tests need
+/// distances times 10²⁴ to stay finite; rays should start within this range too).
+pub const MAX_COORDINATE: f32 = 1e12;
+
 /// Shading data of one triangle.
 #[derive(Clone, Copy, Debug)]
 struct TriangleRecord {
@@ -215,6 +220,15 @@ impl Scene {
                     path: source.clone(),
                     mesh: mesh_name(i),
                     message: "non-finite (NaN or infinite) vertex position".into(),
+                });
+            }
+            if p.iter().any(|q| q.abs().max_element() > MAX_COORDINATE) {
+                return Err(SceneError::Mesh {
+                    path: source.clone(),
+                    mesh: mesh_name(i),
+                    message: format!(
+                        "vertex position beyond ±{MAX_COORDINATE:e} (unsupported scene scale)"
+                    ),
                 });
             }
             let ng = (p[1] - p[0]).cross(p[2] - p[0]).normalize_or_zero();
