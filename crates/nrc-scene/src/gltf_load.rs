@@ -454,7 +454,7 @@ impl Loader<'_> {
         }
         let triangles: Vec<[u32; 3]> = match mode {
             Mode::Triangles => {
-                if indices.len() % 3 != 0 {
+                if !indices.len().is_multiple_of(3) {
                     self.warn(format!(
                         "mesh `{}`: index count {} is not a multiple of 3; ignoring the rest",
                         mesh.name().unwrap_or(""),
@@ -466,7 +466,7 @@ impl Loader<'_> {
             // Strips alternate winding so that every triangle keeps the first one's.
             Mode::TriangleStrip => (0..indices.len().saturating_sub(2))
                 .map(|i| {
-                    if i % 2 == 0 {
+                    if i.is_multiple_of(2) {
                         [indices[i], indices[i + 1], indices[i + 2]]
                     } else {
                         [indices[i + 1], indices[i], indices[i + 2]]

@@ -52,7 +52,7 @@ fn light_scene() -> Scene {
         materials.push(Material {
             name: format!("light{i}"),
             emissive: Vec3::new(1.0 + i as f32, 0.5 * (i % 4) as f32, 3.0 / (1.0 + i as f32)),
-            double_sided: i % 3 == 0,
+            double_sided: i.is_multiple_of(3),
             ..Material::default()
         });
         desc.triangle_materials.push(i + 1);

@@ -21,7 +21,7 @@ fn document(mesh_name: &str, positions: &[[f32; 3]], indices: &[u16], buffer_uri
         bin.extend_from_slice(&i.to_le_bytes());
     }
     let idx_len = bin.len() - pos_len;
-    while bin.len() % 4 != 0 {
+    while !bin.len().is_multiple_of(4) {
         bin.push(0);
     }
     let uri = buffer_uri.map(|u| format!(r#""uri": "{u}","#)).unwrap_or_default();
@@ -53,11 +53,11 @@ fn document(mesh_name: &str, positions: &[[f32; 3]], indices: &[u16], buffer_uri
 /// A `.glb` container of a JSON chunk and a BIN chunk.
 fn glb(json: &str, bin: &[u8]) -> Vec<u8> {
     let mut j = json.as_bytes().to_vec();
-    while j.len() % 4 != 0 {
+    while !j.len().is_multiple_of(4) {
         j.push(b' ');
     }
     let mut b = bin.to_vec();
-    while b.len() % 4 != 0 {
+    while !b.len().is_multiple_of(4) {
         b.push(0);
     }
     let total = 12 + 8 + j.len() + 8 + b.len();
