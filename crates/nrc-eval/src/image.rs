@@ -1,7 +1,8 @@
 //! Plain linear-RGB images as the metrics see them: a borrowed view over `[[f32; 3]]` pixels
 //! in row-major order (top row first) and a small owned buffer for computed images.
 //!
-//! Any image type plugs in by lending its pixel slice: `ImageView::new("render", w, h, &pixels)`.
+//! Any image type plugs in by lending its pixel slice: `ImageView::new("render", w, h, &pixels)`;
+//! the renderer's frames (`nrc_scene::image::Image`) with [`ImageView::of_scene_image`].
 
 use crate::error::{EvalError, Result};
 
@@ -34,6 +35,16 @@ impl<'a> ImageView<'a> {
             height,
             pixels,
         })
+    }
+
+    /// A zero-copy view of a rendered frame.
+    pub fn of_scene_image(name: &'a str, image: &'a nrc_scene::image::Image) -> Result<Self> {
+        Self::new(
+            name,
+            image.width,
+            image.height,
+            bytemuck::cast_slice(&image.data),
+        )
     }
 
     pub fn name(&self) -> &'a str {
@@ -106,6 +117,20 @@ impl RgbImage {
             width,
             height,
             pixels: vec![[0.0; 3]; width * height],
+        }
+    }
+
+    /// The same pixels as a scene image (for EXR output).
+    pub fn into_scene_image(self) -> nrc_scene::image::Image {
+        let data = self
+            .pixels
+            .into_iter()
+            .map(glam::Vec3::from_array)
+            .collect();
+        nrc_scene::image::Image {
+            width: self.width,
+            height: self.height,
+            data,
         }
     }
 

@@ -192,3 +192,30 @@ fn mostly_black_reference_uses_median_of_lit_pixels() {
     assert_eq!(res.num_exposures, 2);
     assert!(res.mean > 0.0 && res.mean.is_finite());
 }
+
+#[test]
+fn scene_images_are_viewed_without_copying() {
+    use nrc_eval::RgbImage;
+    let img = nrc_scene::image::Image::from_data(
+        2,
+        1,
+        vec![
+            glam::Vec3::new(1.0, 2.0, 3.0),
+            glam::Vec3::new(4.0, 5.0, 6.0),
+        ],
+    )
+    .unwrap();
+    let v = ImageView::of_scene_image("frame", &img).unwrap();
+    assert_eq!(v.pixels(), &[[1.0, 2.0, 3.0], [4.0, 5.0, 6.0]]);
+    assert_eq!(
+        v.pixels().as_ptr() as *const u8,
+        img.data.as_ptr() as *const u8
+    );
+    let back = RgbImage {
+        width: 2,
+        height: 1,
+        pixels: v.pixels().to_vec(),
+    }
+    .into_scene_image();
+    assert_eq!(back, img);
+}
