@@ -56,7 +56,7 @@ impl Accessors<'_> {
         if view.get("byteStride").is_some() {
             return Err(format!("accessor {index}: interleaved views are not written by this generator"));
         }
-        if (view_offset + offset) % size != 0 {
+        if !(view_offset + offset).is_multiple_of(size) {
             return Err(format!("accessor {index}: data not aligned to its {size}-byte components"));
         }
         if offset + count * n * size > view_length {
@@ -112,7 +112,7 @@ pub fn validate(dir: &Path, name: &str) -> Result<()> {
     }
     for (i, view) in json["bufferViews"].as_array().into_iter().flatten().enumerate() {
         let offset = view.get("byteOffset").and_then(Value::as_u64).unwrap_or(0) as usize;
-        if offset % 4 != 0 {
+        if !offset.is_multiple_of(4) {
             return Err(in_doc(format!("bufferView {i} is not 4-byte aligned")));
         }
         if offset + uint(view, "byteLength").map_err(in_doc)? > bin.len() {
@@ -126,10 +126,10 @@ pub fn validate(dir: &Path, name: &str) -> Result<()> {
         if material.get("doubleSided").is_none() {
             return Err(in_doc(format!("material {m} does not state doubleSided")));
         }
-        if let Some(f) = material.get("emissiveFactor").and_then(Value::as_array) {
-            if f.iter().any(|c| !(0.0..=1.0).contains(&c.as_f64().unwrap_or(-1.0))) {
-                return Err(in_doc(format!("material {m}: emissiveFactor outside [0, 1]")));
-            }
+        if let Some(f) = material.get("emissiveFactor").and_then(Value::as_array)
+            && f.iter().any(|c| !(0.0..=1.0).contains(&c.as_f64().unwrap_or(-1.0)))
+        {
+            return Err(in_doc(format!("material {m}: emissiveFactor outside [0, 1]")));
         }
         for ext in material.get("extensions").and_then(Value::as_object).into_iter().flatten() {
             used.insert(ext.0.clone());
@@ -186,7 +186,7 @@ pub fn validate(dir: &Path, name: &str) -> Result<()> {
                 }
             }
             let indices = acc.indices(uint(prim, "indices").map_err(in_doc)?).map_err(in_doc)?;
-            if indices.len() % 3 != 0 || indices.iter().any(|&i| i as usize >= count) {
+            if !indices.len().is_multiple_of(3) || indices.iter().any(|&i| i as usize >= count) {
                 return Err(in_doc(format!("mesh {m}: index count not a multiple of 3 or index out of range")));
             }
             let p = |i: u32| glam::Vec3::from_slice(&pos[3 * i as usize..3 * i as usize + 3]);

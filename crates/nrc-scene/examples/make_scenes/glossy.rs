@@ -36,7 +36,7 @@ pub fn panel_roughness(col: u32) -> f32 {
 
 /// Whether a panel cell is metal (checkerboard of metal and paint).
 pub fn panel_is_metal(col: u32, row: u32) -> bool {
-    (col + row) % 2 == 0
+    (col + row).is_multiple_of(2)
 }
 
 fn panel_textures() -> (Image, Image) {

@@ -217,7 +217,7 @@ pub struct Document {
 impl Document {
     fn add_view(&mut self, bytes: &[u8], target: u32) -> usize {
         // Every view starts on a 4-byte boundary, as the component types require.
-        while self.bin.len() % 4 != 0 {
+        while !self.bin.len().is_multiple_of(4) {
             self.bin.push(0);
         }
         self.buffer_views.push(json!({
@@ -234,7 +234,7 @@ impl Document {
 
     /// Stores a mesh's vertex attributes and indices in the buffer.
     pub fn add_geometry(&mut self, mesh: &Mesh) -> usize {
-        assert!(!mesh.indices.is_empty() && mesh.indices.len() % 3 == 0);
+        assert!(!mesh.indices.is_empty() && mesh.indices.len().is_multiple_of(3));
         let count = mesh.positions.len();
         let floats = |vs: &mut dyn Iterator<Item = f32>| vs.flat_map(f32::to_le_bytes).collect::<Vec<u8>>();
         let view = self.add_view(&floats(&mut mesh.positions.iter().flat_map(|p| p.to_array())), ARRAY_BUFFER);

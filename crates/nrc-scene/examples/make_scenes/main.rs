@@ -22,7 +22,10 @@ mod textures;
 use std::path::PathBuf;
 use std::process::ExitCode;
 
-const SCENES: [(&str, fn() -> gltf_doc::Document); 4] = [
+/// Builds one scene's document.
+type Builder = fn() -> gltf_doc::Document;
+
+const SCENES: [(&str, Builder); 4] = [
     ("cornell-box", cornell_box::build),
     ("caustics", caustics::build),
     ("ajar", ajar::build),

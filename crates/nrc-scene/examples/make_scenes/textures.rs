@@ -49,5 +49,5 @@ pub fn unorm(value: f32) -> u8 {
 /// alternating linear colours `a` (top-left) and `b`.
 pub fn checker(cells: u32, cell: u32, a: Vec3, b: Vec3) -> Image {
     let (pa, pb) = (srgb_pixel(a), srgb_pixel(b));
-    Image::from_fn(cells * cell, cells * cell, |x, y| if (x / cell + y / cell) % 2 == 0 { pa } else { pb })
+    Image::from_fn(cells * cell, cells * cell, |x, y| if (x / cell + y / cell).is_multiple_of(2) { pa } else { pb })
 }
