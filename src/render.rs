@@ -128,6 +128,13 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     if !args.exposure.is_finite() {
         bail!("--exposure must be a finite number");
     }
+    // Fail before a long render, not after it, when an output cannot be written.
+    for path in std::iter::once(&args.out).chain(&args.png).chain(&args.variance) {
+        let parent = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(std::path::Path::new("."));
+        if !parent.is_dir() {
+            bail!("{}: the folder {} does not exist", path.display(), parent.display());
+        }
+    }
     let scene = args.scene.load()?;
     for w in scene.warnings() {
         eprintln!("warning: {w}");
