@@ -195,7 +195,10 @@ mod tests {
         t.wrap_s = WrapMode::MirroredRepeat;
         assert_eq!(t.sample(Vec2::new(1.25, 0.5)), Vec4::ONE);
         assert_eq!(t.sample(Vec2::new(1.75, 0.5)), Vec4::ZERO);
-        assert_eq!(t.sample(Vec2::new(f32::NAN, 0.5)).x, 0.5);
+        // Non-finite coordinates read at the origin: with mirroring, texel 0 on both sides.
+        assert_eq!(t.sample(Vec2::new(f32::NAN, 0.5)), Vec4::ZERO);
+        t.wrap_s = WrapMode::Repeat;
+        assert_eq!(t.sample(Vec2::new(f32::INFINITY, 0.5)).x, 0.5);
     }
 
     #[test]
