@@ -5,6 +5,30 @@
 //! ([`Scene::intersect`], [`Scene::occluded`]), describes hit points
 //! ([`Scene::interaction`], [`Scene::pbr`], [`Scene::emission`]) and samples its area
 //! lights ([`Scene::sample_light`], [`Scene::light_pdf_area`]).
+//!
+//! ```
+//! use glam::Vec3;
+//! use nrc_scene::{Material, Ray, Scene, SceneDescription};
+//!
+//! // One emissive triangle facing +z (scenes usually come from `Scene::load("x.glb")`).
+//! let scene = Scene::from_description(SceneDescription {
+//!     positions: vec![Vec3::ZERO, Vec3::X, Vec3::Y],
+//!     triangles: vec![[0, 1, 2]],
+//!     triangle_materials: vec![0],
+//!     materials: vec![Material { emissive: Vec3::splat(2.0), ..Material::default() }],
+//!     ..SceneDescription::default()
+//! })?;
+//! let ray = Ray::new(Vec3::new(0.25, 0.25, 1.0), -Vec3::Z);
+//! let hit = scene.intersect(&ray).expect("the ray hits the triangle");
+//! let si = scene.interaction(&ray, &hit);
+//! assert_eq!(hit.t, 1.0);
+//! assert_eq!(si.ng, Vec3::Z);
+//! assert_eq!(scene.emission(&si), Vec3::splat(2.0)); // seen from the front
+//! assert_eq!(scene.light_count(), 1);
+//! // A ray leaving the surface does not hit it again.
+//! assert!(scene.intersect(&si.spawn_ray(Vec3::new(0.3, 0.1, 1.0).normalize())).is_none());
+//! # Ok::<(), nrc_scene::SceneError>(())
+//! ```
 
 pub mod accel;
 pub mod bsdf;
