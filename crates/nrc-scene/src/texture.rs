@@ -202,6 +202,24 @@ mod tests {
     }
 
     #[test]
+    fn texture_transform_follows_the_extension_matrix() {
+        // KHR_texture_transform: uv' = T · R · S · uv with R = [cos sin; −sin cos].
+        let t = UvTransform {
+            offset: Vec2::new(0.5, 0.25),
+            rotation: std::f32::consts::FRAC_PI_2,
+            scale: Vec2::new(2.0, 3.0),
+        };
+        let uv = t.apply(Vec2::new(1.0, 1.0));
+        // S: (2, 3); R(π/2): (cos·2 + sin·3, −sin·2 + cos·3) = (3, −2); T: (3.5, −1.75).
+        assert!((uv - Vec2::new(3.5, -1.75)).length() < 1e-5, "{uv}");
+        let r = TextureRef {
+            texture: 0,
+            transform: None,
+        };
+        assert_eq!(r.uv(Vec2::new(0.3, 0.7)), Vec2::new(0.3, 0.7));
+    }
+
+    #[test]
     fn srgb_round_trip() {
         for i in 0..=255 {
             let c = i as f32 / 255.0;
