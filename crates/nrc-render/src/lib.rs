@@ -5,11 +5,13 @@
 //! the image loop around it ([`render()`]). Later: the cache inference passes
 //! (cache-terminated rendering) and the online frame loop.
 
+pub mod methods;
 pub mod path_tracer;
 pub mod render;
 pub mod sampler;
 pub mod tiles;
 
+pub use methods::{Budget, Frame, FrameRequest, Method, MethodSettings, MethodSpec, render_frame};
 pub use path_tracer::{LightStrategy, PathStats, PathTracer};
 pub use render::{RenderOutput, RenderSettings, RenderStats, render};
 pub use sampler::PixelSampler;

@@ -1,0 +1,400 @@
+//! The registry of rendering methods that the comparison harness (`nrc compare`) judges.
+//!
+//! A method is named on the command line (`pt-16spp`, `pt-4spp-nonee`); the name parses into a
+//! [`MethodSpec`], the config enum of all methods, which [`MethodSpec::build`]s the method's
+//! state: a [`Method`]. Later estimators (cache-terminated paths such as `nrc-pt`) add a variant
+//! to the enum and an implementation of the trait; the harness needs nothing else.
+//!
+//! A method's unit of work is a **pass**: one independent estimate of the frame at the method's
+//! stated samples per pixel (its random streams chosen by a seed). [`render_frame`] averages
+//! passes until the [`Budget`] is spent:
+//!
+//! - [`Budget::Passes`]`(n)` (equal samples): exactly `n` passes, so `pt-4spp` at 2 passes
+//!   holds 8 samples per pixel; methods stating the same samples per pixel get the same count.
+//! - [`Budget::Time`]`(t)` (equal time): passes follow each other while finishing one more is
+//!   predicted to end nearer the budget than stopping now (predicted with the mean pass time so
+//!   far, i.e. another pass starts while `elapsed + mean/2 ≤ t`). At least one pass is made, even
+//!   if it alone exceeds the budget. **Tolerance:** the frame's wall time is within one pass of
+//!   the budget, `|elapsed − t| ≤` [`Frame::longest_pass`] (with steady pass times, within half
+//!   a pass); the last pass is always kept whole, never cut or weighted.
+
+use std::fmt;
+use std::str::FromStr;
+use std::time::{Duration, Instant};
+
+use glam::{DVec3, Vec3};
+use nrc_scene::{Camera, Image, Scene};
+
+use crate::path_tracer::{LightStrategy, PathTracer};
+use crate::render::{RenderSettings, render};
+
+/// The grammar of method names, for help texts and error messages.
+pub const METHOD_NAMES: &str = "pt-<N>spp (reference path tracer, N samples per pixel per pass, NEE and BSDF sampling combined by MIS), \
+     pt-<N>spp-nonee (the same with next-event estimation off: BSDF sampling only)";
+
+/// A rendering method and its settings, as named on the command line.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum MethodSpec {
+    /// The reference path tracer ([`PathTracer`]) at `spp` samples per pixel per pass, with
+    /// next-event estimation (MIS with BSDF sampling) or without (BSDF sampling only).
+    PathTracer { spp: u32, nee: bool },
+}
+
+/// Settings every method shares (how deep paths go), set once for a whole comparison so that
+/// methods and the reference estimate the same image.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct MethodSettings {
+    /// Path depth and Russian roulette; the light strategy is the method's own.
+    pub tracer: PathTracer,
+}
+
+impl Default for MethodSettings {
+    fn default() -> Self {
+        Self { tracer: PathTracer::default() }
+    }
+}
+
+/// A name that is not a method.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct ParseMethodError {
+    pub name: String,
+    pub reason: String,
+}
+
+impl fmt::Display for ParseMethodError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "unknown method `{}`: {}; known methods: {METHOD_NAMES}", self.name, self.reason)
+    }
+}
+
+impl std::error::Error for ParseMethodError {}
+
+impl FromStr for MethodSpec {
+    type Err = ParseMethodError;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        let err = |reason: &str| ParseMethodError { name: s.to_string(), reason: reason.to_string() };
+        let mut parts = s.trim().split('-');
+        match parts.next() {
+            Some("pt") => {}
+            _ => return Err(err("no such method family")),
+        }
+        let spp = parts
+            .next()
+            .and_then(|p| p.strip_suffix("spp"))
+            .ok_or_else(|| err("the path tracer's name needs its samples per pixel, e.g. pt-16spp"))?;
+        let spp: u32 = spp
+            .parse()
+            .map_err(|_| err("samples per pixel must be a whole number, e.g. pt-16spp"))?;
+        if spp == 0 {
+            return Err(err("samples per pixel must be at least 1"));
+        }
+        let nee = match parts.next() {
+            None | Some("nee") => true,
+            Some("nonee") => false,
+            Some(_) => return Err(err("the only path tracer options are -nee (default) and -nonee")),
+        };
+        if parts.next().is_some() {
+            return Err(err("too many parts"));
+        }
+        Ok(MethodSpec::PathTracer { spp, nee })
+    }
+}
+
+impl fmt::Display for MethodSpec {
+    /// The canonical name (parses back to the same spec).
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            MethodSpec::PathTracer { spp, nee: true } => write!(f, "pt-{spp}spp"),
+            MethodSpec::PathTracer { spp, nee: false } => write!(f, "pt-{spp}spp-nonee"),
+        }
+    }
+}
+
+impl MethodSpec {
+    /// Samples per pixel of one pass.
+    pub fn samples_per_pass(&self) -> u32 {
+        match self {
+            MethodSpec::PathTracer { spp, .. } => *spp,
+        }
+    }
+
+    /// The method's state, ready to render.
+    pub fn build(&self, settings: &MethodSettings) -> Box<dyn Method> {
+        match *self {
+            MethodSpec::PathTracer { spp, nee } => Box::new(PathTracerMethod {
+                name: self.to_string(),
+                spp,
+                tracer: PathTracer {
+                    strategy: if nee { LightStrategy::Mis } else { LightStrategy::BsdfOnly },
+                    ..settings.tracer
+                },
+            }),
+        }
+    }
+}
+
+/// One pass of a method: an independent estimate of the frame.
+#[derive(Clone, Debug)]
+pub struct Pass {
+    /// Per-pixel mean radiance of the pass.
+    pub image: Image,
+    /// Samples whose estimate was NaN or infinite (counted as black).
+    pub invalid_samples: u64,
+}
+
+/// A rendering method with its state (for the path tracer, just its settings; for cache-based
+/// methods, the cache they train and query). Methods render on the current rayon pool.
+pub trait Method: Send {
+    /// The method's canonical name.
+    fn name(&self) -> &str;
+
+    /// Samples per pixel of one pass.
+    fn samples_per_pass(&self) -> u32;
+
+    /// Renders one pass of `width × height` pixels from `camera`; `seed` chooses the random
+    /// streams, so passes with different seeds are independent estimates.
+    fn render_pass(&mut self, scene: &Scene, camera: &Camera, width: u32, height: u32, seed: u64) -> Pass;
+}
+
+/// The reference path tracer as a method.
+#[derive(Clone, Debug)]
+struct PathTracerMethod {
+    name: String,
+    spp: u32,
+    tracer: PathTracer,
+}
+
+impl Method for PathTracerMethod {
+    fn name(&self) -> &str {
+        &self.name
+    }
+
+    fn samples_per_pass(&self) -> u32 {
+        self.spp
+    }
+
+    fn render_pass(&mut self, scene: &Scene, camera: &Camera, width: u32, height: u32, seed: u64) -> Pass {
+        let settings = RenderSettings { width, height, spp: self.spp, seed, variance: false };
+        let out = render(scene, camera, &self.tracer, &settings, &|_| {});
+        Pass { image: out.mean, invalid_samples: out.stats.invalid_samples }
+    }
+}
+
+/// How much a frame may spend.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Budget {
+    /// Exactly this many passes (equal samples per pixel for methods of equal pass size).
+    Passes(u32),
+    /// Wall-clock time (equal time); see the module documentation for the stopping rule.
+    Time(Duration),
+}
+
+/// What to render.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct FrameRequest {
+    pub width: u32,
+    pub height: u32,
+    /// Seed of the frame; pass `p` uses [`pass_seed`]`(seed, p)`.
+    pub seed: u64,
+    pub budget: Budget,
+}
+
+/// A rendered frame: the average of its passes, and what it cost.
+#[derive(Clone, Debug)]
+pub struct Frame {
+    pub image: Image,
+    /// Passes averaged.
+    pub passes: u32,
+    /// Samples per pixel in the frame (passes × samples per pass).
+    pub samples_per_pixel: u64,
+    /// Wall time of the whole frame (passes and averaging).
+    pub elapsed: Duration,
+    /// The longest pass, measured between consecutive budget checks (so it includes any
+    /// overhead between passes); the equal-time tolerance.
+    pub longest_pass: Duration,
+    /// Samples whose estimate was NaN or infinite (counted as black).
+    pub invalid_samples: u64,
+}
+
+/// Why a frame could not be rendered.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct BudgetError(pub String);
+
+impl fmt::Display for BudgetError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+impl std::error::Error for BudgetError {}
+
+/// The seed of pass `pass` of a frame seeded `seed`: a bijective mix (SplitMix64's finaliser)
+/// of both, so passes of a frame, and frames of nearby seeds, get unrelated random streams.
+pub fn pass_seed(seed: u64, pass: u32) -> u64 {
+    let mut z = seed ^ (pass as u64 + 1).wrapping_mul(0x9E37_79B9_7F4A_7C15);
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    z ^ (z >> 31)
+}
+
+/// Renders one frame of `method` within `request.budget`: passes with seeds
+/// [`pass_seed`]`(request.seed, 0, 1, …)`, averaged with equal weights.
+pub fn render_frame(
+    method: &mut dyn Method,
+    scene: &Scene,
+    camera: &Camera,
+    request: &FrameRequest,
+) -> Result<Frame, BudgetError> {
+    let (w, h) = (request.width, request.height);
+    if w == 0 || h == 0 {
+        return Err(BudgetError(format!("image size {w}x{h} is empty")));
+    }
+    match request.budget {
+        Budget::Passes(0) => return Err(BudgetError("a frame needs at least one pass".into())),
+        Budget::Time(t) if t.is_zero() => return Err(BudgetError("the time budget must be positive".into())),
+        _ => {}
+    }
+    let start = Instant::now();
+    let mut sum = vec![DVec3::ZERO; w as usize * h as usize];
+    let mut passes = 0u32;
+    let mut invalid_samples = 0;
+    let mut longest_pass = Duration::ZERO;
+    let mut last_check = Duration::ZERO;
+    loop {
+        let pass = method.render_pass(scene, camera, w, h, pass_seed(request.seed, passes));
+        for (s, p) in sum.iter_mut().zip(&pass.image.data) {
+            *s += p.as_dvec3();
+        }
+        invalid_samples += pass.invalid_samples;
+        passes += 1;
+        let now = start.elapsed();
+        longest_pass = longest_pass.max(now - last_check);
+        last_check = now;
+        let more = match request.budget {
+            Budget::Passes(n) => passes < n,
+            // Another pass ends nearer the budget than stopping now when
+            // now + mean ≤ budget + (budget − now), i.e. now + mean/2 ≤ budget.
+            Budget::Time(budget) => now + (now / passes) / 2 <= budget,
+        };
+        if !more {
+            break;
+        }
+    }
+    let scale = 1.0 / passes as f64;
+    let data: Vec<Vec3> = sum.iter().map(|s| (*s * scale).as_vec3()).collect();
+    let image = Image::from_data(w as usize, h as usize, data).expect("one value per pixel");
+    Ok(Frame {
+        image,
+        passes,
+        samples_per_pixel: passes as u64 * method.samples_per_pass() as u64,
+        elapsed: start.elapsed(),
+        longest_pass,
+        invalid_samples,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn names_parse_and_print_back() {
+        for (name, spec) in [
+            ("pt-1spp", MethodSpec::PathTracer { spp: 1, nee: true }),
+            ("pt-16spp", MethodSpec::PathTracer { spp: 16, nee: true }),
+            ("pt-4spp-nonee", MethodSpec::PathTracer { spp: 4, nee: false }),
+        ] {
+            let parsed: MethodSpec = name.parse().unwrap();
+            assert_eq!(parsed, spec);
+            assert_eq!(parsed.to_string(), name);
+        }
+        assert_eq!("pt-8spp-nee".parse::<MethodSpec>().unwrap().to_string(), "pt-8spp");
+        for bad in ["", "pt", "pt-0spp", "pt-xspp", "pt-4", "pt-4spp-foo", "pt-4spp-nonee-x", "nrc-1spp", "pt--1spp"] {
+            let e = bad.parse::<MethodSpec>().unwrap_err();
+            assert!(e.to_string().contains("unknown method") && e.to_string().contains("pt-<N>spp"), "{e}");
+        }
+    }
+
+    /// A method whose passes are constant images worth `pass index + 1` and take a fixed time.
+    struct Fake {
+        passes: u32,
+        sleep: Duration,
+    }
+
+    impl Method for Fake {
+        fn name(&self) -> &str {
+            "fake"
+        }
+        fn samples_per_pass(&self) -> u32 {
+            3
+        }
+        fn render_pass(&mut self, _: &Scene, _: &Camera, width: u32, height: u32, _: u64) -> Pass {
+            std::thread::sleep(self.sleep);
+            self.passes += 1;
+            let image = Image::from_data(
+                width as usize,
+                height as usize,
+                vec![Vec3::splat(self.passes as f32); (width * height) as usize],
+            )
+            .unwrap();
+            Pass { image, invalid_samples: 0 }
+        }
+    }
+
+    fn empty_scene() -> Scene {
+        Scene::from_description(nrc_scene::SceneDescription {
+            positions: vec![Vec3::ZERO, Vec3::X, Vec3::Y],
+            triangles: vec![[0, 1, 2]],
+            triangle_materials: vec![0],
+            triangle_meshes: vec![0],
+            mesh_names: vec!["t".into()],
+            materials: vec![nrc_scene::Material::default()],
+            ..Default::default()
+        })
+        .unwrap()
+    }
+
+    #[test]
+    fn equal_passes_average_all_passes() {
+        let scene = empty_scene();
+        let mut m = Fake { passes: 0, sleep: Duration::ZERO };
+        let req = FrameRequest { width: 2, height: 3, seed: 1, budget: Budget::Passes(4) };
+        let f = render_frame(&mut m, &scene, &scene.camera, &req).unwrap();
+        assert_eq!((f.passes, f.samples_per_pixel), (4, 12));
+        // Mean of 1, 2, 3, 4.
+        assert!(f.image.data.iter().all(|p| *p == Vec3::splat(2.5)));
+        let bad = FrameRequest { budget: Budget::Passes(0), ..req };
+        assert!(render_frame(&mut m, &scene, &scene.camera, &bad).is_err());
+    }
+
+    /// The stopping rule's guarantee, |elapsed − budget| ≤ longest pass, with passes of
+    /// several sizes relative to the budget (including one pass longer than the budget).
+    #[test]
+    fn equal_time_stops_within_one_pass_of_the_budget() {
+        let scene = empty_scene();
+        for (sleep_ms, budget_ms) in [(2u64, 30u64), (7, 30), (40, 30)] {
+            let mut m = Fake { passes: 0, sleep: Duration::from_millis(sleep_ms) };
+            let budget = Duration::from_millis(budget_ms);
+            let req = FrameRequest { width: 2, height: 2, seed: 1, budget: Budget::Time(budget) };
+            let f = render_frame(&mut m, &scene, &scene.camera, &req).unwrap();
+            let diff = f.elapsed.abs_diff(budget);
+            assert!(diff <= f.longest_pass, "{sleep_ms} ms passes: {f:?}");
+            assert!(f.longest_pass >= Duration::from_millis(sleep_ms));
+            assert_eq!(f.samples_per_pixel, 3 * f.passes as u64);
+            if sleep_ms > budget_ms {
+                assert_eq!(f.passes, 1);
+            }
+        }
+    }
+
+    #[test]
+    fn pass_seeds_differ() {
+        let mut seen = std::collections::HashSet::new();
+        for seed in 0..64 {
+            for pass in 0..64 {
+                assert!(seen.insert(pass_seed(seed, pass)));
+            }
+        }
+    }
+}
