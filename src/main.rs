@@ -6,7 +6,9 @@
 
 mod args;
 mod bench;
+mod compare;
 mod info;
+mod reference;
 mod render;
 mod scene_args;
 
@@ -29,6 +31,11 @@ enum Command {
     /// Measure throughput.
     #[command(subcommand)]
     Bench(bench::BenchCommand),
+    /// Render (or find in the cache) a reference image with its per-pixel variance.
+    Reference(reference::ReferenceArgs),
+    /// Compare rendering methods against a reference: errors, bias and variance, equal-time
+    /// and equal-sample studies, report, plots and images.
+    Compare(Box<compare::CompareArgs>),
 }
 
 fn main() -> std::process::ExitCode {
@@ -37,6 +44,8 @@ fn main() -> std::process::ExitCode {
         Command::Render(a) => render::run(&a),
         Command::Info(a) => info::run(&a),
         Command::Bench(b) => bench::run(&b),
+        Command::Reference(a) => reference::run(&a),
+        Command::Compare(a) => compare::run(&a),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

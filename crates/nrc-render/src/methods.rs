@@ -42,16 +42,10 @@ pub enum MethodSpec {
 
 /// Settings every method shares (how deep paths go), set once for a whole comparison so that
 /// methods and the reference estimate the same image.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct MethodSettings {
     /// Path depth and Russian roulette; the light strategy is the method's own.
     pub tracer: PathTracer,
-}
-
-impl Default for MethodSettings {
-    fn default() -> Self {
-        Self { tracer: PathTracer::default() }
-    }
 }
 
 /// A name that is not a method.
@@ -63,7 +57,11 @@ pub struct ParseMethodError {
 
 impl fmt::Display for ParseMethodError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "unknown method `{}`: {}; known methods: {METHOD_NAMES}", self.name, self.reason)
+        write!(
+            f,
+            "unknown method `{}`: {}; known methods: {METHOD_NAMES}",
+            self.name, self.reason
+        )
     }
 }
 
@@ -73,7 +71,10 @@ impl FromStr for MethodSpec {
     type Err = ParseMethodError;
 
     fn from_str(s: &str) -> Result<Self, Self::Err> {
-        let err = |reason: &str| ParseMethodError { name: s.to_string(), reason: reason.to_string() };
+        let err = |reason: &str| ParseMethodError {
+            name: s.to_string(),
+            reason: reason.to_string(),
+        };
         let mut parts = s.trim().split('-');
         match parts.next() {
             Some("pt") => {}
@@ -126,7 +127,11 @@ impl MethodSpec {
                 name: self.to_string(),
                 spp,
                 tracer: PathTracer {
-                    strategy: if nee { LightStrategy::Mis } else { LightStrategy::BsdfOnly },
+                    strategy: if nee {
+                        LightStrategy::Mis
+                    } else {
+                        LightStrategy::BsdfOnly
+                    },
                     ..settings.tracer
                 },
             }),
@@ -175,9 +180,18 @@ impl Method for PathTracerMethod {
     }
 
     fn render_pass(&mut self, scene: &Scene, camera: &Camera, width: u32, height: u32, seed: u64) -> Pass {
-        let settings = RenderSettings { width, height, spp: self.spp, seed, variance: false };
+        let settings = RenderSettings {
+            width,
+            height,
+            spp: self.spp,
+            seed,
+            variance: false,
+        };
         let out = render(scene, camera, &self.tracer, &settings, &|_| {});
-        Pass { image: out.mean, invalid_samples: out.stats.invalid_samples }
+        Pass {
+            image: out.mean,
+            invalid_samples: out.stats.invalid_samples,
+        }
     }
 }
 
@@ -310,9 +324,22 @@ mod tests {
             assert_eq!(parsed.to_string(), name);
         }
         assert_eq!("pt-8spp-nee".parse::<MethodSpec>().unwrap().to_string(), "pt-8spp");
-        for bad in ["", "pt", "pt-0spp", "pt-xspp", "pt-4", "pt-4spp-foo", "pt-4spp-nonee-x", "nrc-1spp", "pt--1spp"] {
+        for bad in [
+            "",
+            "pt",
+            "pt-0spp",
+            "pt-xspp",
+            "pt-4",
+            "pt-4spp-foo",
+            "pt-4spp-nonee-x",
+            "nrc-1spp",
+            "pt--1spp",
+        ] {
             let e = bad.parse::<MethodSpec>().unwrap_err();
-            assert!(e.to_string().contains("unknown method") && e.to_string().contains("pt-<N>spp"), "{e}");
+            assert!(
+                e.to_string().contains("unknown method") && e.to_string().contains("pt-<N>spp"),
+                "{e}"
+            );
         }
     }
 
@@ -338,7 +365,10 @@ mod tests {
                 vec![Vec3::splat(self.passes as f32); (width * height) as usize],
             )
             .unwrap();
-            Pass { image, invalid_samples: 0 }
+            Pass {
+                image,
+                invalid_samples: 0,
+            }
         }
     }
 
@@ -358,13 +388,24 @@ mod tests {
     #[test]
     fn equal_passes_average_all_passes() {
         let scene = empty_scene();
-        let mut m = Fake { passes: 0, sleep: Duration::ZERO };
-        let req = FrameRequest { width: 2, height: 3, seed: 1, budget: Budget::Passes(4) };
+        let mut m = Fake {
+            passes: 0,
+            sleep: Duration::ZERO,
+        };
+        let req = FrameRequest {
+            width: 2,
+            height: 3,
+            seed: 1,
+            budget: Budget::Passes(4),
+        };
         let f = render_frame(&mut m, &scene, &scene.camera, &req).unwrap();
         assert_eq!((f.passes, f.samples_per_pixel), (4, 12));
         // Mean of 1, 2, 3, 4.
         assert!(f.image.data.iter().all(|p| *p == Vec3::splat(2.5)));
-        let bad = FrameRequest { budget: Budget::Passes(0), ..req };
+        let bad = FrameRequest {
+            budget: Budget::Passes(0),
+            ..req
+        };
         assert!(render_frame(&mut m, &scene, &scene.camera, &bad).is_err());
     }
 
@@ -374,9 +415,17 @@ mod tests {
     fn equal_time_stops_within_one_pass_of_the_budget() {
         let scene = empty_scene();
         for (sleep_ms, budget_ms) in [(2u64, 30u64), (7, 30), (40, 30)] {
-            let mut m = Fake { passes: 0, sleep: Duration::from_millis(sleep_ms) };
+            let mut m = Fake {
+                passes: 0,
+                sleep: Duration::from_millis(sleep_ms),
+            };
             let budget = Duration::from_millis(budget_ms);
-            let req = FrameRequest { width: 2, height: 2, seed: 1, budget: Budget::Time(budget) };
+            let req = FrameRequest {
+                width: 2,
+                height: 2,
+                seed: 1,
+                budget: Budget::Time(budget),
+            };
             let f = render_frame(&mut m, &scene, &scene.camera, &req).unwrap();
             let diff = f.elapsed.abs_diff(budget);
             assert!(diff <= f.longest_pass, "{sleep_ms} ms passes: {f:?}");

@@ -1,0 +1,513 @@
+//! End-to-end tests of `nrc reference` and `nrc compare` on the shipped Cornell box at tiny
+//! resolutions: the report files exist and parse, the path tracer's error falls as its sample
+//! count rises (by the expected factor, within a statistical bound), equal-time frames meet
+//! their budget within the stated tolerance, references are cached and reused, and corrupt or
+//! mismatched references end with one clear error line.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+use nrc_scene::Image;
+
+fn nrc(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_nrc"))
+        .args(args)
+        .output()
+        .expect("nrc runs")
+}
+
+fn cornell() -> String {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("scenes/cornell-box.gltf")
+        .to_str()
+        .unwrap()
+        .to_string()
+}
+
+fn text(b: &[u8]) -> String {
+    String::from_utf8_lossy(b).into_owned()
+}
+
+fn assert_ok(out: &Output) {
+    assert!(
+        out.status.success(),
+        "failed: {}\n{}",
+        text(&out.stderr),
+        text(&out.stdout)
+    );
+}
+
+/// The command failed cleanly: non-zero status, exactly one `error:` line on stderr naming
+/// every `needle`, no panic.
+fn assert_clean_error(out: &Output, needles: &[&str]) {
+    let err = text(&out.stderr);
+    assert!(!out.status.success(), "succeeded; stderr: {err}");
+    assert!(!err.contains("panicked"), "panic: {err}");
+    let lines: Vec<&str> = err.lines().filter(|l| !l.trim().is_empty()).collect();
+    assert_eq!(lines.len(), 1, "expected one error line, got: {err}");
+    assert!(lines[0].starts_with("error: "), "not an error line: {err}");
+    for n in needles {
+        assert!(lines[0].contains(n), "error line does not name `{n}`: {err}");
+    }
+}
+
+/// The one cache entry folder in `cache`.
+fn entries(cache: &Path) -> Vec<PathBuf> {
+    let mut v: Vec<PathBuf> = std::fs::read_dir(cache).unwrap().map(|e| e.unwrap().path()).collect();
+    v.sort();
+    v
+}
+
+/// Mean and standard error of the mean.
+fn mean_se(v: &[f64]) -> (f64, f64) {
+    let n = v.len() as f64;
+    let m = v.iter().sum::<f64>() / n;
+    let var = v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (n - 1.0);
+    (m, (var / n).sqrt())
+}
+
+fn is_png(path: &Path) -> bool {
+    std::fs::read(path)
+        .map(|b| b.len() > 8 && &b[1..4] == b"PNG")
+        .unwrap_or(false)
+}
+
+#[derive(serde::Deserialize)]
+struct RunsFile {
+    mode: String,
+    runs: Vec<Run>,
+}
+
+#[derive(serde::Deserialize)]
+struct Run {
+    method: String,
+    run: Option<u32>,
+    sweep_step: Option<u32>,
+    budget_ms: Option<f64>,
+    passes: u32,
+    samples_per_pixel: u64,
+    time_ms: f64,
+    longest_pass_ms: f64,
+    metrics: nrc_eval::ErrorMetrics,
+}
+
+fn read_runs(dir: &Path) -> RunsFile {
+    serde_json::from_str(&std::fs::read_to_string(dir.join("runs.json")).unwrap()).unwrap()
+}
+
+/// Equal samples: every output exists and parses, and the path tracer's MSE falls with spp.
+///
+/// E[MSE_k] = S/k + V, where S is the image-averaged variance of one path, k the spp and V the
+/// reference's own noise (the mean of its variance of the mean, stored with it). So
+/// S₁ = MSE₁ − V and S₁₆ = 16 (MSE₁₆ − V) estimate the same S: MSE₁/MSE₁₆ ≈ 16. Each MSE is
+/// the mean over independent runs, with its standard error from their spread; the difference
+/// of the two estimates of S over its standard error is about N(0, 1) and is required to be
+/// within 4. (Over base seeds 1–12 the ratio came out between 10.8 and 21.2, |z| ≤ 1.7.) Fixed seeds
+/// make the test deterministic.
+#[test]
+fn equal_spp_report_and_error_falls_with_spp() {
+    // Runs per method: the errors of one tiny render are dominated by a few pixels on the
+    // light's edge, so they are averaged over runs (and their spread gives the bounds).
+    const RUNS: u32 = 16;
+    let dir = tempfile::tempdir().unwrap();
+    let (cache, out) = (dir.path().join("cache"), dir.path().join("out"));
+    let o = nrc(&[
+        "compare",
+        "--scene",
+        &cornell(),
+        "--methods",
+        "pt-1spp,pt-4spp,pt-16spp",
+        "--equal-spp",
+        "1",
+        "--width",
+        "32",
+        "--height",
+        "32",
+        "--runs",
+        &RUNS.to_string(),
+        "--reference-spp",
+        "256",
+        "--sweep",
+        "--sweep-steps",
+        "3",
+        "--cache-dir",
+        cache.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert_ok(&o);
+    assert!(
+        text(&o.stdout).contains("| pt-16spp |"),
+        "report printed: {}",
+        text(&o.stdout)
+    );
+
+    // Report files.
+    let report = nrc_eval::report::read_report_json(&out.join("report.json")).unwrap();
+    let md = std::fs::read_to_string(out.join("report.md")).unwrap();
+    assert!(md.contains("| method | time/frame (ms) | spp | MSE |"), "{md}");
+    let names: Vec<&str> = report.rows.iter().map(|r| r.method.as_str()).collect();
+    assert_eq!(names, ["pt-1spp", "pt-4spp", "pt-16spp"]);
+    assert_eq!((report.width, report.height), (32, 32));
+    for (row, spp) in report.rows.iter().zip([1.0, 4.0, 16.0]) {
+        assert_eq!(row.samples_per_pixel, spp);
+        assert!(row.time_per_frame_ms > 0.0);
+        assert!(row.metrics.flip.is_some_and(|f| f > 0.0 && f < 1.0), "{row:?}");
+        let bv = row.bias_variance.expect("bias and variance from the runs");
+        assert_eq!(bv.renders, RUNS as usize);
+        assert!(bv.variance > 0.0);
+    }
+    // Sweep: doubling passes, and the time-to-error table against the first method.
+    assert_eq!(report.sweeps.len(), 3);
+    for (s, spp) in report.sweeps.iter().zip([1.0, 4.0, 16.0]) {
+        let spps: Vec<f64> = s.points.iter().map(|p| p.samples_per_pixel).collect();
+        assert_eq!(spps, [spp, 2.0 * spp, 4.0 * spp], "{}", s.method);
+    }
+    assert_eq!(report.time_to_error.len(), 1);
+    assert_eq!(report.time_to_error[0].baseline, "pt-1spp");
+    assert_eq!(report.time_to_error[0].rows.len(), 3);
+    let runs = read_runs(&out);
+    assert_eq!(runs.mode, "equal-spp");
+    assert_eq!(runs.runs.len(), 3 * (RUNS as usize + 2));
+
+    // Images.
+    for f in ["error-vs-time.png", "reference.png"] {
+        assert!(is_png(&out.join(f)), "{f}");
+    }
+    let svg = std::fs::read_to_string(out.join("error-vs-time.svg")).unwrap();
+    assert!(svg.contains("<svg") && svg.contains("pt-16spp"));
+    for m in ["pt-1spp", "pt-4spp", "pt-16spp"] {
+        for suffix in [".png", "-relmse.png", "-flip.png"] {
+            assert!(is_png(&out.join(format!("{m}{suffix}"))), "{m}{suffix}");
+        }
+    }
+    let no_temporaries = std::fs::read_dir(&out)
+        .unwrap()
+        .all(|e| !e.unwrap().file_name().to_string_lossy().starts_with('.'));
+    assert!(no_temporaries);
+
+    // The MSE falls as spp rises, by the expected factor.
+    let entry = &entries(&cache)[0];
+    let reference = Image::read_exr(&entry.join("mean.exr")).unwrap();
+    let ref_var = Image::read_exr(&entry.join("variance.exr")).unwrap();
+    // runs.json holds each run's errors; run 0's are those of the image written.
+    let x1 = Image::read_exr(&out.join("pt-1spp.exr")).unwrap();
+    let e1 = x1
+        .data
+        .iter()
+        .zip(&reference.data)
+        .map(|(a, b)| (*a - *b).length_squared() as f64)
+        .sum::<f64>()
+        / (3 * x1.data.len()) as f64;
+    let run0 = runs
+        .runs
+        .iter()
+        .find(|r| r.method == "pt-1spp" && r.run == Some(0))
+        .unwrap();
+    assert!(
+        (run0.metrics.mse - e1).abs() <= 1e-5 * e1,
+        "{} vs {e1}",
+        run0.metrics.mse
+    );
+    let per_run = |m: &str| -> Vec<f64> {
+        runs.runs
+            .iter()
+            .filter(|r| r.method == m && r.run.is_some())
+            .map(|r| r.metrics.mse)
+            .collect()
+    };
+    let ((m1, se1), (m4, _), (m16, se16)) = (
+        mean_se(&per_run("pt-1spp")),
+        mean_se(&per_run("pt-4spp")),
+        mean_se(&per_run("pt-16spp")),
+    );
+    for (row, m) in report.rows.iter().zip([m1, m4, m16]) {
+        assert!(
+            (row.metrics.mse - m).abs() <= 1e-12 * m,
+            "report rows hold the means over runs"
+        );
+    }
+    eprintln!(
+        "MSE: 1 spp {m1:.5} ± {se1:.5}, 4 spp {m4:.5}, 16 spp {m16:.6} ± {se16:.6}; ratio {:.2}",
+        m1 / m16
+    );
+    assert!(m1 > m4 && m4 > m16, "MSE {m1}, {m4}, {m16}");
+    // A clear margin: the drop from 1 to 16 spp is over 3 standard errors (p < 0.0014 if
+    // the MSE did not fall).
+    assert!(m1 - m16 > 3.0 * se1.hypot(se16), "{m1} ± {se1} vs {m16} ± {se16}");
+    // The expected ratio: S from 1 spp and from 16 spp agree, |z| < 4.
+    let v = ref_var.data.iter().map(|p| p.element_sum() as f64).sum::<f64>() / (3 * ref_var.data.len()) as f64;
+    let (s1, s16) = (m1 - v, 16.0 * (m16 - v));
+    let z = (s1 - s16) / se1.hypot(16.0 * se16);
+    eprintln!("path variance S: from 1 spp {s1:.4}, from 16 spp {s16:.4}, reference noise {v:.2e}, z {z:.2}");
+    assert!(
+        z.abs() < 4.0,
+        "path variance from 1 spp {s1} ± {se1}, from 16 spp {s16} ± {}: z = {z}",
+        16.0 * se16
+    );
+}
+
+/// Equal time: each frame ends within its longest pass of the budget (the stated tolerance),
+/// holds whole passes, and the sweep doubles the budget.
+#[test]
+fn equal_time_frames_meet_the_budget() {
+    let dir = tempfile::tempdir().unwrap();
+    let (cache, out) = (dir.path().join("cache"), dir.path().join("out"));
+    let o = nrc(&[
+        "compare",
+        "--scene",
+        &cornell(),
+        "--methods",
+        "pt-1spp,pt-4spp-nonee",
+        "--equal-time",
+        "40",
+        "--width",
+        "24",
+        "--height",
+        "24",
+        "--runs",
+        "2",
+        "--reference-spp",
+        "64",
+        "--sweep",
+        "--sweep-steps",
+        "2",
+        "--no-flip",
+        "--cache-dir",
+        cache.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert_ok(&o);
+    let runs = read_runs(&out);
+    assert_eq!(runs.mode, "equal-time");
+    assert_eq!(runs.runs.len(), 2 * (2 + 1));
+    for r in &runs.runs {
+        let budget = r.budget_ms.unwrap();
+        let expected = if r.sweep_step == Some(1) { 80.0 } else { 40.0 };
+        assert_eq!(budget, expected);
+        let spp = if r.method == "pt-1spp" { 1 } else { 4 };
+        assert_eq!(r.samples_per_pixel, r.passes as u64 * spp);
+        // The tolerance; 0.5 ms covers the final averaging of the passes, after the last check.
+        assert!(
+            (r.time_ms - budget).abs() <= r.longest_pass_ms + 0.5,
+            "{} took {} ms for a {} ms budget; longest pass {} ms",
+            r.method,
+            r.time_ms,
+            budget,
+            r.longest_pass_ms
+        );
+        assert!(r.metrics.flip.is_none());
+    }
+    let report = nrc_eval::report::read_report_json(&out.join("report.json")).unwrap();
+    assert_eq!(report.rows.len(), 2);
+    assert!(
+        report
+            .rows
+            .iter()
+            .all(|r| r.metrics.flip.is_none() && r.bias_variance.is_some())
+    );
+    assert_eq!(report.sweeps.len(), 2);
+    assert!(is_png(&out.join("error-vs-time.png")));
+}
+
+/// A reference is rendered once and then reused; another spp, or other scene content, gets
+/// its own entry.
+#[test]
+fn references_are_cached_by_content_and_settings() {
+    let dir = tempfile::tempdir().unwrap();
+    let cache = dir.path().join("cache");
+    // A copy of the scene whose buffer can be changed.
+    let scene_dir = dir.path().join("scene");
+    std::fs::create_dir(&scene_dir).unwrap();
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes");
+    for f in ["cornell-box.gltf", "cornell-box.bin"] {
+        std::fs::copy(root.join(f), scene_dir.join(f)).unwrap();
+    }
+    let scene = scene_dir.join("cornell-box.gltf");
+    let reference = |spp: &str| {
+        let o = nrc(&[
+            "reference",
+            "--scene",
+            scene.to_str().unwrap(),
+            "--spp",
+            spp,
+            "--width",
+            "16",
+            "--height",
+            "12",
+            "--cache-dir",
+            cache.to_str().unwrap(),
+        ]);
+        assert_ok(&o);
+        text(&o.stdout)
+    };
+    assert!(reference("32").starts_with("rendered reference"));
+    assert_eq!(entries(&cache).len(), 1);
+    let mtime = std::fs::metadata(entries(&cache)[0].join("mean.exr"))
+        .unwrap()
+        .modified()
+        .unwrap();
+    assert!(reference("32").starts_with("reused reference"));
+    assert_eq!(
+        std::fs::metadata(entries(&cache)[0].join("mean.exr"))
+            .unwrap()
+            .modified()
+            .unwrap(),
+        mtime
+    );
+    let stored = Image::read_exr(&entries(&cache)[0].join("mean.exr")).unwrap();
+    assert_eq!((stored.width, stored.height), (16, 12));
+
+    assert!(reference("16").starts_with("rendered reference"));
+    assert_eq!(entries(&cache).len(), 2);
+    // Extra bytes after the buffer's data: the scene loads the same, but its content differs.
+    let mut bin = std::fs::read(scene_dir.join("cornell-box.bin")).unwrap();
+    bin.push(0);
+    std::fs::write(scene_dir.join("cornell-box.bin"), bin).unwrap();
+    assert!(reference("32").starts_with("rendered reference"));
+    assert_eq!(entries(&cache).len(), 3);
+}
+
+/// Corrupt cache entries, references of the wrong size and bad arguments end with one clear
+/// error line.
+#[test]
+fn bad_references_and_arguments_are_clear_errors() {
+    let dir = tempfile::tempdir().unwrap();
+    let cache = dir.path().join("cache");
+    let out = dir.path().join("out");
+    let (c, o) = (cache.to_str().unwrap(), out.to_str().unwrap());
+    let scene = cornell();
+    assert_ok(&nrc(&[
+        "reference",
+        "--scene",
+        &scene,
+        "--spp",
+        "8",
+        "--width",
+        "16",
+        "--height",
+        "16",
+        "--cache-dir",
+        c,
+    ]));
+    let entry = entries(&cache)[0].clone();
+    let entry_s = entry.to_str().unwrap();
+
+    // A reference of another size.
+    let compare = |extra: &[&str]| {
+        let mut args = vec![
+            "compare",
+            "--scene",
+            &scene,
+            "--methods",
+            "pt-1spp",
+            "--equal-spp",
+            "1",
+            "--no-flip",
+            "--out",
+            o,
+            "--cache-dir",
+            c,
+        ];
+        args.extend_from_slice(extra);
+        nrc(&args)
+    };
+    assert_clean_error(
+        &compare(&["--width", "20", "--height", "16", "--reference", entry_s]),
+        &["is 16x16 pixels", "renders 20x16"],
+    );
+    // The right size works, from the folder and from its bare EXR.
+    assert_ok(&compare(&["--width", "16", "--height", "16", "--reference", entry_s]));
+    let mean = entry.join("mean.exr");
+    assert_ok(&compare(&[
+        "--width",
+        "16",
+        "--height",
+        "16",
+        "--reference",
+        mean.to_str().unwrap(),
+    ]));
+
+    // A corrupt EXR in the cache: `reference` and `compare` both refuse it.
+    std::fs::write(&mean, b"not an EXR file").unwrap();
+    let again = nrc(&[
+        "reference",
+        "--scene",
+        &scene,
+        "--spp",
+        "8",
+        "--width",
+        "16",
+        "--height",
+        "16",
+        "--cache-dir",
+        c,
+    ]);
+    assert_clean_error(&again, &["corrupt", "mean.exr", "delete"]);
+    assert_clean_error(
+        &compare(&["--width", "16", "--height", "16", "--reference-spp", "8"]),
+        &["corrupt", "mean.exr"],
+    );
+    // `--force` renders it again.
+    let forced = nrc(&[
+        "reference",
+        "--scene",
+        &scene,
+        "--spp",
+        "8",
+        "--width",
+        "16",
+        "--height",
+        "16",
+        "--cache-dir",
+        c,
+        "--force",
+    ]);
+    assert_ok(&forced);
+    assert!(text(&forced.stdout).starts_with("rendered reference"));
+    // Settings that disagree with the stored image.
+    let meta = entry.join("reference.json");
+    let json = std::fs::read_to_string(&meta)
+        .unwrap()
+        .replace("\"width\": 16", "\"width\": 17");
+    std::fs::write(&meta, json).unwrap();
+    assert_clean_error(
+        &compare(&["--width", "16", "--height", "16", "--reference-spp", "8"]),
+        &["is 16x16, but its settings say 17x16"],
+    );
+    std::fs::write(&meta, "{").unwrap();
+    assert_clean_error(
+        &compare(&["--width", "16", "--height", "16", "--reference-spp", "8"]),
+        &["reference.json", "corrupt"],
+    );
+
+    // Bad arguments.
+    // (A method name is parsed by clap, whose messages add a usage hint.)
+    let unknown = compare(&["--methods", "pt-1spp,foo"]);
+    assert!(!unknown.status.success() && !text(&unknown.stderr).contains("panicked"));
+    assert!(
+        text(&unknown.stderr).contains("unknown method `foo`"),
+        "{}",
+        text(&unknown.stderr)
+    );
+    assert_clean_error(
+        &nrc(&[
+            "compare",
+            "--scene",
+            &scene,
+            "--methods",
+            "pt-1spp",
+            "--equal-time",
+            "0",
+            "--out",
+            o,
+        ]),
+        &["--equal-time"],
+    );
+    assert_clean_error(&compare(&["--methods", "pt-1spp,pt-1spp"]), &["listed twice"]);
+    assert_clean_error(
+        &nrc(&["reference", "--scene", &scene, "--spp", "1", "--cache-dir", c]),
+        &["at least 2 samples"],
+    );
+}
