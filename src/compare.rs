@@ -459,10 +459,13 @@ fn compare(args: &CompareArgs, budget: Budget, scene: &Scene) -> Result<()> {
     }
     let invalid: u64 = runs.iter().map(|r| r.invalid_samples).sum();
     report.notes.push(format!(
-        "Budget: {mode}; a pass is one estimate at the method's stated spp. Errors are means over {} run(s) with distinct seeds \
-         (per-run values in runs.json); images show run 0. Equal-time tolerance: {TOLERANCE}.",
+        "Budget: {mode}; a pass is one estimate at the method's stated spp. Errors are means over {} run(s) with \
+         distinct seeds (per-run values in runs.json); images show run 0.",
         args.runs
     ));
+    if let Budget::Time(_) = budget {
+        report.notes.push(format!("Equal-time tolerance: {TOLERANCE}."));
+    }
     if args.sweep {
         report.notes.push(format!(
             "Sweep: each method at the budget × 1, 2, …, {} (one frame each; the first is run 0).",
