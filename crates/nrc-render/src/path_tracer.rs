@@ -119,7 +119,9 @@ impl PathTracer {
             // Emission found by the ray.
             let le = scene.emission(&si);
             if le != Vec3::ZERO {
-                let weight = if prev_delta || !use_nee {
+                // Area density with which NEE picks this point (0: NEE cannot reach it).
+                let pdf_area = scene.light_pdf_area(si.tri);
+                let weight = if prev_delta || !use_nee || pdf_area == 0.0 {
                     1.0
                 } else if self.strategy == LightStrategy::LightOnly {
                     0.0
@@ -128,7 +130,7 @@ impl PathTracer {
                     // at the previous vertex.
                     let cos_light = si.ng.dot(si.wo).abs();
                     let dist = hit.t * ray.d.length();
-                    let pdf_light = scene.light_pdf_area(si.tri) * dist * dist / cos_light;
+                    let pdf_light = pdf_area * dist * dist / cos_light;
                     power_heuristic(1.0, prev_pdf, 1.0, pdf_light)
                 };
                 radiance += throughput * le * weight;
@@ -146,26 +148,31 @@ impl PathTracer {
             // Next-event estimation: one point on an emitter, chosen by power.
             let u_light = sampler.next_1d();
             let u_point = sampler.next_2d();
-            if use_nee && !bsdf.is_delta() {
-                if let Some(ls) = scene.sample_light(u_light, u_point) {
-                    let to_light = ls.p - si.p;
-                    let dist2 = to_light.length_squared();
-                    let wi = to_light / dist2.sqrt();
-                    let cos_light = ls.n.dot(-wi);
-                    let le = ls.le_toward(-wi);
-                    let wi_local = frame.to_local(wi);
-                    let f = bsdf.eval(wo, wi_local) * wi_local.z.abs();
-                    if ls.pdf_area > 0.0 && cos_light.abs() > 0.0 && le != Vec3::ZERO && f != Vec3::ZERO {
-                        stats.shadow_rays += 1;
-                        if !scene.occluded(&spawn_ray_between(si.p, si.ng, ls.p, ls.n)) {
-                            let pdf_light = ls.pdf_area * dist2 / cos_light.abs();
-                            let weight = if self.strategy == LightStrategy::Mis {
-                                power_heuristic(1.0, pdf_light, 1.0, bsdf.pdf(wo, wi_local))
-                            } else {
-                                1.0
-                            };
-                            radiance += throughput * f * le * (weight / pdf_light);
-                        }
+            if use_nee
+                && !bsdf.is_delta()
+                && let Some(ls) = scene.sample_light(u_light, u_point)
+            {
+                let to_light = ls.p - si.p;
+                let dist2 = to_light.length_squared();
+                let wi = to_light / dist2.sqrt();
+                // Cosine at the light, and its radiance toward the shading point (zero
+                // behind a single-sided emitter).
+                let cos_light = ls.n.dot(-wi).abs();
+                let le = ls.le_toward(-wi);
+                let wi_local = frame.to_local(wi);
+                let f = bsdf.eval(wo, wi_local) * wi_local.z.abs();
+                // Test visibility only for samples that can contribute.
+                if ls.pdf_area > 0.0 && cos_light > 0.0 && le != Vec3::ZERO && f != Vec3::ZERO {
+                    stats.shadow_rays += 1;
+                    if !scene.occluded(&spawn_ray_between(si.p, si.ng, ls.p, ls.n)) {
+                        // Area density to solid angle at the shading point.
+                        let pdf_light = ls.pdf_area * dist2 / cos_light;
+                        let weight = if self.strategy == LightStrategy::Mis {
+                            power_heuristic(1.0, pdf_light, 1.0, bsdf.pdf(wo, wi_local))
+                        } else {
+                            1.0
+                        };
+                        radiance += throughput * f * le * (weight / pdf_light);
                     }
                 }
             }
@@ -181,19 +188,19 @@ impl PathTracer {
             prev_delta = bs.delta;
             ray = spawn_ray(si.p, si.ng, frame.to_world(bs.wi));
             depth += 1;
+            if throughput == Vec3::ZERO {
+                break;
+            }
 
             // Russian roulette (Mitsuba's rule): from `rr_depth` on, continue with
             // probability min(max throughput, 0.95) and divide by it, which keeps the
             // estimate unbiased.
             if depth >= self.rr_depth {
                 let q = throughput.max_element().min(0.95);
-                if !(sampler.next_1d() < q) {
+                if sampler.next_1d() >= q {
                     break;
                 }
                 throughput /= q;
-            }
-            if throughput == Vec3::ZERO {
-                break;
             }
         }
         radiance

@@ -58,7 +58,7 @@ impl Mesh {
                 let mut n = Vec3::ZERO;
                 n[axis] = side;
                 let (u, v) = ((axis + 1) % 3, (axis + 2) % 3);
-                let mut corner = |a: f32, b: f32| {
+                let corner = |a: f32, b: f32| {
                     let mut p = c;
                     p[axis] = if side > 0.0 { hi[axis] } else { lo[axis] };
                     p[u] = if a > 0.0 { hi[u] } else { lo[u] };
