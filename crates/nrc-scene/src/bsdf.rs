@@ -112,7 +112,11 @@ fn mirror_up(w: Vec3) -> Vec3 {
 
 #[inline]
 fn finite_or_zero(v: Vec3) -> Vec3 {
-    if v.is_finite() { v.max(Vec3::ZERO) } else { Vec3::ZERO }
+    if v.is_finite() {
+        v.max(Vec3::ZERO)
+    } else {
+        Vec3::ZERO
+    }
 }
 
 /// Clamps a colour to `[0, 1]`, mapping NaN to 0.
@@ -143,7 +147,11 @@ impl Bsdf {
         let roughness = unit(p.roughness);
         let alpha = roughness * roughness;
         let transmission = unit(p.transmission);
-        let ior = if p.ior.is_nan() { 1.5 } else { p.ior.clamp(1.0, 10.0) };
+        let ior = if p.ior.is_nan() {
+            1.5
+        } else {
+            p.ior.clamp(1.0, 10.0)
+        };
         let specular = unit(p.specular);
         let specular_color = if p.specular_color.is_nan() {
             Vec3::ONE
@@ -153,20 +161,53 @@ impl Bsdf {
         if metallic == 0.0 && transmission == 0.0 && specular == 0.0 {
             Bsdf::Diffuse { albedo: base_color }
         } else if metallic == 1.0 && transmission == 0.0 {
-            Bsdf::Conductor { f0: base_color, alpha }
-        } else if transmission == 1.0 && metallic == 0.0 && specular == 1.0 && specular_color == Vec3::ONE {
-            Bsdf::Dielectric { eta: ior, alpha, tint: base_color }
+            Bsdf::Conductor {
+                f0: base_color,
+                alpha,
+            }
+        } else if transmission == 1.0
+            && metallic == 0.0
+            && specular == 1.0
+            && specular_color == Vec3::ONE
+        {
+            Bsdf::Dielectric {
+                eta: ior,
+                alpha,
+                tint: base_color,
+            }
         } else {
-            Bsdf::MetallicRoughness { base_color, metallic, alpha, transmission, ior, specular, specular_color }
+            Bsdf::MetallicRoughness {
+                base_color,
+                metallic,
+                alpha,
+                transmission,
+                ior,
+                specular,
+                specular_color,
+            }
         }
     }
 
     #[inline]
     fn metallic_roughness(&self) -> Option<MetallicRoughness> {
         match *self {
-            Bsdf::MetallicRoughness { base_color, metallic, alpha, transmission, ior, specular, specular_color } => {
-                Some(MetallicRoughness::new(base_color, metallic, alpha, transmission, ior, specular, specular_color))
-            }
+            Bsdf::MetallicRoughness {
+                base_color,
+                metallic,
+                alpha,
+                transmission,
+                ior,
+                specular,
+                specular_color,
+            } => Some(MetallicRoughness::new(
+                base_color,
+                metallic,
+                alpha,
+                transmission,
+                ior,
+                specular,
+                specular_color,
+            )),
             _ => None,
         }
     }
@@ -189,7 +230,9 @@ impl Bsdf {
                 }
             }
             Bsdf::Dielectric { eta, alpha, tint } => dielectric::eval(eta, alpha, tint, wo, wi),
-            Bsdf::MetallicRoughness { .. } => self.metallic_roughness().map_or(Vec3::ZERO, |m| m.eval(wo, wi)),
+            Bsdf::MetallicRoughness { .. } => self
+                .metallic_roughness()
+                .map_or(Vec3::ZERO, |m| m.eval(wo, wi)),
         };
         finite_or_zero(f)
     }
@@ -213,7 +256,9 @@ impl Bsdf {
                 }
             }
             Bsdf::Dielectric { eta, alpha, .. } => dielectric::pdf(eta, alpha, wo, wi),
-            Bsdf::MetallicRoughness { .. } => self.metallic_roughness().map_or(0.0, |m| m.pdf(wo, wi)),
+            Bsdf::MetallicRoughness { .. } => {
+                self.metallic_roughness().map_or(0.0, |m| m.pdf(wo, wi))
+            }
         };
         if p.is_finite() && p > 0.0 { p } else { 0.0 }
     }
@@ -234,7 +279,12 @@ impl Bsdf {
                     wi.z = -wi.z;
                 }
                 // f cos/pdf = (albedo/π) cos / (cos/π) = albedo.
-                BsdfSample { wi, weight: albedo, pdf, delta: false }
+                BsdfSample {
+                    wi,
+                    weight: albedo,
+                    pdf,
+                    delta: false,
+                }
             }
             Bsdf::Conductor { f0, alpha } => {
                 if wo.z == 0.0 {
@@ -246,11 +296,20 @@ impl Bsdf {
                 }
                 s
             }
-            Bsdf::Dielectric { eta, alpha, tint } => dielectric::sample(eta, alpha, tint, wo, u, uc)?,
+            Bsdf::Dielectric { eta, alpha, tint } => {
+                dielectric::sample(eta, alpha, tint, wo, u, uc)?
+            }
             Bsdf::MetallicRoughness { .. } => self.metallic_roughness()?.sample(wo, u, uc)?,
         };
-        let ok = s.pdf > 0.0 && s.pdf.is_finite() && s.weight.is_finite() && s.wi.is_finite() && s.wi.z != 0.0;
-        ok.then_some(BsdfSample { weight: s.weight.max(Vec3::ZERO), ..s })
+        let ok = s.pdf > 0.0
+            && s.pdf.is_finite()
+            && s.weight.is_finite()
+            && s.wi.is_finite()
+            && s.wi.z != 0.0;
+        ok.then_some(BsdfSample {
+            weight: s.weight.max(Vec3::ZERO),
+            ..s
+        })
     }
 
     /// All lobes with energy are Dirac deltas (`eval` and `pdf` are identically 0).
@@ -259,7 +318,9 @@ impl Bsdf {
             Bsdf::Diffuse { .. } => false,
             Bsdf::Conductor { alpha, .. } => conductor::is_delta(alpha),
             Bsdf::Dielectric { eta, alpha, .. } => dielectric::is_delta(eta, alpha),
-            Bsdf::MetallicRoughness { .. } => self.metallic_roughness().is_some_and(|m| m.is_delta()),
+            Bsdf::MetallicRoughness { .. } => {
+                self.metallic_roughness().is_some_and(|m| m.is_delta())
+            }
         }
     }
 
@@ -278,9 +339,9 @@ impl Bsdf {
         match *self {
             Bsdf::Diffuse { albedo } => albedo,
             Bsdf::Conductor { .. } | Bsdf::Dielectric { .. } => Vec3::ZERO,
-            Bsdf::MetallicRoughness { .. } => {
-                self.metallic_roughness().map_or(Vec3::ZERO, |m| m.diffuse_reflectance())
-            }
+            Bsdf::MetallicRoughness { .. } => self
+                .metallic_roughness()
+                .map_or(Vec3::ZERO, |m| m.diffuse_reflectance()),
         }
     }
 
@@ -291,9 +352,9 @@ impl Bsdf {
             Bsdf::Diffuse { .. } => Vec3::ZERO,
             Bsdf::Conductor { f0, .. } => f0,
             Bsdf::Dielectric { eta, .. } => Vec3::splat(f0_from_ior(eta)),
-            Bsdf::MetallicRoughness { .. } => {
-                self.metallic_roughness().map_or(Vec3::ZERO, |m| m.specular_reflectance())
-            }
+            Bsdf::MetallicRoughness { .. } => self
+                .metallic_roughness()
+                .map_or(Vec3::ZERO, |m| m.specular_reflectance()),
         }
     }
 }

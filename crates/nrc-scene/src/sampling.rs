@@ -158,7 +158,11 @@ mod tests {
             Vec3::new(1.0, -2.0, 0.5).normalize(),
             Vec3::new(0.0, 0.0, -0.0),
         ] {
-            let n = if n.length_squared() == 0.0 { -Vec3::Z } else { n };
+            let n = if n.length_squared() == 0.0 {
+                -Vec3::Z
+            } else {
+                n
+            };
             let f = Frame::from_normal(n);
             assert!(f.s.dot(f.t).abs() < 1e-6 && f.s.dot(f.n).abs() < 1e-6);
             assert!((f.s.length() - 1.0).abs() < 1e-6 && (f.t.length() - 1.0).abs() < 1e-6);

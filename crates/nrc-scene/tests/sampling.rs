@@ -31,15 +31,26 @@ fn statistics_match_reference_values() {
         assert!((chi2_p_value(x, 2) - (-0.5 * x).exp()).abs() < 1e-12);
     }
     // Critical values from standard χ² tables.
-    for (x, dof, p) in [(3.841_459, 1, 0.05), (23.209_251, 10, 0.01), (135.806_723, 100, 0.01), (1_106.969_2, 1000, 0.01)] {
+    for (x, dof, p) in [
+        (3.841_459, 1, 0.05),
+        (23.209_251, 10, 0.01),
+        (135.806_723, 100, 0.01),
+        (1_106.969_2, 1000, 0.01),
+    ] {
         let got = chi2_p_value(x, dof);
-        assert!((got - p).abs() < 1e-5 * p.max(1e-3) * 10.0, "dof {dof}: {got} vs {p}");
+        assert!(
+            (got - p).abs() < 1e-5 * p.max(1e-3) * 10.0,
+            "dof {dof}: {got} vs {p}"
+        );
     }
 }
 
 /// χ² of a direction sampler against its density over a (cos θ, φ) histogram.
 fn sphere_chi2(name: &str, seed: u64, sample: impl Fn(Vec2) -> Vec3, pdf: impl Fn(Vec3) -> f32) {
-    let bins = SphereBins { cos_bins: 16, phi_bins: 32 };
+    let bins = SphereBins {
+        cos_bins: 16,
+        phi_bins: 32,
+    };
     let mut rng = Pcg64::seed_from_u64(seed);
     let mut observed = vec![0.0; bins.len()];
     for _ in 0..SAMPLES {
@@ -47,29 +58,48 @@ fn sphere_chi2(name: &str, seed: u64, sample: impl Fn(Vec2) -> Vec3, pdf: impl F
         assert!((w.length() - 1.0).abs() < 1e-4, "{name}: not unit {w}");
         observed[bins.index(w)] += 1.0;
     }
-    let mass = bins.integrate(&|w| f64::from(pdf(w)), 1e-9, &|_| 1);
+    let mass = bins.integrate(&|w| f64::from(pdf(w)), 1e-9, 1e-6, &|_| 1);
     let total: f64 = mass.iter().sum();
-    assert!((total - 1.0).abs() < 1e-4, "{name}: density integrates to {total}");
+    assert!(
+        (total - 1.0).abs() < 1e-4,
+        "{name}: density integrates to {total}"
+    );
     let expected: Vec<f64> = mass.iter().map(|m| m * SAMPLES as f64).collect();
     let r = chi2_test(&observed, &expected).unwrap_or_else(|e| panic!("{name}: {e}"));
-    eprintln!("{name}: χ² = {:.1}, dof {}, p = {:.3}", r.statistic, r.dof, r.p_value);
-    assert!(r.p_value > level(), "{name}: p = {:.2e} below {:.2e}", r.p_value, level());
+    eprintln!(
+        "{name}: χ² = {:.1}, dof {}, p = {:.3}",
+        r.statistic, r.dof, r.p_value
+    );
+    assert!(
+        r.p_value > level(),
+        "{name}: p = {:.2e} below {:.2e}",
+        r.p_value,
+        level()
+    );
 }
 
 #[test]
 fn cosine_hemisphere_fits_its_pdf() {
-    sphere_chi2("cosine hemisphere", 1, sample_cosine_hemisphere, |w| cosine_hemisphere_pdf(w.z));
+    sphere_chi2("cosine hemisphere", 1, sample_cosine_hemisphere, |w| {
+        cosine_hemisphere_pdf(w.z)
+    });
 }
 
 #[test]
 fn uniform_sphere_fits_its_pdf() {
-    sphere_chi2("uniform sphere", 2, sample_uniform_sphere, |_| uniform_sphere_pdf());
+    sphere_chi2("uniform sphere", 2, sample_uniform_sphere, |_| {
+        uniform_sphere_pdf()
+    });
 }
 
 #[test]
 fn uniform_hemisphere_fits_its_pdf() {
     sphere_chi2("uniform hemisphere", 3, sample_uniform_hemisphere, |w| {
-        if w.z >= 0.0 { uniform_hemisphere_pdf() } else { 0.0 }
+        if w.z >= 0.0 {
+            uniform_hemisphere_pdf()
+        } else {
+            0.0
+        }
     });
 }
 
@@ -82,7 +112,10 @@ fn triangle_samples_are_uniform() {
     let mut observed = vec![0.0; K * K];
     for _ in 0..SAMPLES {
         let (b1, b2) = sample_uniform_triangle(u2(&mut rng));
-        assert!(b1 >= 0.0 && b2 >= 0.0 && b1 + b2 <= 1.0 + 1e-6, "({b1}, {b2})");
+        assert!(
+            b1 >= 0.0 && b2 >= 0.0 && b1 + b2 <= 1.0 + 1e-6,
+            "({b1}, {b2})"
+        );
         let i = ((b1 * K as f32) as usize).min(K - 1);
         let j = ((b2 * K as f32) as usize).min(K - 1);
         observed[i * K + j] += 1.0;
@@ -99,7 +132,10 @@ fn triangle_samples_are_uniform() {
         })
         .collect();
     let r = chi2_test(&observed, &expected).unwrap();
-    eprintln!("uniform triangle: χ² = {:.1}, dof {}, p = {:.3}", r.statistic, r.dof, r.p_value);
+    eprintln!(
+        "uniform triangle: χ² = {:.1}, dof {}, p = {:.3}",
+        r.statistic, r.dof, r.p_value
+    );
     assert!(r.p_value > level());
 }
 
@@ -120,7 +156,10 @@ fn concentric_disk_is_uniform() {
     }
     let expected = vec![SAMPLES as f64 / (K * K) as f64; K * K];
     let r = chi2_test(&observed, &expected).unwrap();
-    eprintln!("concentric disk: χ² = {:.1}, dof {}, p = {:.3}", r.statistic, r.dof, r.p_value);
+    eprintln!(
+        "concentric disk: χ² = {:.1}, dof {}, p = {:.3}",
+        r.statistic, r.dof, r.p_value
+    );
     assert!(r.p_value > level());
 }
 
@@ -138,9 +177,12 @@ fn frame_maps_cosine_lobe_to_world() {
     }
     let n = Vec3::new(0.3, -0.5, 0.8).normalize();
     let f = Frame::from_normal(n);
-    sphere_chi2("cosine lobe in a frame", 7, |u| f.to_world(sample_cosine_hemisphere(u)), |w| {
-        cosine_hemisphere_pdf(w.dot(n))
-    });
+    sphere_chi2(
+        "cosine lobe in a frame",
+        7,
+        |u| f.to_world(sample_cosine_hemisphere(u)),
+        |w| cosine_hemisphere_pdf(w.dot(n)),
+    );
 }
 
 #[test]
@@ -150,7 +192,10 @@ fn power_heuristic_weights_sum_to_one() {
         let (a, b): (f32, f32) = (rng.random::<f32>() * 100.0, rng.random::<f32>() * 100.0);
         let (na, nb) = (1.0 + (rng.random::<f32>() * 4.0).floor(), 1.0);
         let s = power_heuristic(na, a, nb, b) + power_heuristic(nb, b, na, a);
-        assert!((s - 1.0).abs() < 1e-5 || (a == 0.0 && b == 0.0), "{a} {b}: {s}");
+        assert!(
+            (s - 1.0).abs() < 1e-5 || (a == 0.0 && b == 0.0),
+            "{a} {b}: {s}"
+        );
     }
     assert!((luminance(Vec3::ONE) - 1.0).abs() < 1e-6);
     assert!(luminance(Vec3::new(0.0, 1.0, 0.0)) > luminance(Vec3::new(1.0, 0.0, 1.0)));

@@ -42,7 +42,11 @@ pub(super) fn is_delta(eta: f32, alpha: f32) -> bool {
 /// Mirrors `(wo, wi)` so that `wo.z > 0` and returns the relative index of the far side.
 #[inline]
 fn orient(eta: f32, wo: Vec3, wi: Vec3) -> (Vec3, Vec3, f32) {
-    if wo.z > 0.0 { (wo, wi, eta) } else { (flip(wo), flip(wi), 1.0 / eta) }
+    if wo.z > 0.0 {
+        (wo, wi, eta)
+    } else {
+        (flip(wo), flip(wi), 1.0 / eta)
+    }
 }
 
 /// Microfacet normal of the pair `(wo, wi)` (`wo.z > 0`): the half vector for reflection,
@@ -107,7 +111,14 @@ pub(super) fn pdf(eta: f32, alpha: f32, wo: Vec3, wi: Vec3) -> f32 {
     }
 }
 
-pub(super) fn sample(eta: f32, alpha: f32, tint: Vec3, wo: Vec3, u: Vec2, uc: f32) -> Option<BsdfSample> {
+pub(super) fn sample(
+    eta: f32,
+    alpha: f32,
+    tint: Vec3,
+    wo: Vec3,
+    u: Vec2,
+    uc: f32,
+) -> Option<BsdfSample> {
     if wo.z == 0.0 {
         return None;
     }
@@ -115,7 +126,12 @@ pub(super) fn sample(eta: f32, alpha: f32, tint: Vec3, wo: Vec3, u: Vec2, uc: f3
     let (wo, _, etap) = orient(eta, wo, Vec3::Z);
     let unorient = |w: Vec3| if outside { w } else { flip(w) };
     if index_matched(eta) {
-        return Some(BsdfSample { wi: -unorient(wo), weight: tint, pdf: 1.0, delta: true });
+        return Some(BsdfSample {
+            wi: -unorient(wo),
+            weight: tint,
+            pdf: 1.0,
+            delta: true,
+        });
     }
     if alpha < ALPHA_DELTA {
         // Smooth interface: reflect with probability F, refract with 1 − F. The weights

@@ -11,7 +11,11 @@ use glam::Vec3;
 /// `cos_i` means the direction is on the other side: the interface is seen with `1/eta`.
 /// Returns 1 under total internal reflection.
 pub fn fresnel_dielectric(cos_i: f32, eta: f32) -> f32 {
-    let (cos_i, eta) = if cos_i < 0.0 { (-cos_i, 1.0 / eta) } else { (cos_i, eta) };
+    let (cos_i, eta) = if cos_i < 0.0 {
+        (-cos_i, 1.0 / eta)
+    } else {
+        (cos_i, eta)
+    };
     let cos_i = cos_i.min(1.0);
     let sin2_t = (1.0 - cos_i * cos_i).max(0.0) / (eta * eta);
     if sin2_t >= 1.0 {
@@ -21,7 +25,11 @@ pub fn fresnel_dielectric(cos_i: f32, eta: f32) -> f32 {
     let r_parallel = (eta * cos_i - cos_t) / (eta * cos_i + cos_t);
     let r_perpendicular = (cos_i - eta * cos_t) / (cos_i + eta * cos_t);
     let f = 0.5 * (r_parallel * r_parallel + r_perpendicular * r_perpendicular);
-    if f.is_finite() { f.clamp(0.0, 1.0) } else { 1.0 }
+    if f.is_finite() {
+        f.clamp(0.0, 1.0)
+    } else {
+        1.0
+    }
 }
 
 /// The weight `(1 − cos)⁵` of Schlick's 1994 approximation.

@@ -145,7 +145,8 @@ impl MetallicRoughness {
         let diffuse = base * (1.0 - self.transmission);
         let transmission = base * self.transmission;
         let total = spec + diffuse + transmission;
-        (total > 0.0 && total.is_finite()).then(|| [spec / total, diffuse / total, transmission / total])
+        (total > 0.0 && total.is_finite())
+            .then(|| [spec / total, diffuse / total, transmission / total])
     }
 
     /// Diffuse base `(1 − metallic)(1 − transmission) min(1 − Ê(wo), 1 − Ê(wi)) base / π`
@@ -163,7 +164,8 @@ impl MetallicRoughness {
     /// with the outside direction is `c_out`.
     #[inline]
     fn transmission_weight(&self, c_out: f32) -> Vec3 {
-        self.base * ((1.0 - self.metallic) * self.transmission * (1.0 - self.layer_max(c_out)).max(0.0))
+        self.base
+            * ((1.0 - self.metallic) * self.transmission * (1.0 - self.layer_max(c_out)).max(0.0))
     }
 
     pub fn eval(&self, wo: Vec3, wi: Vec3) -> Vec3 {
@@ -184,7 +186,11 @@ impl MetallicRoughness {
                 return Vec3::ZERO;
             }
             let outside = wo.z > 0.0;
-            let (o, i, etap) = if outside { (wo, wi, self.eta) } else { (flip(wo), flip(wi), 1.0 / self.eta) };
+            let (o, i, etap) = if outside {
+                (wo, wi, self.eta)
+            } else {
+                (flip(wo), flip(wi), 1.0 / self.eta)
+            };
             let Some(m) = half_vector(o, i, etap) else {
                 return Vec3::ZERO;
             };
@@ -217,7 +223,11 @@ impl MetallicRoughness {
             if p_trans <= 0.0 || self.delta_transmission() {
                 return 0.0;
             }
-            let (o, i, etap) = if wo.z > 0.0 { (wo, wi, self.eta) } else { (flip(wo), flip(wi), 1.0 / self.eta) };
+            let (o, i, etap) = if wo.z > 0.0 {
+                (wo, wi, self.eta)
+            } else {
+                (flip(wo), flip(wi), 1.0 / self.eta)
+            };
             let Some(m) = half_vector(o, i, etap) else {
                 return 0.0;
             };
@@ -253,7 +263,11 @@ impl MetallicRoughness {
             let etap = if below { 1.0 / self.eta } else { self.eta };
             if self.delta_transmission() {
                 // Smooth (or index-matched) refraction through the macro-normal.
-                let wi = if (self.eta - 1.0).abs() < 1e-4 { -o } else { refract(o, Vec3::Z, etap)? };
+                let wi = if (self.eta - 1.0).abs() < 1e-4 {
+                    -o
+                } else {
+                    refract(o, Vec3::Z, etap)?
+                };
                 let c_out = if below { wi.z.abs() } else { o.z };
                 return Some(BsdfSample {
                     wi: to_side(wi),
@@ -274,7 +288,12 @@ impl MetallicRoughness {
             return None;
         }
         let weight = self.eval(wo, wi) * (wi.z.abs() / pdf);
-        Some(BsdfSample { wi, weight, pdf, delta: false })
+        Some(BsdfSample {
+            wi,
+            weight,
+            pdf,
+            delta: false,
+        })
     }
 
     pub fn diffuse_reflectance(&self) -> Vec3 {

@@ -24,7 +24,9 @@ pub struct Ggx {
 
 impl Ggx {
     pub fn new(alpha: f32) -> Self {
-        Self { alpha: alpha.clamp(ALPHA_DELTA, 1.0) }
+        Self {
+            alpha: alpha.clamp(ALPHA_DELTA, 1.0),
+        }
     }
 
     /// Normal distribution `D(m) = α² / (π cos⁴θm (α² + tan²θm)²)` (Walter 2007 eq. 33),

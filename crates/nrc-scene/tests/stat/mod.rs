@@ -108,10 +108,16 @@ pub fn chi2_test(observed: &[f64], expected: &[f64]) -> Result<Chi2, String> {
     let total: f64 = expected.iter().sum();
     for (i, (&o, &e)) in observed.iter().zip(expected).enumerate() {
         if e <= 1e-9 * total.max(1.0) && o > 0.0 {
-            return Err(format!("cell {i}: {o} samples where the density integrates to {e:.3e}"));
+            return Err(format!(
+                "cell {i}: {o} samples where the density integrates to {e:.3e}"
+            ));
         }
     }
-    let mut cells: Vec<(f64, f64)> = observed.iter().copied().zip(expected.iter().copied()).collect();
+    let mut cells: Vec<(f64, f64)> = observed
+        .iter()
+        .copied()
+        .zip(expected.iter().copied())
+        .collect();
     cells.sort_by(|a, b| a.1.total_cmp(&b.1));
     let (mut pool_o, mut pool_e) = (0.0, 0.0);
     let mut kept: Vec<(f64, f64)> = Vec::new();
@@ -135,11 +141,19 @@ pub fn chi2_test(observed: &[f64], expected: &[f64]) -> Result<Chi2, String> {
         }
     }
     if kept.len() < 2 {
-        return Ok(Chi2 { statistic: 0.0, dof: 0, p_value: 1.0 });
+        return Ok(Chi2 {
+            statistic: 0.0,
+            dof: 0,
+            p_value: 1.0,
+        });
     }
     let statistic: f64 = kept.iter().map(|&(o, e)| (o - e) * (o - e) / e).sum();
     let dof = kept.len() - 1;
-    Ok(Chi2 { statistic, dof, p_value: chi2_p_value(statistic, dof) })
+    Ok(Chi2 {
+        statistic,
+        dof,
+        p_value: chi2_p_value(statistic, dof),
+    })
 }
 
 /// Histogram of directions over the sphere in equal-area cells of `(cos θ, φ)`.
@@ -152,7 +166,11 @@ pub struct SphereBins {
 /// Unit direction of `(cos θ, φ)`.
 pub fn direction(cos: f64, phi: f64) -> Vec3 {
     let sin = (1.0 - cos * cos).max(0.0).sqrt();
-    Vec3::new((sin * phi.cos()) as f32, (sin * phi.sin()) as f32, cos as f32)
+    Vec3::new(
+        (sin * phi.cos()) as f32,
+        (sin * phi.sin()) as f32,
+        cos as f32,
+    )
 }
 
 impl SphereBins {
@@ -173,19 +191,31 @@ impl SphereBins {
         let (i, j) = (k / self.phi_bins, k % self.phi_bins);
         let dc = 2.0 / self.cos_bins as f64;
         let dp = 2.0 * PI / self.phi_bins as f64;
-        (-1.0 + i as f64 * dc, -1.0 + (i + 1) as f64 * dc, j as f64 * dp, (j + 1) as f64 * dp)
+        (
+            -1.0 + i as f64 * dc,
+            -1.0 + (i + 1) as f64 * dc,
+            j as f64 * dp,
+            (j + 1) as f64 * dp,
+        )
     }
 
     /// Integral of a solid-angle density over each cell (`dω = d cos θ dφ`), by adaptive
-    /// Simpson with absolute tolerance `tol` per cell. Each cell is first split
-    /// `4^min_depth(k)` times so that narrow lobes are not stepped over.
-    pub fn integrate(&self, pdf: &dyn Fn(Vec3) -> f64, tol: f64, min_depth: &dyn Fn(usize) -> u32) -> Vec<f64> {
+    /// Simpson with tolerance `tol + rel_tol · |cell integral|` per cell. Each cell is first
+    /// split `4^min_depth(k)` times so that narrow lobes are not stepped over.
+    pub fn integrate(
+        &self,
+        pdf: &dyn Fn(Vec3) -> f64,
+        tol: f64,
+        rel_tol: f64,
+        min_depth: &dyn Fn(usize) -> u32,
+    ) -> Vec<f64> {
         let f = |c: f64, p: f64| pdf(direction(c, p));
         (0..self.len())
             .map(|k| {
                 let (c0, c1, p0, p1) = self.cell(k);
                 let whole = simpson(&f, c0, c1, p0, p1);
-                adaptive_simpson(&f, c0, c1, p0, p1, whole, tol, 12, min_depth(k)).max(0.0)
+                let tol = tol + rel_tol * whole.abs();
+                adaptive_simpson(&f, c0, c1, p0, p1, whole, tol, 10, min_depth(k)).max(0.0)
             })
             .collect()
     }
@@ -208,7 +238,9 @@ fn simpson(f: &dyn Fn(f64, f64) -> f64, x0: f64, x1: f64, y0: f64, y1: f64) -> f
 
 /// Adaptive Simpson on a rectangle: compare the rule on the rectangle with the sum over
 /// its four quarters and recurse where they disagree by more than `15 tol`, adding the
-/// Richardson correction when accepting.
+/// Richardson correction when accepting. Children get `tol / 2` (not `/ 4`), so that
+/// refinement along a discontinuity of the density (horizon, total internal reflection)
+/// terminates; the total error stays a small multiple of `tol`.
 fn adaptive_simpson(
     f: &dyn Fn(f64, f64) -> f64,
     x0: f64,
@@ -221,7 +253,12 @@ fn adaptive_simpson(
     min_depth: u32,
 ) -> f64 {
     let (xm, ym) = (0.5 * (x0 + x1), 0.5 * (y0 + y1));
-    let quarters = [(x0, xm, y0, ym), (xm, x1, y0, ym), (x0, xm, ym, y1), (xm, x1, ym, y1)];
+    let quarters = [
+        (x0, xm, y0, ym),
+        (xm, x1, y0, ym),
+        (x0, xm, ym, y1),
+        (xm, x1, ym, y1),
+    ];
     let parts = quarters.map(|(a, b, c, d)| simpson(f, a, b, c, d));
     let sum: f64 = parts.iter().sum();
     if min_depth == 0 && (depth_left == 0 || (sum - whole).abs() <= 15.0 * tol) {
@@ -231,7 +268,17 @@ fn adaptive_simpson(
         .iter()
         .zip(parts)
         .map(|(&(a, b, c, d), part)| {
-            adaptive_simpson(f, a, b, c, d, part, 0.25 * tol, depth_left.saturating_sub(1), min_depth.saturating_sub(1))
+            adaptive_simpson(
+                f,
+                a,
+                b,
+                c,
+                d,
+                part,
+                0.5 * tol,
+                depth_left.saturating_sub(1),
+                min_depth.saturating_sub(1),
+            )
         })
         .sum()
 }
