@@ -7,7 +7,11 @@
 //!   at the primary hits (what a path tracer traces after the first bounce);
 //! - path tracer: full paths per second (and rays per second) at the given size and spp.
 //!
-//! Each timing is the best of `--repeats` runs, so that a busy machine disturbs it less.
+//! Each wall-clock figure is the best of `--repeats` runs, so that a busy machine disturbs it
+//! less. On a machine shared with other work, threads wait for a core and wall-clock
+//! throughput understates what the code does; the last column therefore also gives the
+//! throughput per CPU-second of the process (all repeats of the multi-threaded runs, CPU
+//! time from `/proc/self/stat` on Linux, 10 ms resolution), which the load barely changes.
 
 use std::hint::black_box;
 use std::time::{Duration, Instant};
@@ -75,17 +79,43 @@ fn trace_all(scene: &Scene, rays: &[Ray]) -> usize {
         .sum()
 }
 
-/// Best wall-clock time of `repeats` runs of `f`.
-fn best_of<T>(repeats: u32, mut f: impl FnMut() -> T) -> (Duration, T) {
+/// CPU time (user + system) used so far by all threads of this process, where the system
+/// tells it (`/proc/self/stat`, in clock ticks of 1/100 s as Linux reports them).
+fn process_cpu_time() -> Option<Duration> {
+    let stat = std::fs::read_to_string("/proc/self/stat").ok()?;
+    // Fields after the parenthesised command name; utime and stime are fields 14 and 15.
+    let rest = &stat[stat.rfind(')')? + 2..];
+    let mut fields = rest.split_whitespace().skip(11);
+    let utime: u64 = fields.next()?.parse().ok()?;
+    let stime: u64 = fields.next()?.parse().ok()?;
+    Some(Duration::from_millis((utime + stime) * 10))
+}
+
+/// A measurement: the best wall-clock time over the repeats, the CPU time per run
+/// (averaged over all repeats) when known, and the last run's result.
+struct Timing<T> {
+    best: Duration,
+    cpu_per_run: Option<Duration>,
+    value: T,
+}
+
+/// Runs `f` `repeats` times.
+fn measure<T>(repeats: u32, mut f: impl FnMut() -> T) -> Timing<T> {
+    let repeats = repeats.max(1);
     let mut best = Duration::MAX;
     let mut last = None;
-    for _ in 0..repeats.max(1) {
+    let cpu0 = process_cpu_time();
+    for _ in 0..repeats {
         let t = Instant::now();
         let v = f();
         best = best.min(t.elapsed());
         last = Some(v);
     }
-    (best, last.expect("at least one run"))
+    let cpu_per_run = match (cpu0, process_cpu_time()) {
+        (Some(a), Some(b)) if b > a => Some((b - a) / repeats),
+        _ => None,
+    };
+    Timing { best, cpu_per_run, value: last.expect("at least one run") }
 }
 
 /// One jittered camera ray per pixel sample.
@@ -137,36 +167,48 @@ fn trace(args: &TraceArgs) -> Result<()> {
     struct Row {
         name: &'static str,
         unit: &'static str,
-        values: [f64; 2],
+        /// 1 thread, all threads (wall clock), per CPU-second (all threads).
+        values: [f64; 3],
     }
     let mut rows = vec![
-        Row { name: "primary rays", unit: "Mrays/s", values: [0.0; 2] },
-        Row { name: "incoherent (diffuse-bounce) rays", unit: "Mrays/s", values: [0.0; 2] },
-        Row { name: "path tracer", unit: "M samples/s", values: [0.0; 2] },
-        Row { name: "path tracer rays", unit: "Mrays/s", values: [0.0; 2] },
+        Row { name: "primary rays", unit: "Mrays/s", values: [0.0; 3] },
+        Row { name: "incoherent (diffuse-bounce) rays", unit: "Mrays/s", values: [0.0; 3] },
+        Row { name: "path tracer", unit: "M samples/s", values: [0.0; 3] },
+        Row { name: "path tracer rays", unit: "Mrays/s", values: [0.0; 3] },
     ];
+    let rate = |work: f64, t: Duration| work / t.as_secs_f64() * 1e-6;
+    let per_cpu = |work: f64, t: Option<Duration>| t.map_or(f64::NAN, |t| rate(work, t));
     let mut hits = (0, 0);
     for (col, pool) in [&one, &all].into_iter().enumerate() {
-        let (t, n) = best_of(args.repeats, || pool.install(|| trace_all(&scene, &primary)));
-        rows[0].values[col] = primary.len() as f64 / t.as_secs_f64() * 1e-6;
-        hits.0 = n;
-        let (t, n) = best_of(args.repeats, || pool.install(|| trace_all(&scene, &bounce)));
-        rows[1].values[col] = bounce.len() as f64 / t.as_secs_f64() * 1e-6;
-        hits.1 = n;
-        let (t, out) = best_of(args.repeats, || {
+        let m = measure(args.repeats, || pool.install(|| trace_all(&scene, &primary)));
+        rows[0].values[col] = rate(primary.len() as f64, m.best);
+        rows[0].values[2] = per_cpu(primary.len() as f64, m.cpu_per_run);
+        hits.0 = m.value;
+        let m = measure(args.repeats, || pool.install(|| trace_all(&scene, &bounce)));
+        rows[1].values[col] = rate(bounce.len() as f64, m.best);
+        rows[1].values[2] = per_cpu(bounce.len() as f64, m.cpu_per_run);
+        hits.1 = m.value;
+        let m = measure(args.repeats, || {
             pool.install(|| render(&scene, &scene.camera, &tracer, &settings, &|_| {}))
         });
-        rows[2].values[col] = out.stats.samples as f64 / t.as_secs_f64() * 1e-6;
-        rows[3].values[col] = out.stats.rays.rays() as f64 / t.as_secs_f64() * 1e-6;
+        let (samples, rays) = (m.value.stats.samples as f64, m.value.stats.rays.rays() as f64);
+        rows[2].values[col] = rate(samples, m.best);
+        rows[2].values[2] = per_cpu(samples, m.cpu_per_run);
+        rows[3].values[col] = rate(rays, m.best);
+        rows[3].values[2] = per_cpu(rays, m.cpu_per_run);
     }
 
+    let threads = all.current_num_threads();
     println!(
-        "scene {}: {} triangles; {w}x{h}, {spp} spp; max_depth {}, rr_depth {}; best of {}",
+        "scene {}: {} triangles; {w}x{h}, {spp} spp; max_depth {}, rr_depth {}",
         args.scene.scene.display(),
         scene.triangle_count(),
         args.tracer.max_depth,
         args.tracer.rr_depth,
-        args.repeats
+    );
+    println!(
+        "wall-clock figures: best of {}; per CPU-second: {threads}-thread runs, CPU time of all threads",
+        args.repeats.max(1)
     );
     println!(
         "rays: {} primary ({} hit), {} incoherent ({} hit)",
@@ -175,10 +217,19 @@ fn trace(args: &TraceArgs) -> Result<()> {
         bounce.len(),
         hits.1
     );
-    let threads = all.current_num_threads();
-    println!("{:<34} {:>12} {:>12} {:>12}", "", "unit", "1 thread", format!("{threads} threads"));
+    println!(
+        "{:<34} {:>12} {:>12} {:>12} {:>14}",
+        "",
+        "unit",
+        "1 thread",
+        format!("{threads} threads"),
+        "per CPU-second"
+    );
     for r in &rows {
-        println!("{:<34} {:>12} {:>12.3} {:>12.3}", r.name, r.unit, r.values[0], r.values[1]);
+        println!(
+            "{:<34} {:>12} {:>12.3} {:>12.3} {:>14.3}",
+            r.name, r.unit, r.values[0], r.values[1], r.values[2]
+        );
     }
     Ok(())
 }
