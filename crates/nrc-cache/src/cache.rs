@@ -1,0 +1,375 @@
+//! [`RadianceCache`]: the public face of the crate — train on [`TrainingBatch`]es, answer
+//! [`CacheQuery`]s with the EMA weights, save and load snapshots.
+
+use std::path::Path;
+use std::sync::{Arc, Mutex};
+
+use burn::backend::Dispatch;
+use burn::tensor::{Device, Tensor, TensorData};
+
+use crate::batch::{QUERY_ROW, TRAIN_ROW, pack_queries, pack_training};
+use crate::config::{AdamParams, CacheConfig, SceneBox, Sizing};
+use crate::cpu::train::LossSettings;
+use crate::device::{CacheDevice, ComputePath};
+use crate::error::CacheError;
+use crate::model::ModelLayout;
+use crate::ops::{NrcFusedOps, StepSpec};
+use crate::record::{CacheQuery, TrainingBatch};
+use crate::snapshot;
+use crate::state::{HostState, TensorState, tensor_vec, vec_tensor};
+
+/// What a call to [`RadianceCache::train`] did.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct TrainStats {
+    /// Mean loss (over samples and channels) of the last step, measured before its update;
+    /// 0 when no step ran.
+    pub loss: f32,
+    /// Mean loss of the first step of this call.
+    pub first_loss: f32,
+    /// Steps taken by this call (0 when no sample survived the checks).
+    pub steps: u32,
+    /// Steps taken since the cache was created.
+    pub total_steps: u32,
+    /// Samples trained on.
+    pub used: usize,
+    /// Samples dropped: a NaN or infinite query field, target or weight.
+    pub dropped_nonfinite: usize,
+    /// Samples dropped: a negative or absurdly large target, or a negative weight.
+    pub dropped_absurd: usize,
+}
+
+/// Inference weights, valid for one step count.
+#[derive(Clone, Debug)]
+struct InferenceWeights {
+    step: u32,
+    grid: Tensor<1>,
+    mlp: Tensor<1>,
+}
+
+/// The neural radiance cache.
+#[derive(Debug)]
+pub struct RadianceCache {
+    config: CacheConfig,
+    layout: Arc<ModelLayout>,
+    scene_box: SceneBox,
+    device: CacheDevice,
+    burn_device: Device,
+    path: ComputePath,
+    adam: AdamParams,
+    ema: Option<f32>,
+    step: u32,
+    state: Option<TensorState>,
+    inference: Mutex<Option<InferenceWeights>>,
+}
+
+impl RadianceCache {
+    /// A freshly initialised cache for `config` on `device` (its default [`ComputePath`]),
+    /// positions normalised to the unit box.
+    pub fn new(config: CacheConfig, device: CacheDevice) -> Result<Self, CacheError> {
+        Self::with_path(config, SceneBox::default(), device, device.default_path())
+    }
+
+    /// As [`RadianceCache::new`] on the automatically chosen device ([`CacheDevice::auto`]);
+    /// prints the choice to stderr.
+    pub fn new_auto(config: CacheConfig) -> Result<Self, CacheError> {
+        let (device, reason) = CacheDevice::auto();
+        eprintln!("nrc-cache: device {device} ({reason})");
+        Self::new(config, device)
+    }
+
+    /// A cache sized for a scene (see [`CacheConfig::sized_for_scene`]): the finest resolution
+    /// and table size follow from the box and the smallest feature to resolve.
+    pub fn for_scene_extent(config: &CacheConfig, scene_box: SceneBox, min_feature_size: f32, device: CacheDevice) -> Result<(Self, Sizing), CacheError> {
+        let (config, sizing) = config.sized_for_scene(&scene_box, min_feature_size)?;
+        Ok((Self::with_path(config, scene_box, device, device.default_path())?, sizing))
+    }
+
+    /// A freshly initialised cache computing along `path`.
+    pub fn with_path(config: CacheConfig, scene_box: SceneBox, device: CacheDevice, path: ComputePath) -> Result<Self, CacheError> {
+        config.validate()?;
+        let layout = ModelLayout::new(&config);
+        let (grid, mlp) = layout.init_params(config.seed);
+        let host = HostState {
+            grid_m: vec![0.0; grid.len()],
+            grid_v: vec![0.0; grid.len()],
+            grid_ema: vec![0.0; grid.len()],
+            mlp_m: vec![0.0; mlp.len()],
+            mlp_v: vec![0.0; mlp.len()],
+            mlp_ema: vec![0.0; mlp.len()],
+            grid,
+            mlp,
+        };
+        Self::from_host(config, scene_box, device, path, host, 0)
+    }
+
+    pub(crate) fn from_host(config: CacheConfig, scene_box: SceneBox, device: CacheDevice, path: ComputePath, host: HostState, step: u32) -> Result<Self, CacheError> {
+        if path == ComputePath::Fused && device != CacheDevice::Cpu {
+            return Err(CacheError::Device("the fused training step exists on the CPU (Flex) only; use the custom-ops path on wgpu".into()));
+        }
+        let layout = Arc::new(ModelLayout::new(&config));
+        let burn_device = device.burn_device()?;
+        let (adam, ema) = config.optimizer.resolve();
+        let state = TensorState::from_host(host, layout.grid_entries(), step, path == ComputePath::Fused, &burn_device);
+        Ok(Self { config, layout, scene_box, device, burn_device, path, adam, ema, step, state: Some(state), inference: Mutex::new(None) })
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &CacheConfig {
+        &self.config
+    }
+
+    /// The model layout derived from the configuration.
+    pub fn layout(&self) -> &ModelLayout {
+        &self.layout
+    }
+
+    /// The scene box positions are normalised to.
+    pub fn scene_box(&self) -> SceneBox {
+        self.scene_box
+    }
+
+    /// Sets the scene box (stored in snapshots; use [`SceneBox::normalize`] on positions).
+    pub fn set_scene_box(&mut self, scene_box: SceneBox) {
+        self.scene_box = scene_box;
+    }
+
+    /// The compute device.
+    pub fn device(&self) -> CacheDevice {
+        self.device
+    }
+
+    /// How training and inference are computed.
+    pub fn path(&self) -> ComputePath {
+        self.path
+    }
+
+    /// Steps taken so far.
+    pub fn step_count(&self) -> u32 {
+        self.step
+    }
+
+    /// Trainable parameters.
+    pub fn param_count(&self) -> usize {
+        self.layout.param_count()
+    }
+
+    /// Bytes of training state (see [`ModelLayout::training_memory_bytes`]).
+    pub fn memory_bytes(&self) -> usize {
+        self.layout.training_memory_bytes()
+    }
+
+    /// A human-readable summary: encoding, network, sizes, device and path.
+    pub fn describe(&self) -> String {
+        let mut s = String::new();
+        let enc = &self.layout.encoding;
+        let parts: Vec<String> = enc
+            .parts
+            .iter()
+            .map(|p| match &p.kind {
+                crate::encoding::EncodingKind::HashGrid(g) => format!(
+                    "HashGrid(L={}, F={}, log2T={}, N_min={}, b={:.4}, finest={}, {} dense levels)",
+                    g.levels.len(),
+                    g.features(),
+                    g.params.log2_hashmap_size,
+                    g.params.base_resolution,
+                    g.params.per_level_scale,
+                    g.finest_resolution(),
+                    g.levels.iter().filter(|l| l.dense).count()
+                ),
+                crate::encoding::EncodingKind::OneBlob { bins, wrap } => format!("OneBlob({}×{bins}{})", p.in_dims, if *wrap { ", wrapped" } else { "" }),
+                crate::encoding::EncodingKind::TriangleWave { frequencies } => format!("TriangleWave({}×{frequencies})", p.in_dims),
+                crate::encoding::EncodingKind::Identity { .. } => format!("Identity({})", p.in_dims),
+            })
+            .collect();
+        s.push_str(&format!("encoding: {} → {} inputs ({} padded)\n", parts.join(" + "), enc.unpadded_dims, enc.padded_dims));
+        s.push_str(&format!(
+            "network: {} hidden layers × 64, ReLU, no biases, output {:?} × (diffuse + specular)\n",
+            self.layout.layers.len() - 1,
+            self.layout.output_activation
+        ));
+        s.push_str(&format!(
+            "parameters: {} (hash table {}, MLP {}), training memory {:.1} MiB\n",
+            self.param_count(),
+            self.layout.grid_params,
+            self.layout.mlp_params(),
+            self.memory_bytes() as f64 / (1024.0 * 1024.0)
+        ));
+        s.push_str(&format!(
+            "optimizer: Adam lr {} β1 {} β2 {} ε {:e} L2 {}, EMA {}\n",
+            self.adam.learning_rate,
+            self.adam.beta1,
+            self.adam.beta2,
+            self.adam.epsilon,
+            self.adam.l2_reg,
+            self.ema.map_or("off".into(), |a| format!("α {a}"))
+        ));
+        s.push_str(&format!("device: {} ({} path), step {}", self.device, self.path, self.step));
+        s
+    }
+
+    /// Runs `steps` optimisation steps on the batch (each over all of its usable samples).
+    /// Bad samples are dropped and counted, never trained on.
+    pub fn train(&mut self, batch: &TrainingBatch, steps: u32) -> Result<TrainStats, CacheError> {
+        let t_pack = std::time::Instant::now();
+        let packed = pack_training(batch, self.config.loss.max_target)?;
+        let mut stats = TrainStats {
+            used: packed.len,
+            dropped_nonfinite: packed.dropped_nonfinite,
+            dropped_absurd: packed.dropped_absurd,
+            total_steps: self.step,
+            ..TrainStats::default()
+        };
+        if packed.len == 0 || steps == 0 {
+            return Ok(stats);
+        }
+        // Drop cached inference weights first: they may share storage with the weights, which
+        // would make the in-place update copy them.
+        *self.inference.lock().expect("inference lock") = None;
+        let rows = Tensor::<2>::from_data(TensorData::new(packed.rows, [packed.len, TRAIN_ROW]), &self.burn_device);
+        crate::cpu::train::PHASE_NANOS[4].fetch_add(t_pack.elapsed().as_nanos() as u64, std::sync::atomic::Ordering::Relaxed);
+        let state = self.state.take().expect("state present between calls");
+        let losses: Vec<f64> = match self.path {
+            ComputePath::Fused => {
+                let spec = StepSpec {
+                    layout: self.layout.clone(),
+                    adam: self.adam,
+                    ema: self.ema,
+                    loss: LossSettings { activation: self.layout.output_activation, epsilon: self.config.loss.epsilon },
+                    first_step: self.step,
+                    steps,
+                };
+                let out = <Dispatch as NrcFusedOps>::fused_train_steps(state.into_dispatch(), rows.into_dispatch(), spec);
+                self.state = Some(TensorState::from_dispatch(out.state));
+                out.losses
+            }
+            ComputePath::CustomOps | ComputePath::Unfused => {
+                let mut state = state;
+                let mut losses = Vec::with_capacity(steps as usize);
+                for k in 1..=steps {
+                    losses.push(crate::tensor_path::train_step_tensor(&self.layout, self.path, &mut state, &rows, self.adam, self.ema, self.config.loss.epsilon, self.step + k));
+                }
+                self.state = Some(state);
+                let all = Tensor::cat(losses, 0);
+                all.into_data().convert::<f64>().try_to_vec::<f64>().expect("losses")
+            }
+        };
+        self.step += steps;
+        stats.steps = steps;
+        stats.total_steps = self.step;
+        stats.first_loss = losses.first().copied().unwrap_or(0.0) as f32;
+        stats.loss = losses.last().copied().unwrap_or(0.0) as f32;
+        Ok(stats)
+    }
+
+    /// Outgoing radiance (emission excluded) at each query, from the EMA weights.
+    pub fn infer(&self, queries: &[CacheQuery]) -> Vec<[f32; 3]> {
+        if queries.is_empty() {
+            return Vec::new();
+        }
+        let rows = Tensor::<2>::from_data(TensorData::new(pack_queries(queries), [queries.len(), QUERY_ROW]), &self.burn_device);
+        let (grid, mlp) = self.inference_weights();
+        let out = match self.path {
+            ComputePath::Fused => Tensor::<2>::from_dispatch(<Dispatch as NrcFusedOps>::fused_infer(
+                grid.into_dispatch(),
+                mlp.into_dispatch(),
+                rows.into_dispatch(),
+                self.layout.clone(),
+            )),
+            _ => crate::tensor_path::infer_tensor(&self.layout, self.path, (self.layout.grid_params > 0).then_some(grid), mlp, rows),
+        };
+        let flat: Vec<f32> = out.into_data().convert::<f32>().try_to_vec::<f32>().expect("f32 output");
+        flat.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect()
+    }
+
+    /// The bias-corrected EMA weights (the weights without EMA), computed once per step count.
+    pub fn inference_weights(&self) -> (Tensor<1>, Tensor<1>) {
+        let mut guard = self.inference.lock().expect("inference lock");
+        if let Some(w) = guard.as_ref().filter(|w| w.step == self.step) {
+            return (w.grid.clone(), w.mlp.clone());
+        }
+        let state = self.state.as_ref().expect("state present");
+        let (grid, mlp) = match (self.path, self.ema) {
+            (_, None) => (state.grid.clone(), state.mlp.clone()),
+            (ComputePath::Fused, Some(alpha)) => {
+                // The op takes the state by value; the clones share storage and the kernel only
+                // reads it.
+                let w = <Dispatch as NrcFusedOps>::inference_weights(state.clone().into_dispatch(), self.layout.clone(), Some(alpha), self.step);
+                (Tensor::from_dispatch(w.grid), Tensor::from_dispatch(w.mlp))
+            }
+            (_, Some(alpha)) => {
+                if self.step == 0 {
+                    (state.grid.clone(), state.mlp.clone())
+                } else {
+                    let inv = 1.0 / (1.0 - alpha.powi(self.step.min(i32::MAX as u32) as i32));
+                    (state.grid_ema.clone().mul_scalar(inv), state.mlp_ema.clone().mul_scalar(inv))
+                }
+            }
+        };
+        *guard = Some(InferenceWeights { step: self.step, grid: grid.clone(), mlp: mlp.clone() });
+        (grid, mlp)
+    }
+
+    /// The state on the host with every EMA entry current (the form snapshots store).
+    pub fn host_state(&mut self) -> HostState {
+        if let (ComputePath::Fused, Some(alpha)) = (self.path, self.ema) {
+            let state = self.state.take().expect("state present");
+            let s = <Dispatch as NrcFusedOps>::catch_up_ema(state.into_dispatch(), self.layout.clone(), alpha, self.step);
+            self.state = Some(TensorState::from_dispatch(s));
+        }
+        self.state.as_ref().expect("state present").to_host()
+    }
+
+    /// The current weights (hash table, MLP), not averaged.
+    pub fn weights(&self) -> (Vec<f32>, Vec<f32>) {
+        let s = self.state.as_ref().expect("state present");
+        (tensor_vec(s.grid.clone()), tensor_vec(s.mlp.clone()))
+    }
+
+    /// Replaces the current weights (moments and EMA untouched); lengths must match the layout.
+    pub fn set_weights(&mut self, grid: Vec<f32>, mlp: Vec<f32>) -> Result<(), CacheError> {
+        if grid.len() != self.layout.grid_params || mlp.len() != self.layout.mlp_params() {
+            return Err(CacheError::Input(format!(
+                "weights of length {} + {} do not match the layout's {} + {}",
+                grid.len(),
+                mlp.len(),
+                self.layout.grid_params,
+                self.layout.mlp_params()
+            )));
+        }
+        let s = self.state.as_mut().expect("state present");
+        s.grid = vec_tensor(grid, &self.burn_device);
+        s.mlp = vec_tensor(mlp, &self.burn_device);
+        *self.inference.lock().expect("inference lock") = None;
+        Ok(())
+    }
+
+    /// Writes a snapshot (see [`crate::snapshot`] for the format), atomically.
+    pub fn save(&mut self, path: &Path) -> Result<(), CacheError> {
+        let host = self.host_state();
+        snapshot::write(path, &self.config, &self.scene_box, self.step, &host)
+    }
+
+    /// Loads a snapshot onto `device` (its default path).
+    pub fn load(path: &Path, device: CacheDevice) -> Result<Self, CacheError> {
+        let s = snapshot::read(path)?;
+        Self::from_host(s.config, s.scene_box, device, device.default_path(), s.state, s.step)
+    }
+
+    /// Loads a snapshot and checks that it was made with `expected` (otherwise an error naming
+    /// the first differing section).
+    pub fn load_matching(path: &Path, expected: &CacheConfig, device: CacheDevice) -> Result<Self, CacheError> {
+        let s = snapshot::read(path)?;
+        snapshot::check_config(path, &s.config, expected)?;
+        Self::from_host(s.config, s.scene_box, device, device.default_path(), s.state, s.step)
+    }
+
+    /// Changes the compute path (the state moves over; the fused path requires the CPU).
+    pub fn set_path(&mut self, path: ComputePath) -> Result<(), CacheError> {
+        if path == self.path {
+            return Ok(());
+        }
+        let host = self.host_state();
+        *self = Self::from_host(self.config.clone(), self.scene_box, self.device, path, host, self.step)?;
+        Ok(())
+    }
+}

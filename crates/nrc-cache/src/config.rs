@@ -1,0 +1,565 @@
+//! The cache's configuration: one JSON document describing encoding, network, loss and optimizer,
+//! in tiny-cuda-nn's style (an `"otype"` tag per component). See `models/nrc-hashgrid.json`.
+//!
+//! Parsing reports the JSON path of a malformed field (`encoding.nested[0].n_levels: ...`);
+//! [`CacheConfig::validate`] rejects out-of-range values naming the field.
+
+use std::path::Path;
+
+use serde::{Deserialize, Serialize};
+
+use crate::encoding::hash_grid::{HashGrid, HashGridParams};
+use crate::error::CacheError;
+use crate::record::RAW_INPUT_DIMS;
+
+/// The whole cache configuration.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CacheConfig {
+    /// Input encoding (a `Composite` over the 14 raw inputs, see [`crate::record::raw_inputs`]).
+    pub encoding: CompositeConfig,
+    /// The MLP.
+    pub network: NetworkConfig,
+    /// Training loss.
+    pub loss: LossConfig,
+    /// Optimizer (`Adam`, optionally wrapped in an `EMA`).
+    pub optimizer: OptimizerConfig,
+    /// Seed of the parameter initialisation.
+    #[serde(default = "default_seed")]
+    pub seed: u64,
+}
+
+fn default_seed() -> u64 {
+    1337
+}
+
+/// `Composite` encoding: nested encodings consume consecutive raw input dimensions; the
+/// concatenated output is padded with ones to a multiple of `pad_to_multiple` (the padding acts
+/// as a bias input of the bias-free first layer).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CompositeConfig {
+    /// Must be `"Composite"`.
+    pub otype: String,
+    /// The nested encodings, in raw-input order.
+    pub nested: Vec<NestedEncoding>,
+    /// Output width is padded up to a multiple of this.
+    #[serde(default = "default_pad")]
+    pub pad_to_multiple: u32,
+}
+
+fn default_pad() -> u32 {
+    16
+}
+
+/// One nested encoding of the composite.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "otype", deny_unknown_fields)]
+pub enum NestedEncoding {
+    /// Multiresolution hash grid over 3 dimensions (see [`crate::encoding::hash_grid`]).
+    HashGrid {
+        /// Must be 3.
+        n_dims_to_encode: u32,
+        /// Levels L.
+        n_levels: u32,
+        /// Features per level F (1, 2, 4 or 8).
+        n_features_per_level: u32,
+        /// log2 of the per-level table size.
+        log2_hashmap_size: u32,
+        /// Coarsest resolution.
+        base_resolution: f32,
+        /// Growth factor between levels.
+        per_level_scale: f32,
+    },
+    /// One-blob encoding with `n_bins` bins per dimension; `wrap` for periodic inputs (azimuth).
+    OneBlob {
+        /// Dimensions consumed.
+        n_dims_to_encode: u32,
+        /// Bins per dimension.
+        n_bins: u32,
+        /// Periodic on [0,1).
+        #[serde(default)]
+        wrap: bool,
+    },
+    /// Triangle-wave frequency encoding with `n_frequencies` octaves per dimension.
+    TriangleWave {
+        /// Dimensions consumed.
+        n_dims_to_encode: u32,
+        /// Octaves per dimension.
+        n_frequencies: u32,
+    },
+    /// Pass-through `x·scale + offset`.
+    Identity {
+        /// Dimensions consumed.
+        n_dims_to_encode: u32,
+        /// Multiplier.
+        #[serde(default = "one")]
+        scale: f32,
+        /// Offset.
+        #[serde(default)]
+        offset: f32,
+    },
+}
+
+fn one() -> f32 {
+    1.0
+}
+
+impl NestedEncoding {
+    /// Raw input dimensions this encoding consumes.
+    pub fn n_dims_to_encode(&self) -> u32 {
+        match self {
+            Self::HashGrid { n_dims_to_encode, .. }
+            | Self::OneBlob { n_dims_to_encode, .. }
+            | Self::TriangleWave { n_dims_to_encode, .. }
+            | Self::Identity { n_dims_to_encode, .. } => *n_dims_to_encode,
+        }
+    }
+}
+
+/// Mapping of the network's 3 outputs to non-negative radiance (before the reflectance factor).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub enum OutputActivation {
+    /// `exp(y)` (default): the relative loss is scale-invariant, so learning log-radiance gives
+    /// gradients of the same size for targets from 1e-6 to 1e6. The argument is clamped to
+    /// [−80, 80] to stay finite.
+    Exponential,
+    /// `ln(1 + e^y)`: smooth, linear growth for large radiance.
+    Softplus,
+    /// `max(y, 0)`: cheapest; a unit stuck below zero gets no gradient.
+    ReLU,
+}
+
+/// The MLP: `n_hidden_layers` hidden layers of 64 neurons, ReLU, no biases, 3 outputs.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct NetworkConfig {
+    /// Must be `"FullyFusedMLP"`.
+    pub otype: String,
+    /// Width; must be 64.
+    pub n_neurons: u32,
+    /// Hidden layers (weight matrices = hidden layers + 1).
+    pub n_hidden_layers: u32,
+    /// Hidden activation; must be `"ReLU"`.
+    #[serde(default = "relu")]
+    pub activation: String,
+    /// Output mapping to non-negative radiance.
+    #[serde(default = "exponential")]
+    pub output_activation: OutputActivation,
+    /// Must be 3 (RGB).
+    #[serde(default = "three")]
+    pub n_output_dims: u32,
+}
+
+fn relu() -> String {
+    "ReLU".into()
+}
+fn exponential() -> OutputActivation {
+    OutputActivation::Exponential
+}
+fn three() -> u32 {
+    3
+}
+
+/// Relative L2 loss normalised by the squared luminance of the detached prediction:
+/// `w·(y − t)² / (lum(y)² + epsilon)`, averaged over samples and channels.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LossConfig {
+    /// Must be `"RelativeL2Luminance"`.
+    pub otype: String,
+    /// ε of the denominator.
+    #[serde(default = "loss_eps")]
+    pub epsilon: f32,
+    /// Targets with a channel above this (or below 0) are absurd: dropped and counted.
+    #[serde(default = "max_target")]
+    pub max_target: f32,
+}
+
+fn loss_eps() -> f32 {
+    0.01
+}
+fn max_target() -> f32 {
+    1e8
+}
+
+/// Optimizer: `Adam`, or an `EMA` of the weights wrapping Adam (inference uses the average).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "otype", deny_unknown_fields)]
+pub enum OptimizerConfig {
+    /// Exponential moving average of the weights, bias-corrected: `ê_t = e_t / (1 − decay^t)`.
+    EMA {
+        /// α.
+        #[serde(default = "ema_decay")]
+        decay: f32,
+        /// The optimizer whose weights are averaged (must be Adam).
+        nested: Box<OptimizerConfig>,
+    },
+    /// Adam.
+    Adam {
+        /// Learning rate.
+        #[serde(default = "lr")]
+        learning_rate: f32,
+        /// β1.
+        #[serde(default = "beta1")]
+        beta1: f32,
+        /// β2.
+        #[serde(default = "beta2")]
+        beta2: f32,
+        /// ε.
+        #[serde(default = "adam_eps")]
+        epsilon: f32,
+        /// L2 regularisation added to the gradient (`g + l2_reg·w`).
+        #[serde(default)]
+        l2_reg: f32,
+    },
+}
+
+fn ema_decay() -> f32 {
+    0.99
+}
+fn lr() -> f32 {
+    1e-2
+}
+fn beta1() -> f32 {
+    0.9
+}
+fn beta2() -> f32 {
+    0.99
+}
+fn adam_eps() -> f32 {
+    1e-15
+}
+
+/// Adam hyper-parameters, resolved from the config.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct AdamParams {
+    /// Learning rate.
+    pub learning_rate: f32,
+    /// β1.
+    pub beta1: f32,
+    /// β2.
+    pub beta2: f32,
+    /// ε.
+    pub epsilon: f32,
+    /// L2 regularisation.
+    pub l2_reg: f32,
+}
+
+impl OptimizerConfig {
+    /// The Adam parameters and the EMA decay (None without EMA).
+    pub fn resolve(&self) -> (AdamParams, Option<f32>) {
+        match self {
+            Self::EMA { decay, nested } => (nested.resolve().0, Some(*decay)),
+            Self::Adam { learning_rate, beta1, beta2, epsilon, l2_reg } => (
+                AdamParams {
+                    learning_rate: *learning_rate,
+                    beta1: *beta1,
+                    beta2: *beta2,
+                    epsilon: *epsilon,
+                    l2_reg: *l2_reg,
+                },
+                None,
+            ),
+        }
+    }
+}
+
+/// An axis-aligned scene box; query positions are normalised to it.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SceneBox {
+    /// Minimum corner.
+    pub min: [f32; 3],
+    /// Maximum corner.
+    pub max: [f32; 3],
+}
+
+impl Default for SceneBox {
+    fn default() -> Self {
+        Self { min: [0.0; 3], max: [1.0; 3] }
+    }
+}
+
+impl SceneBox {
+    /// Extent per axis.
+    pub fn extent(&self) -> [f32; 3] {
+        std::array::from_fn(|k| self.max[k] - self.min[k])
+    }
+
+    /// Maps a world position into [0,1]³ (clamped).
+    pub fn normalize(&self, p: [f32; 3]) -> [f32; 3] {
+        std::array::from_fn(|k| {
+            let e = self.max[k] - self.min[k];
+            if e > 0.0 { ((p[k] - self.min[k]) / e).clamp(0.0, 1.0) } else { 0.5 }
+        })
+    }
+}
+
+/// What [`CacheConfig::sized_for_scene`] chose.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Sizing {
+    /// Finest grid resolution (or finest triangle-wave period, in cells of the longest axis).
+    pub finest_resolution: u32,
+    /// Chosen per-level scale of the hash grid (None without a hash grid).
+    pub per_level_scale: Option<f32>,
+    /// Chosen log2 table size (None without a hash grid).
+    pub log2_hashmap_size: Option<u32>,
+    /// Chosen triangle-wave octaves (None without a triangle-wave encoding).
+    pub n_frequencies: Option<u32>,
+    /// Trainable parameters.
+    pub param_count: usize,
+    /// Bytes of training state (weights, Adam moments, EMA, gradient scratch, bookkeeping).
+    pub memory_bytes: usize,
+}
+
+impl CacheConfig {
+    /// Parses and validates a JSON document.
+    pub fn from_json_str(json: &str) -> Result<Self, CacheError> {
+        let de = &mut serde_json::Deserializer::from_str(json);
+        let config: Self = serde_path_to_error::deserialize(de).map_err(|e| {
+            let path = e.path().to_string();
+            CacheError::Config { field: if path == "." { "(document)".into() } else { path }, message: e.inner().to_string() }
+        })?;
+        config.validate()?;
+        Ok(config)
+    }
+
+    /// Reads, parses and validates a JSON file.
+    pub fn from_file(path: &Path) -> Result<Self, CacheError> {
+        let text = std::fs::read_to_string(path)
+            .map_err(|e| CacheError::Io { path: path.display().to_string(), message: e.to_string() })?;
+        Self::from_json_str(&text)
+    }
+
+    /// Serialises to pretty JSON.
+    pub fn to_json(&self) -> String {
+        serde_json::to_string_pretty(self).expect("config serialises")
+    }
+
+    /// The `models/nrc-hashgrid.json` preset: hash grid 16×2, log2T 19, base 16, 3 hidden layers.
+    pub fn hash_grid_preset() -> Self {
+        Self::from_json_str(include_str!("../../../models/nrc-hashgrid.json")).expect("preset is valid")
+    }
+
+    /// The `models/nrc-trianglewave.json` preset: 12 triangle-wave octaves + one-blob, 5 hidden layers.
+    pub fn triangle_wave_preset() -> Self {
+        Self::from_json_str(include_str!("../../../models/nrc-trianglewave.json")).expect("preset is valid")
+    }
+
+    /// Checks every field's range; the error names the field.
+    pub fn validate(&self) -> Result<(), CacheError> {
+        let err = |field: String, message: String| Err(CacheError::Config { field, message });
+        let e = &self.encoding;
+        if e.otype != "Composite" {
+            return err("encoding.otype".into(), format!("must be \"Composite\" (the cache encodes {RAW_INPUT_DIMS} raw inputs), got {:?}", e.otype));
+        }
+        if e.nested.is_empty() {
+            return err("encoding.nested".into(), "must hold at least one encoding".into());
+        }
+        if !(1..=64).contains(&e.pad_to_multiple) {
+            return err("encoding.pad_to_multiple".into(), format!("must be in 1..=64, got {}", e.pad_to_multiple));
+        }
+        let mut dims = 0u32;
+        let mut grids = 0;
+        for (i, n) in e.nested.iter().enumerate() {
+            let f = |name: &str| format!("encoding.nested[{i}].{name}");
+            let nd = n.n_dims_to_encode();
+            if nd == 0 || nd > RAW_INPUT_DIMS as u32 {
+                return err(f("n_dims_to_encode"), format!("must be in 1..={RAW_INPUT_DIMS}, got {nd}"));
+            }
+            dims += nd;
+            match n {
+                NestedEncoding::HashGrid { n_dims_to_encode, n_levels, n_features_per_level, log2_hashmap_size, base_resolution, per_level_scale } => {
+                    grids += 1;
+                    if grids > 1 {
+                        return err(f("otype"), "at most one HashGrid encoding is supported".into());
+                    }
+                    if *n_dims_to_encode != 3 {
+                        return err(f("n_dims_to_encode"), format!("a HashGrid encodes exactly 3 dimensions (the position), got {n_dims_to_encode}"));
+                    }
+                    if !(1..=32).contains(n_levels) {
+                        return err(f("n_levels"), format!("must be in 1..=32, got {n_levels}"));
+                    }
+                    if ![1, 2, 4, 8].contains(n_features_per_level) {
+                        return err(f("n_features_per_level"), format!("must be 1, 2, 4 or 8, got {n_features_per_level}"));
+                    }
+                    if !(10..=24).contains(log2_hashmap_size) {
+                        return err(f("log2_hashmap_size"), format!("must be in 10..=24, got {log2_hashmap_size}"));
+                    }
+                    if !(base_resolution.is_finite() && *base_resolution >= 2.0 && *base_resolution <= 4096.0) {
+                        return err(f("base_resolution"), format!("must be in [2, 4096], got {base_resolution}"));
+                    }
+                    if !(per_level_scale.is_finite() && *per_level_scale >= 1.0 && *per_level_scale <= 4.0) {
+                        return err(f("per_level_scale"), format!("must be in [1, 4], got {per_level_scale}"));
+                    }
+                    let finest = base_resolution * per_level_scale.powi(*n_levels as i32 - 1);
+                    if finest > 1_048_576.0 {
+                        return err(f("per_level_scale"), format!("finest resolution {finest:.0} exceeds 2^20"));
+                    }
+                }
+                NestedEncoding::OneBlob { n_bins, .. } => {
+                    if !(1..=64).contains(n_bins) {
+                        return err(f("n_bins"), format!("must be in 1..=64, got {n_bins}"));
+                    }
+                }
+                NestedEncoding::TriangleWave { n_frequencies, .. } => {
+                    if !(1..=24).contains(n_frequencies) {
+                        return err(f("n_frequencies"), format!("must be in 1..=24, got {n_frequencies}"));
+                    }
+                }
+                NestedEncoding::Identity { scale, offset, .. } => {
+                    if !scale.is_finite() {
+                        return err(f("scale"), format!("must be finite, got {scale}"));
+                    }
+                    if !offset.is_finite() {
+                        return err(f("offset"), format!("must be finite, got {offset}"));
+                    }
+                }
+            }
+        }
+        if dims != RAW_INPUT_DIMS as u32 {
+            return err(
+                "encoding.nested".into(),
+                format!("the nested encodings consume {dims} dimensions; the cache provides {RAW_INPUT_DIMS} (position 3, direction 2, normal 2, roughness 1, diffuse 3, specular 3)"),
+            );
+        }
+        let n = &self.network;
+        if n.otype != "FullyFusedMLP" {
+            return err("network.otype".into(), format!("must be \"FullyFusedMLP\", got {:?}", n.otype));
+        }
+        if n.n_neurons != 64 {
+            return err("network.n_neurons".into(), format!("only 64 neurons are supported, got {}", n.n_neurons));
+        }
+        if !(1..=16).contains(&n.n_hidden_layers) {
+            return err("network.n_hidden_layers".into(), format!("must be in 1..=16, got {}", n.n_hidden_layers));
+        }
+        if n.activation != "ReLU" {
+            return err("network.activation".into(), format!("must be \"ReLU\", got {:?}", n.activation));
+        }
+        if n.n_output_dims != 3 {
+            return err("network.n_output_dims".into(), format!("must be 3 (RGB), got {}", n.n_output_dims));
+        }
+        let l = &self.loss;
+        if l.otype != "RelativeL2Luminance" {
+            return err("loss.otype".into(), format!("must be \"RelativeL2Luminance\", got {:?}", l.otype));
+        }
+        if !(l.epsilon.is_finite() && l.epsilon > 0.0) {
+            return err("loss.epsilon".into(), format!("must be finite and > 0, got {}", l.epsilon));
+        }
+        if !(l.max_target.is_finite() && l.max_target > 0.0) {
+            return err("loss.max_target".into(), format!("must be finite and > 0, got {}", l.max_target));
+        }
+        validate_optimizer(&self.optimizer, "optimizer", true)
+    }
+
+    /// The hash-grid parameters, if the encoding has a hash grid.
+    pub fn hash_grid(&self) -> Option<HashGridParams> {
+        self.encoding.nested.iter().find_map(|n| match n {
+            NestedEncoding::HashGrid { n_levels, n_features_per_level, log2_hashmap_size, base_resolution, per_level_scale, .. } => {
+                Some(HashGridParams {
+                    n_levels: *n_levels,
+                    n_features_per_level: *n_features_per_level,
+                    log2_hashmap_size: *log2_hashmap_size,
+                    base_resolution: *base_resolution,
+                    per_level_scale: *per_level_scale,
+                })
+            }
+            _ => None,
+        })
+    }
+
+    /// Sizes the model for a scene: the finest resolvable feature is `min_feature_size` (world
+    /// units) along the box's longest axis.
+    ///
+    /// * Hash grid: finest resolution `N_max = ceil(longest extent / min_feature_size)`, the
+    ///   per-level scale spreads the configured levels from the base resolution to `N_max`
+    ///   (`b = (N_max/N_min)^(1/(L−1))`), and the table holds the finest level's *surface* cells:
+    ///   `T = next_pow2(2·(n_x n_y + n_y n_z + n_z n_x))` (the box's surface area in finest cells,
+    ///   a proxy for the scene's surfaces), at least 2^14 and at most the configured
+    ///   `log2_hashmap_size`, which acts as the memory budget.
+    /// * Triangle wave: octaves so that the finest period is about `min_feature_size`
+    ///   (`n = ceil(log2 N_max) + 1`, at most the configured count).
+    pub fn sized_for_scene(&self, scene: &SceneBox, min_feature_size: f32) -> Result<(Self, Sizing), CacheError> {
+        let ext = scene.extent();
+        if !ext.iter().all(|e| e.is_finite() && *e >= 0.0) || ext.iter().all(|e| *e <= 0.0) {
+            return Err(CacheError::Config { field: "scene_box".into(), message: format!("invalid extent {ext:?}") });
+        }
+        if !(min_feature_size.is_finite() && min_feature_size > 0.0) {
+            return Err(CacheError::Config { field: "min_feature_size".into(), message: format!("must be finite and > 0, got {min_feature_size}") });
+        }
+        let longest = ext.iter().cloned().fold(0.0f32, f32::max);
+        let n_max = (longest / min_feature_size).ceil().clamp(2.0, 1_048_576.0);
+        let mut out = self.clone();
+        let mut sizing = Sizing {
+            finest_resolution: n_max as u32,
+            per_level_scale: None,
+            log2_hashmap_size: None,
+            n_frequencies: None,
+            param_count: 0,
+            memory_bytes: 0,
+        };
+        for n in out.encoding.nested.iter_mut() {
+            match n {
+                NestedEncoding::HashGrid { n_levels, log2_hashmap_size, base_resolution, per_level_scale, .. } => {
+                    let n_max = n_max.max(*base_resolution);
+                    *per_level_scale = if *n_levels > 1 { (n_max / *base_resolution).powf(1.0 / (*n_levels - 1) as f32) } else { 1.0 };
+                    let cells: [f64; 3] = std::array::from_fn(|k| (f64::from(ext[k] / longest) * f64::from(n_max)).ceil().max(1.0));
+                    let surface = 2.0 * (cells[0] * cells[1] + cells[1] * cells[2] + cells[2] * cells[0]);
+                    let log2 = (surface.log2().ceil() as u32).clamp(14, *log2_hashmap_size);
+                    *log2_hashmap_size = log2;
+                    sizing.per_level_scale = Some(*per_level_scale);
+                    sizing.log2_hashmap_size = Some(log2);
+                }
+                NestedEncoding::TriangleWave { n_frequencies, .. } => {
+                    let n = ((n_max.log2().ceil() as u32) + 1).clamp(1, *n_frequencies);
+                    *n_frequencies = n;
+                    sizing.n_frequencies = Some(n);
+                }
+                _ => {}
+            }
+        }
+        out.validate()?;
+        let layout = crate::model::ModelLayout::new(&out);
+        sizing.param_count = layout.param_count();
+        sizing.memory_bytes = layout.training_memory_bytes();
+        Ok((out, sizing))
+    }
+
+    /// The derived hash-grid layout, if any.
+    pub fn grid_layout(&self) -> Option<HashGrid> {
+        self.hash_grid().map(HashGrid::new)
+    }
+}
+
+fn validate_optimizer(o: &OptimizerConfig, field: &str, top: bool) -> Result<(), CacheError> {
+    let err = |name: &str, message: String| Err(CacheError::Config { field: format!("{field}.{name}"), message });
+    match o {
+        OptimizerConfig::EMA { decay, nested } => {
+            if !top {
+                return err("otype", "an EMA cannot be nested in an EMA".into());
+            }
+            if !(decay.is_finite() && (0.0..1.0).contains(decay)) {
+                return err("decay", format!("must be in [0, 1), got {decay}"));
+            }
+            validate_optimizer(nested, &format!("{field}.nested"), false)
+        }
+        OptimizerConfig::Adam { learning_rate, beta1, beta2, epsilon, l2_reg } => {
+            if !(learning_rate.is_finite() && *learning_rate > 0.0) {
+                return err("learning_rate", format!("must be finite and > 0, got {learning_rate}"));
+            }
+            if !(beta1.is_finite() && (0.0..1.0).contains(beta1)) {
+                return err("beta1", format!("must be in [0, 1), got {beta1}"));
+            }
+            if !(beta2.is_finite() && (0.0..1.0).contains(beta2)) {
+                return err("beta2", format!("must be in [0, 1), got {beta2}"));
+            }
+            if !(epsilon.is_finite() && *epsilon >= 0.0) {
+                return err("epsilon", format!("must be finite and ≥ 0, got {epsilon}"));
+            }
+            if !(l2_reg.is_finite() && *l2_reg >= 0.0) {
+                return err("l2_reg", format!("must be finite and ≥ 0, got {l2_reg}"));
+            }
+            Ok(())
+        }
+    }
+}

@@ -1,0 +1,194 @@
+//! Small dense products for the fused MLP: `C (+)= A·B` on cache-resident tiles.
+//!
+//! `A` is read through strides (so `Xᵀ` costs nothing), `B` row by row. The x86-64 kernel is a
+//! 6×16 register block (12 AVX accumulators, two B loads and one broadcast per step of the
+//! inner dimension — the BLIS Haswell shape), chosen at run time when AVX2 and FMA are present;
+//! other machines use the portable loops, which are also the reference of the tests.
+
+/// Operand `A` of [`gemm`]: element `(i, p)` is `data[i·row_stride + p·col_stride]`.
+#[derive(Clone, Copy, Debug)]
+pub struct Strided<'a> {
+    /// Backing storage.
+    pub data: &'a [f32],
+    /// Distance between rows.
+    pub row_stride: usize,
+    /// Distance between columns.
+    pub col_stride: usize,
+}
+
+/// Operand `B`/`C` of [`gemm`]: row `p` starts at `data[p·stride]` and is contiguous.
+#[derive(Debug)]
+pub struct Rows<T> {
+    /// Backing storage.
+    pub data: T,
+    /// Distance between rows.
+    pub stride: usize,
+}
+
+/// What happens to the product before it is stored.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Store {
+    /// `C = A·B`.
+    Overwrite,
+    /// `C = max(A·B, 0)` (a ReLU layer).
+    Relu,
+    /// `C += A·B`.
+    Accumulate,
+}
+
+/// `C[m×n] (op)= A[m×k] · B[k×n]`; `n` must be a multiple of 8.
+pub fn gemm(m: usize, n: usize, k: usize, a: Strided<'_>, b: Rows<&[f32]>, c: Rows<&mut [f32]>, store: Store) {
+    assert!(n % 8 == 0, "gemm: n = {n} must be a multiple of 8");
+    if m == 0 || n == 0 {
+        return;
+    }
+    if k > 0 {
+        assert!((m - 1) * a.row_stride + (k - 1) * a.col_stride < a.data.len(), "gemm: A out of bounds");
+        assert!((k - 1) * b.stride + n <= b.data.len(), "gemm: B out of bounds");
+    }
+    assert!((m - 1) * c.stride + n <= c.data.len(), "gemm: C out of bounds");
+    #[cfg(target_arch = "x86_64")]
+    if has_avx2_fma() {
+        // SAFETY: the features were detected at run time and all accesses were bounds-checked above.
+        unsafe { avx2::gemm(m, n, k, a, b, c, store) };
+        return;
+    }
+    gemm_portable(m, n, k, a, b, c, store);
+}
+
+/// Whether the AVX2 + FMA kernel is used on this machine.
+pub fn has_avx2_fma() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        std::is_x86_feature_detected!("avx2") && std::is_x86_feature_detected!("fma")
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        false
+    }
+}
+
+/// Plain loops (the reference, and the kernel without AVX2).
+pub fn gemm_portable(m: usize, n: usize, k: usize, a: Strided<'_>, b: Rows<&[f32]>, c: Rows<&mut [f32]>, store: Store) {
+    let mut acc = vec![0f32; n];
+    for i in 0..m {
+        acc.fill(0.0);
+        for p in 0..k {
+            let av = a.data[i * a.row_stride + p * a.col_stride];
+            let row = &b.data[p * b.stride..p * b.stride + n];
+            for (s, bv) in acc.iter_mut().zip(row) {
+                *s += av * bv;
+            }
+        }
+        let out = &mut c.data[i * c.stride..i * c.stride + n];
+        match store {
+            Store::Overwrite => out.copy_from_slice(&acc),
+            Store::Relu => out.iter_mut().zip(&acc).for_each(|(o, s)| *o = s.max(0.0)),
+            Store::Accumulate => out.iter_mut().zip(&acc).for_each(|(o, s)| *o += s),
+        }
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+mod avx2 {
+    use super::{Rows, Store, Strided};
+    use std::arch::x86_64::*;
+
+    #[target_feature(enable = "avx2,fma")]
+    pub(super) unsafe fn gemm(m: usize, n: usize, k: usize, a: Strided<'_>, b: Rows<&[f32]>, c: Rows<&mut [f32]>, store: Store) {
+        let (ap, bp, cp) = (a.data.as_ptr(), b.data.as_ptr(), c.data.as_mut_ptr());
+        let (ars, acs, ldb, ldc) = (a.row_stride, a.col_stride, b.stride, c.stride);
+        let mut i = 0;
+        // SAFETY (all blocks): rows i..i+MR < m and columns j..j+8·NV ≤ n, checked by the caller.
+        unsafe {
+            while i + 6 <= m {
+                row_block::<6>(n, k, ap.add(i * ars), ars, acs, bp, ldb, cp.add(i * ldc), ldc, store);
+                i += 6;
+            }
+            let rest = m - i;
+            let (ap, cp) = (ap.add(i * ars), cp.add(i * ldc));
+            match rest {
+                1 => row_block::<1>(n, k, ap, ars, acs, bp, ldb, cp, ldc, store),
+                2 => row_block::<2>(n, k, ap, ars, acs, bp, ldb, cp, ldc, store),
+                3 => row_block::<3>(n, k, ap, ars, acs, bp, ldb, cp, ldc, store),
+                4 => row_block::<4>(n, k, ap, ars, acs, bp, ldb, cp, ldc, store),
+                5 => row_block::<5>(n, k, ap, ars, acs, bp, ldb, cp, ldc, store),
+                _ => {}
+            }
+        }
+    }
+
+    #[inline]
+    #[target_feature(enable = "avx2,fma")]
+    unsafe fn row_block<const MR: usize>(
+        n: usize,
+        k: usize,
+        a: *const f32,
+        ars: usize,
+        acs: usize,
+        b: *const f32,
+        ldb: usize,
+        c: *mut f32,
+        ldc: usize,
+        store: Store,
+    ) {
+        let mut j = 0;
+        // SAFETY: see `gemm`.
+        unsafe {
+            while j + 16 <= n {
+                micro::<MR, 2>(k, a, ars, acs, b.add(j), ldb, c.add(j), ldc, store);
+                j += 16;
+            }
+            if j < n {
+                micro::<MR, 1>(k, a, ars, acs, b.add(j), ldb, c.add(j), ldc, store);
+            }
+        }
+    }
+
+    /// An `MR × 8·NV` block of C accumulated in registers over the whole inner dimension.
+    #[inline]
+    #[target_feature(enable = "avx2,fma")]
+    unsafe fn micro<const MR: usize, const NV: usize>(
+        k: usize,
+        a: *const f32,
+        ars: usize,
+        acs: usize,
+        b: *const f32,
+        ldb: usize,
+        c: *mut f32,
+        ldc: usize,
+        store: Store,
+    ) {
+        // SAFETY: see `gemm`.
+        unsafe {
+            let mut acc = [[_mm256_setzero_ps(); NV]; MR];
+            for p in 0..k {
+                let brow = b.add(p * ldb);
+                let mut bv = [_mm256_setzero_ps(); NV];
+                for (v, bvv) in bv.iter_mut().enumerate() {
+                    *bvv = _mm256_loadu_ps(brow.add(8 * v));
+                }
+                let acol = a.add(p * acs);
+                for (i, acc_i) in acc.iter_mut().enumerate() {
+                    let av = _mm256_broadcast_ss(&*acol.add(i * ars));
+                    for v in 0..NV {
+                        acc_i[v] = _mm256_fmadd_ps(av, bv[v], acc_i[v]);
+                    }
+                }
+            }
+            let zero = _mm256_setzero_ps();
+            for (i, acc_i) in acc.iter().enumerate() {
+                let crow = c.add(i * ldc);
+                for (v, accv) in acc_i.iter().enumerate() {
+                    let dst = crow.add(8 * v);
+                    let val = match store {
+                        Store::Overwrite => *accv,
+                        Store::Relu => _mm256_max_ps(*accv, zero),
+                        Store::Accumulate => _mm256_add_ps(_mm256_loadu_ps(dst), *accv),
+                    };
+                    _mm256_storeu_ps(dst, val);
+                }
+            }
+        }
+    }
+}

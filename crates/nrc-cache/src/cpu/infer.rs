@@ -1,0 +1,42 @@
+//! Fused CPU inference: encode and run the MLP per cache-resident tile, parallel over tiles.
+
+use rayon::prelude::*;
+
+use super::mlp::{OUT_PAD, PreparedMlp, TILE, TileScratch, forward_tile};
+use crate::batch::{FACTOR_AT, QUERY_ROW};
+use crate::loss::activate;
+use crate::model::ModelLayout;
+use crate::record::RAW_INPUT_DIMS;
+
+/// Radiance of the packed query rows (`n · QUERY_ROW` floats) into `out` (`n · 3`), with the
+/// hash table `grid` and MLP weights `mlp` (the bias-corrected EMA weights for inference).
+pub fn infer(layout: &ModelLayout, grid: &[f32], mlp: &[f32], rows: &[f32], out: &mut [f32]) {
+    let prepared = PreparedMlp::new(&layout.layers, mlp);
+    let network_out = network_outputs(layout, &prepared, grid, rows);
+    out.par_chunks_mut(3).zip(network_out.par_chunks(3)).zip(rows.par_chunks(QUERY_ROW)).for_each(|((o, y), r)| {
+        for c in 0..3 {
+            o[c] = activate(layout.output_activation, y[c]).0 * r[FACTOR_AT + c];
+        }
+    });
+}
+
+/// The raw network outputs (before the output activation and reflectance factor), `[n][3]`.
+pub fn network_outputs(layout: &ModelLayout, prepared: &PreparedMlp, grid: &[f32], rows: &[f32]) -> Vec<f32> {
+    let n = rows.len() / QUERY_ROW;
+    let k_in = prepared.inputs();
+    let mut out = vec![0f32; n * 3];
+    out.par_chunks_mut(TILE * 3).zip(rows.par_chunks(TILE * QUERY_ROW)).for_each_init(
+        || TileScratch::new(k_in, prepared.hidden()),
+        |s, (o, r)| {
+            let m = r.len() / QUERY_ROW;
+            for i in 0..m {
+                layout.encoding.forward_one(grid, &r[i * QUERY_ROW..i * QUERY_ROW + RAW_INPUT_DIMS], &mut s.x[i * k_in..(i + 1) * k_in]);
+            }
+            forward_tile(prepared, m, s);
+            for i in 0..m {
+                o[i * 3..i * 3 + 3].copy_from_slice(&s.out[i * OUT_PAD..i * OUT_PAD + 3]);
+            }
+        },
+    );
+    out
+}

@@ -1,0 +1,215 @@
+//! The fused CPU training step: encode → MLP forward → loss → MLP backward per cache-resident
+//! tile (parallel over tiles), then the hash-grid gradient scatter and sparse Adam + EMA per
+//! level (parallel over levels), then dense Adam + EMA of the MLP.
+
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::time::Instant;
+
+use rayon::prelude::*;
+
+use super::grid::{scatter_level, split_levels};
+use super::mlp::{MlpGrad, OUT_PAD, PreparedMlp, TILE, TileScratch, backward_tile, forward_tile};
+use super::optim::{StepConstants, dense_step, sparse_step};
+use crate::batch::{FACTOR_AT, TARGET_AT, TRAIN_ROW, WEIGHT_AT};
+use crate::config::OutputActivation;
+use crate::loss::sample_loss;
+use crate::model::ModelLayout;
+use crate::record::RAW_INPUT_DIMS;
+
+/// Accumulated nanoseconds per phase, read by the benchmark: 0 encode (summed over threads),
+/// 1 MLP forward + loss + backward (summed over threads), 2 hash-grid scatter + sparse
+/// Adam/EMA (wall), 3 MLP Adam/EMA (wall), 4 packing and upload of the batch (wall, counted by
+/// [`crate::RadianceCache::train`]).
+pub static PHASE_NANOS: [AtomicU64; 5] = [const { AtomicU64::new(0) }; 5];
+
+fn add_phase(i: usize, since: Instant) {
+    PHASE_NANOS[i].fetch_add(since.elapsed().as_nanos() as u64, Ordering::Relaxed);
+}
+
+/// Mutable training state of one parameter group.
+#[derive(Debug)]
+pub struct GroupState<'a> {
+    /// Weights.
+    pub w: &'a mut [f32],
+    /// Adam first moment.
+    pub m: &'a mut [f32],
+    /// Adam second moment.
+    pub v: &'a mut [f32],
+    /// Raw (not bias-corrected) EMA.
+    pub ema: &'a mut [f32],
+}
+
+/// Hash-table state: the group plus the gradient scratch (all zeros between steps) and the
+/// step each entry's EMA is current at.
+#[derive(Debug)]
+pub struct GridState<'a> {
+    /// Weights, moments, EMA.
+    pub group: GroupState<'a>,
+    /// Gradient accumulator, zero between steps.
+    pub grad: &'a mut [f32],
+    /// Step each entry's EMA is current at.
+    pub last: &'a mut [u32],
+}
+
+/// Loss settings of a step.
+#[derive(Clone, Copy, Debug)]
+pub struct LossSettings {
+    /// Output mapping.
+    pub activation: OutputActivation,
+    /// ε of the relative loss.
+    pub epsilon: f32,
+}
+
+/// Phase A of a step, parallel over tiles: forward, loss and backward of every tile. Returns
+/// the summed loss, the MLP weight gradients, and ∂L/∂(hash-grid columns) `[n][L·F]`.
+fn forward_backward(layout: &ModelLayout, grid_w: &[f32], mlp_w: &[f32], rows: &[f32], loss: LossSettings) -> (f64, MlpGrad, Vec<f32>) {
+    let n = rows.len() / TRAIN_ROW;
+    let prepared = PreparedMlp::new(&layout.layers, mlp_w);
+    let k_in = prepared.inputs();
+    let hidden = prepared.hidden();
+    let (grid_col, grid_dims) = layout.encoding.grid().map_or((0, 0), |(g, p)| (p.out_offset, g.output_dims()));
+    let scale = 1.0 / (3.0 * n as f32);
+    let mut dxg = vec![0f32; n * grid_dims.max(1)];
+    let (loss_sum, mgrad) = rows
+        .par_chunks(TILE * TRAIN_ROW)
+        .zip(dxg.par_chunks_mut(TILE * grid_dims.max(1)))
+        .fold(
+            || (0f64, MlpGrad::zeros(&prepared), TileScratch::new(k_in, hidden)),
+            |(mut loss_acc, mut grad, mut s), (rows_t, dxg_t)| {
+                let m = rows_t.len() / TRAIN_ROW;
+                let t_encode = Instant::now();
+                for i in 0..m {
+                    let row = &rows_t[i * TRAIN_ROW..(i + 1) * TRAIN_ROW];
+                    layout.encoding.forward_one(grid_w, &row[..RAW_INPUT_DIMS], &mut s.x[i * k_in..(i + 1) * k_in]);
+                }
+                add_phase(0, t_encode);
+                let t_mlp = Instant::now();
+                forward_tile(&prepared, m, &mut s);
+                for i in 0..m {
+                    let row = &rows_t[i * TRAIN_ROW..(i + 1) * TRAIN_ROW];
+                    let o = &s.out[i * OUT_PAD..i * OUT_PAD + 3];
+                    let (l, g) = sample_loss(
+                        loss.activation,
+                        [o[0], o[1], o[2]],
+                        [row[FACTOR_AT], row[FACTOR_AT + 1], row[FACTOR_AT + 2]],
+                        [row[TARGET_AT], row[TARGET_AT + 1], row[TARGET_AT + 2]],
+                        row[WEIGHT_AT],
+                        loss.epsilon,
+                        scale,
+                    );
+                    loss_acc += l;
+                    let d = &mut s.dout[i * OUT_PAD..(i + 1) * OUT_PAD];
+                    d[..3].copy_from_slice(&g);
+                    d[3..].fill(0.0);
+                }
+                let dx = (grid_dims > 0).then(|| (grid_col, grid_dims, &mut dxg_t[..m * grid_dims]));
+                backward_tile(&prepared, m, &mut s, &mut grad, dx);
+                add_phase(1, t_mlp);
+                (loss_acc, grad, s)
+            },
+        )
+        .map(|(l, g, _)| (l, g))
+        .reduce(
+            || (0.0, MlpGrad::zeros(&prepared)),
+            |(la, mut ga), (lb, gb)| {
+                ga.add(&gb);
+                (la + lb, ga)
+            },
+        );
+    (loss_sum, mgrad, dxg)
+}
+
+/// Loss and gradients of the fused step without an update (what the step feeds to Adam):
+/// mean loss, ∂L/∂table (dense), ∂L/∂MLP weights.
+pub fn gradients(layout: &ModelLayout, grid_w: &[f32], mlp_w: &[f32], rows: &[f32], loss: LossSettings) -> (f64, Vec<f32>, Vec<f32>) {
+    let n = rows.len() / TRAIN_ROW;
+    let (loss_sum, mgrad, dxg) = forward_backward(layout, grid_w, mlp_w, rows, loss);
+    let mut mlp = vec![0f32; mlp_w.len()];
+    mgrad.write_flat(&layout.layers, &mut mlp);
+    let mut grid = vec![0f32; grid_w.len()];
+    if let Some((hg, part)) = layout.encoding.grid() {
+        let f = hg.features();
+        let d = hg.output_dims();
+        let levels = split_levels(hg, f, &mut grid[..]);
+        levels.into_par_iter().enumerate().for_each(|(l, g)| {
+            scatter_level(
+                hg,
+                l,
+                n,
+                |i| {
+                    let r = &rows[i * TRAIN_ROW + part.in_offset..];
+                    [r[0], r[1], r[2]]
+                },
+                |i| &dxg[i * d + l * f..i * d + (l + 1) * f],
+                g,
+                None,
+            );
+        });
+    }
+    (loss_sum / (3.0 * n as f64), grid, mlp)
+}
+
+/// One optimisation step over the packed rows (`n · TRAIN_ROW` floats, `n ≥ 1`); returns the
+/// mean loss over samples and channels (before the update).
+pub fn train_step(
+    layout: &ModelLayout,
+    grid: Option<GridState<'_>>,
+    mlp: GroupState<'_>,
+    rows: &[f32],
+    c: &StepConstants,
+    loss: LossSettings,
+) -> f64 {
+    let n = rows.len() / TRAIN_ROW;
+    let grid_part = layout.encoding.grid();
+    let (grid_dims, grid_in) = grid_part.map_or((0, 0), |(g, p)| (g.output_dims(), p.in_offset));
+    let grid_w: &[f32] = grid.as_ref().map_or(&[], |g| &*g.group.w);
+    let (loss_sum, mgrad, dxg) = forward_backward(layout, grid_w, mlp.w, rows, loss);
+
+    // Phase C: hash-grid scatter + sparse Adam/EMA, one task per level.
+    let t_grid = Instant::now();
+    if let (Some(g), Some((hg, _))) = (grid, grid_part) {
+        let f = hg.features();
+        let GridState { group, grad, last } = g;
+        let ws = split_levels(hg, f, group.w);
+        let ms = split_levels(hg, f, group.m);
+        let vs = split_levels(hg, f, group.v);
+        let es = split_levels(hg, f, group.ema);
+        let gs = split_levels(hg, f, grad);
+        let ls = split_levels(hg, 1, last);
+        let dxg = &dxg;
+        ws.into_par_iter()
+            .zip(ms)
+            .zip(vs)
+            .zip(es)
+            .zip(gs)
+            .zip(ls)
+            .enumerate()
+            .for_each(|(l, (((((w, m), v), e), gr), la))| {
+                let entries = hg.levels[l].entries as usize;
+                let mut touched = vec![0u64; entries.div_ceil(64)];
+                scatter_level(
+                    hg,
+                    l,
+                    n,
+                    |i| {
+                        let r = &rows[i * TRAIN_ROW + grid_in..];
+                        [r[0], r[1], r[2]]
+                    },
+                    |i| &dxg[i * grid_dims + l * f..i * grid_dims + (l + 1) * f],
+                    gr,
+                    Some(&mut touched),
+                );
+                sparse_step(c, f, &mut touched, w, m, v, e, gr, la);
+            });
+    }
+
+    add_phase(2, t_grid);
+    // Phase D: dense Adam + EMA of the MLP.
+    let t_adam = Instant::now();
+    let mut flat = vec![0f32; mlp.w.len()];
+    mgrad.write_flat(&layout.layers, &mut flat);
+    dense_step(c, mlp.w, mlp.m, mlp.v, mlp.ema, &flat);
+    add_phase(3, t_adam);
+
+    loss_sum / (3.0 * n as f64)
+}

@@ -1,0 +1,224 @@
+//! Multiresolution hash-grid encoding (Müller et al. 2022), tiny-cuda-nn conventions.
+//!
+//! # Specification (the CPU kernels here and the WGSL kernels in `shaders/` implement exactly this)
+//!
+//! Parameters: `L` levels, `F` features per level, table size `T = 2^log2T` entries per level,
+//! base resolution `N_min`, per-level scale `b`. For level `l`:
+//!
+//! * scale `s_l = N_min · b^l − 1`, resolution `r_l = ceil(s_l) + 1`;
+//! * the level is **dense** when `r_l³ ≤ T`: it holds `E_l = min(T, round_up(r_l³, 8))` entries and
+//!   a grid vertex `(x, y, z)` has index `(x + y·r_l + z·r_l²) mod E_l` (computed in u32; vertices at
+//!   coordinate `r_l`, reached only for inputs next to 1, alias as in tiny-cuda-nn);
+//! * otherwise it is **hashed**: `E_l = T` and the index is
+//!   `(x·1 ⊕ y·2654435761 ⊕ z·805459861) & (T − 1)` with wrapping u32 products.
+//!
+//! For an input `p ∈ [0,1]³`: `pos = p·s_l + 0.5`, `cell = floor(pos)`, `w = pos − cell`; the
+//! level's `F` features are the trilinear interpolation of the 8 vertices `cell + c`,
+//! `c ∈ {0,1}³`, with weight `Π_d (c_d ? w_d : 1 − w_d)`. The output is level-major:
+//! `out[l·F + f]`.
+//!
+//! Parameters are laid out level-major `[level][entry][feature]`, level `l` starting at entry
+//! offset `Σ_{k<l} E_k`; they are initialised uniformly in ±1e-4.
+//!
+//! The backward pass scatters `w_c · ∂L/∂out[l·F + f]` into the gradient of the 8 vertices'
+//! features, and (for gradient checks) gives `∂L/∂p_d = Σ_l s_l Σ_c ∂w_c/∂pos_d · ⟨feature_c, ∂L/∂out_l⟩`.
+
+use serde::{Deserialize, Serialize};
+
+/// Hash primes of the spatial hash, one per dimension (tiny-cuda-nn).
+pub const PRIMES: [u32; 3] = [1, 2_654_435_761, 805_459_861];
+
+/// Hyper-parameters of a hash grid (the JSON fields of a `HashGrid` encoding).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct HashGridParams {
+    /// Number of levels L.
+    pub n_levels: u32,
+    /// Features per level F.
+    pub n_features_per_level: u32,
+    /// log2 of the table size T per level.
+    pub log2_hashmap_size: u32,
+    /// Resolution N_min of the coarsest level.
+    pub base_resolution: f32,
+    /// Growth factor b between levels.
+    pub per_level_scale: f32,
+}
+
+/// One level of a hash grid, derived from [`HashGridParams`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct GridLevel {
+    /// `s_l`.
+    pub scale: f32,
+    /// `r_l`.
+    pub resolution: u32,
+    /// Dense indexing (true) or spatial hash (false).
+    pub dense: bool,
+    /// Entries `E_l` of this level.
+    pub entries: u32,
+    /// First entry of this level in the parameter table.
+    pub offset: usize,
+}
+
+/// A hash grid's derived layout: the per-level scale, resolution, indexing mode and offsets.
+#[derive(Clone, Debug, PartialEq)]
+pub struct HashGrid {
+    /// The hyper-parameters.
+    pub params: HashGridParams,
+    /// Derived per-level layout.
+    pub levels: Vec<GridLevel>,
+    /// Total entries over all levels.
+    pub total_entries: usize,
+}
+
+/// Vertex indices and trilinear weights of one level for one input.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Corners {
+    /// Entry index (absolute, including the level offset) of each of the 8 vertices.
+    pub index: [u32; 8],
+    /// Trilinear weight of each vertex.
+    pub weight: [f32; 8],
+    /// Fractional position `w` within the cell, per dimension.
+    pub frac: [f32; 3],
+}
+
+impl HashGrid {
+    /// Derives the level layout from the hyper-parameters (assumed validated).
+    pub fn new(params: HashGridParams) -> Self {
+        let t = 1u64 << params.log2_hashmap_size;
+        let mut offset = 0usize;
+        let levels = (0..params.n_levels)
+            .map(|l| {
+                let scale = level_scale(params.base_resolution, params.per_level_scale, l);
+                let resolution = scale.ceil() as u32 + 1;
+                let r3 = u64::from(resolution).pow(3);
+                let dense = r3 <= t;
+                let entries = if dense { t.min(r3.div_ceil(8) * 8) } else { t } as u32;
+                let level = GridLevel { scale, resolution, dense, entries, offset };
+                offset += entries as usize;
+                level
+            })
+            .collect();
+        Self { params, levels, total_entries: offset }
+    }
+
+    /// Number of features F per level.
+    pub fn features(&self) -> usize {
+        self.params.n_features_per_level as usize
+    }
+
+    /// Output dimensions L·F.
+    pub fn output_dims(&self) -> usize {
+        self.levels.len() * self.features()
+    }
+
+    /// Number of parameters (entries · F).
+    pub fn param_count(&self) -> usize {
+        self.total_entries * self.features()
+    }
+
+    /// Resolution of the finest level.
+    pub fn finest_resolution(&self) -> u32 {
+        self.levels.last().map_or(0, |l| l.resolution)
+    }
+
+    /// Vertex indices and weights of level `l` for input `p` (components in [0,1]).
+    #[inline(always)]
+    pub fn corners(&self, level: &GridLevel, p: [f32; 3]) -> Corners {
+        let mut cell = [0u32; 3];
+        let mut frac = [0f32; 3];
+        for d in 0..3 {
+            let pos = p[d] * level.scale + 0.5;
+            let fl = pos.floor();
+            cell[d] = fl as u32;
+            frac[d] = pos - fl;
+        }
+        let mut out = Corners { frac, ..Corners::default() };
+        for c in 0..8u32 {
+            let v = [cell[0] + (c & 1), cell[1] + ((c >> 1) & 1), cell[2] + ((c >> 2) & 1)];
+            let mut w = 1.0;
+            for d in 0..3 {
+                w *= if (c >> d) & 1 == 1 { frac[d] } else { 1.0 - frac[d] };
+            }
+            out.index[c as usize] = level.offset as u32 + vertex_index(level, v);
+            out.weight[c as usize] = w;
+        }
+        out
+    }
+
+    /// Encodes one input: `out[l·F + f]` (length L·F) from the table `params` ([entry][feature]).
+    #[inline]
+    pub fn forward_one(&self, params: &[f32], p: [f32; 3], out: &mut [f32]) {
+        let f = self.features();
+        for (l, level) in self.levels.iter().enumerate() {
+            let c = self.corners(level, p);
+            let o = &mut out[l * f..(l + 1) * f];
+            o.fill(0.0);
+            for k in 0..8 {
+                let base = c.index[k] as usize * f;
+                let w = c.weight[k];
+                for (j, oj) in o.iter_mut().enumerate() {
+                    *oj += w * params[base + j];
+                }
+            }
+        }
+    }
+
+    /// Scatters the gradient of one input's output `dout` (length L·F) into `grad` ([entry][feature]).
+    #[inline]
+    pub fn backward_params_one(&self, p: [f32; 3], dout: &[f32], grad: &mut [f32]) {
+        let f = self.features();
+        for (l, level) in self.levels.iter().enumerate() {
+            let c = self.corners(level, p);
+            let d = &dout[l * f..(l + 1) * f];
+            for k in 0..8 {
+                let base = c.index[k] as usize * f;
+                for j in 0..f {
+                    grad[base + j] += c.weight[k] * d[j];
+                }
+            }
+        }
+    }
+
+    /// Gradient of `⟨dout, encode(p)⟩` with respect to the input position `p`.
+    pub fn backward_input_one(&self, params: &[f32], p: [f32; 3], dout: &[f32]) -> [f32; 3] {
+        let f = self.features();
+        let mut g = [0f32; 3];
+        for (l, level) in self.levels.iter().enumerate() {
+            let c = self.corners(level, p);
+            let d = &dout[l * f..(l + 1) * f];
+            for k in 0..8u32 {
+                let base = c.index[k as usize] as usize * f;
+                let dot: f32 = (0..f).map(|j| params[base + j] * d[j]).sum();
+                for (dim, gd) in g.iter_mut().enumerate() {
+                    // ∂w_c/∂frac_dim: the factor of dimension `dim` becomes ±1.
+                    let mut dw = if (k >> dim) & 1 == 1 { 1.0 } else { -1.0 };
+                    for e in 0..3 {
+                        if e != dim {
+                            dw *= if (k >> e) & 1 == 1 { c.frac[e] } else { 1.0 - c.frac[e] };
+                        }
+                    }
+                    *gd += level.scale * dw * dot;
+                }
+            }
+        }
+        g
+    }
+}
+
+/// `s_l = N_min · b^l − 1`, computed as tiny-cuda-nn does (exp2 of l·log2 b).
+#[inline]
+pub fn level_scale(base_resolution: f32, per_level_scale: f32, level: u32) -> f32 {
+    (level as f32 * per_level_scale.log2()).exp2() * base_resolution - 1.0
+}
+
+/// Index of vertex `v` within its level (without the level offset).
+#[inline(always)]
+pub fn vertex_index(level: &GridLevel, v: [u32; 3]) -> u32 {
+    if level.dense {
+        let r = level.resolution;
+        let i = v[0].wrapping_add(v[1].wrapping_mul(r)).wrapping_add(v[2].wrapping_mul(r.wrapping_mul(r)));
+        i % level.entries
+    } else {
+        let h = v[0].wrapping_mul(PRIMES[0]) ^ v[1].wrapping_mul(PRIMES[1]) ^ v[2].wrapping_mul(PRIMES[2]);
+        h & (level.entries - 1)
+    }
+}

@@ -1,0 +1,47 @@
+//! # nrc-cache: the neural radiance cache
+//!
+//! Learns the outgoing radiance `L(x, ω)` of a scene from [`CacheQuery`] records and radiance
+//! targets, trains online with burn on the Flex CPU backend or wgpu, answers batched queries,
+//! and saves and restores itself. It knows nothing of scenes.
+//!
+//! ```no_run
+//! use nrc_cache::{CacheConfig, CacheDevice, CacheQuery, RadianceCache, TrainingBatch};
+//!
+//! let mut cache = RadianceCache::new(CacheConfig::hash_grid_preset(), CacheDevice::Cpu).unwrap();
+//! let q = CacheQuery { position: [0.5; 3], normal: [0.0, 0.0, 1.0], direction: [0.0, 0.0, 1.0], diffuse: [0.5; 3], ..Default::default() };
+//! let batch = TrainingBatch { queries: vec![q; 256], targets: vec![[1.0, 0.5, 0.25]; 256], weights: None };
+//! let stats = cache.train(&batch, 4).unwrap();
+//! let radiance = cache.infer(&[q]);
+//! println!("loss {} → {:?}", stats.loss, radiance[0]);
+//! ```
+//!
+//! The pieces, in data-flow order: [`record`] (queries and batches, raw inputs) → [`encoding`]
+//! (hash grid, one-blob, triangle wave, identity, composite) → [`model`] (64-wide bias-free MLP,
+//! parameter layout) → [`loss`] (reflectance factorisation, output mapping, relative L2) →
+//! Adam and the weight EMA ([`cpu::optim`], [`tensor_path`]) → [`snapshot`]. The custom burn ops
+//! are in [`ops`] and [`hash_grid_op`]; their CPU kernels in [`cpu`], their WGSL kernels in
+//! [`gpu`] and `shaders/`.
+
+pub mod batch;
+pub mod bench;
+pub mod cache;
+pub mod config;
+pub mod cpu;
+pub mod device;
+pub mod encoding;
+pub mod error;
+pub mod gpu;
+pub mod hash_grid_op;
+pub mod loss;
+pub mod model;
+pub mod ops;
+pub mod record;
+pub mod snapshot;
+pub mod state;
+pub mod tensor_path;
+
+pub use cache::{RadianceCache, TrainStats};
+pub use config::{CacheConfig, SceneBox, Sizing};
+pub use device::{CacheDevice, ComputePath};
+pub use error::CacheError;
+pub use record::{CacheQuery, TrainingBatch};

@@ -1,0 +1,120 @@
+//! The model's parameter layout and initialisation.
+//!
+//! All trainable parameters live in one flat f32 vector (as in tiny-cuda-nn):
+//!
+//! ```text
+//! [ hash table: [level][entry][feature] | layer 0: [in][64] | layer 1..H−1: [64][64] | output: [64][3] ]
+//! ```
+//!
+//! Training keeps the two groups apart (the grid is updated sparsely, the MLP densely), so
+//! [`LayerShape::offset`] counts from the start of the MLP group.
+//!
+//! Weight matrices are stored input-major (`M[k][j]` connects input `k` to output `j`), so a
+//! layer computes `y = x · M`. There are no biases; the encoding's padding columns (ones) act
+//! as the first layer's bias.
+
+use rand::{Rng, SeedableRng};
+use rand_pcg::Pcg64Mcg;
+
+use crate::config::{CacheConfig, OutputActivation};
+use crate::encoding::InputEncoding;
+
+/// Width of every hidden layer.
+pub const WIDTH: usize = 64;
+/// Network outputs (RGB).
+pub const OUTPUTS: usize = 3;
+
+/// Shape and position of one weight matrix in the flat parameter vector.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct LayerShape {
+    /// Inputs (rows).
+    pub inputs: usize,
+    /// Outputs (columns).
+    pub outputs: usize,
+    /// Offset of `M[0][0]` in the MLP parameter group.
+    pub offset: usize,
+}
+
+impl LayerShape {
+    /// Number of weights.
+    pub fn len(&self) -> usize {
+        self.inputs * self.outputs
+    }
+
+    /// Whether the layer has no weights.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+}
+
+/// Everything derived from a config that the kernels need: the encoding, the layers and the
+/// parameter layout.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ModelLayout {
+    /// The composite input encoding.
+    pub encoding: InputEncoding,
+    /// Weight matrices, input to output.
+    pub layers: Vec<LayerShape>,
+    /// Output mapping.
+    pub output_activation: OutputActivation,
+    /// Parameters of the hash table (they come first).
+    pub grid_params: usize,
+    /// Total parameters.
+    pub total_params: usize,
+}
+
+impl ModelLayout {
+    /// Derives the layout from a validated config.
+    pub fn new(config: &CacheConfig) -> Self {
+        let encoding = InputEncoding::new(&config.encoding);
+        let grid_params = encoding.param_count();
+        let hidden = config.network.n_hidden_layers as usize;
+        let mut offset = 0;
+        let mut layers = Vec::with_capacity(hidden + 1);
+        let mut inputs = encoding.padded_dims;
+        for l in 0..=hidden {
+            let outputs = if l == hidden { OUTPUTS } else { WIDTH };
+            layers.push(LayerShape { inputs, outputs, offset });
+            offset += inputs * outputs;
+            inputs = outputs;
+        }
+        Self { encoding, layers, output_activation: config.network.output_activation, grid_params, total_params: grid_params + offset }
+    }
+
+    /// Total trainable parameters.
+    pub fn param_count(&self) -> usize {
+        self.total_params
+    }
+
+    /// MLP parameters.
+    pub fn mlp_params(&self) -> usize {
+        self.total_params - self.grid_params
+    }
+
+    /// Entries of the hash table (rows of F features).
+    pub fn grid_entries(&self) -> usize {
+        self.encoding.grid().map_or(0, |(g, _)| g.total_entries)
+    }
+
+    /// Bytes held for training: weights, two Adam moments, EMA and gradient scratch (5 × 4 bytes
+    /// per parameter) plus one u32 per hash-table entry (the step its EMA is current at).
+    pub fn training_memory_bytes(&self) -> usize {
+        self.total_params * 5 * 4 + self.grid_entries() * 4
+    }
+
+    /// Initial parameters: hash table uniform in ±1e-4, weight matrices Xavier-uniform
+    /// (`±sqrt(6/(fan_in+fan_out))`), from a seeded PCG generator.
+    /// Returns (hash table, MLP weights).
+    pub fn init_params(&self, seed: u64) -> (Vec<f32>, Vec<f32>) {
+        let mut rng = Pcg64Mcg::seed_from_u64(seed);
+        let grid = (0..self.grid_params).map(|_| rng.random_range(-1e-4f32..1e-4)).collect();
+        let mut mlp = Vec::with_capacity(self.mlp_params());
+        for l in &self.layers {
+            let a = (6.0 / (l.inputs + l.outputs) as f32).sqrt();
+            for _ in 0..l.len() {
+                mlp.push(rng.random_range(-a..a));
+            }
+        }
+        (grid, mlp)
+    }
+}

@@ -1,0 +1,386 @@
+//! The cache's custom burn operations (backend extensions).
+//!
+//! * [`MlpOps`] — differentiable: the fused MLP, a forward op and a backward op. The `Autodiff`
+//!   implementation (generic over the inner backend) registers the backward op as the node's
+//!   backward step, so gradients flow through burn's autodiff graph. (The hash-grid encoding's
+//!   op is [`crate::hash_grid_op::HashGridOps`], built the same way.)
+//! * [`NrcFusedOps`] — the whole CPU training step (encode, MLP forward/backward, loss, sparse
+//!   Adam + EMA) and fused inference, on tensors that live on the device.
+//!
+//! Both are implemented for Flex (rayon kernels in [`crate::cpu`]). A wgpu implementation plugs
+//! in by adding `Cube` to a selector list and implementing the trait for `CubeBackend`; without
+//! one the cache runs the generic tensor-op path on wgpu (with the hash-grid op's WGSL kernels).
+
+use std::borrow::Cow;
+use std::sync::Arc;
+
+use burn::backend::autodiff::{
+    Autodiff,
+    checkpoint::{base::Checkpointer, strategy::CheckpointStrategy},
+    grads::Gradients,
+    ops::{Backward, Ops, OpsKind},
+};
+use burn::backend::flex::FlexTensor;
+use burn::backend::tensor::{FloatTensor, IntTensor};
+use burn::backend::{AutodiffBackend, Backend, Dispatch, ExtensionType, Flex, TensorMetadata, backend_extension};
+use burn::tensor::{DType, Tensor, TensorData};
+use rayon::prelude::*;
+
+use crate::cpu;
+use crate::cpu::mlp::{MlpGrad, OUT_PAD, PreparedMlp, TILE, TileScratch, backward_tile, forward_tile};
+use crate::model::{LayerShape, ModelLayout};
+
+/// Which gradients a backward op must produce.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Needs {
+    /// Gradient of the parameters (table or weights).
+    pub params: bool,
+    /// Gradient of the input (positions or network input).
+    pub input: bool,
+}
+
+/// The fused MLP as a differentiable custom op.
+#[backend_extension(Flex, Autodiff)]
+pub trait MlpOps: burn::backend::Backend {
+    /// Fused MLP (ReLU hidden layers, no biases, linear output): `weights` is the MLP parameter
+    /// group `[W]` (layout of [`LayerShape`]), `input` `[N, in]` → raw outputs `[N, 3]`.
+    fn mlp_forward(weights: FloatTensor<Self>, input: FloatTensor<Self>, layers: Arc<Vec<LayerShape>>) -> FloatTensor<Self>;
+
+    /// Backward of [`MlpOps::mlp_forward`]: `(∂L/∂weights [W], ∂L/∂input [N, in])`, recomputing
+    /// each tile's activations in cache instead of storing them.
+    fn mlp_backward(
+        weights: FloatTensor<Self>,
+        input: FloatTensor<Self>,
+        grad_out: FloatTensor<Self>,
+        layers: Arc<Vec<LayerShape>>,
+        needs: Needs,
+    ) -> (FloatTensor<Self>, FloatTensor<Self>);
+}
+
+/// The complete training state on the device: the two parameter groups with their Adam
+/// moments and raw EMA, the hash-table gradient scratch (zero between steps) and, per table
+/// entry, the step its EMA is current at (i32 storage of a u32 step count).
+#[derive(ExtensionType)]
+pub struct TrainState<B: Backend> {
+    /// Hash table weights `[entries·F]` (empty without a hash grid).
+    pub grid: FloatTensor<B>,
+    /// Adam first moment of the table.
+    pub grid_m: FloatTensor<B>,
+    /// Adam second moment of the table.
+    pub grid_v: FloatTensor<B>,
+    /// Raw EMA of the table.
+    pub grid_ema: FloatTensor<B>,
+    /// Gradient scratch of the table.
+    pub grid_grad: FloatTensor<B>,
+    /// Step each table entry's EMA is current at `[entries]`.
+    pub grid_last: IntTensor<B>,
+    /// MLP weights `[W]`.
+    pub mlp: FloatTensor<B>,
+    /// Adam first moment of the MLP.
+    pub mlp_m: FloatTensor<B>,
+    /// Adam second moment of the MLP.
+    pub mlp_v: FloatTensor<B>,
+    /// Raw EMA of the MLP.
+    pub mlp_ema: FloatTensor<B>,
+}
+
+/// Result of [`NrcFusedOps::fused_train_steps`].
+#[derive(ExtensionType)]
+pub struct TrainOutcome<B: Backend> {
+    /// The updated state.
+    #[extension_type]
+    pub state: TrainState<B>,
+    /// Mean loss of each step (before its update).
+    pub losses: Vec<f64>,
+}
+
+/// Constants of a run of training steps.
+#[derive(Clone, Debug)]
+pub struct StepSpec {
+    /// The model.
+    pub layout: Arc<ModelLayout>,
+    /// Adam parameters.
+    pub adam: crate::config::AdamParams,
+    /// EMA decay.
+    pub ema: Option<f32>,
+    /// Loss settings.
+    pub loss: cpu::train::LossSettings,
+    /// Step count before the first step of this run.
+    pub first_step: u32,
+    /// Steps to take.
+    pub steps: u32,
+}
+
+/// Inference weights derived from a [`TrainState`].
+#[derive(ExtensionType)]
+pub struct InferenceWeights<B: Backend> {
+    /// Hash table (bias-corrected EMA, or the weights without EMA).
+    pub grid: FloatTensor<B>,
+    /// MLP weights (likewise).
+    pub mlp: FloatTensor<B>,
+}
+
+/// Fused, non-differentiable custom ops of the training loop.
+#[backend_extension(Flex)]
+pub trait NrcFusedOps: burn::backend::Backend {
+    /// Runs `spec.steps` fused training steps on the packed rows `batch` `[N, 21]`.
+    fn fused_train_steps(#[extension_type] state: TrainState<Self>, batch: FloatTensor<Self>, spec: StepSpec) -> TrainOutcome<Self>;
+
+    /// The inference weights at step `step`: bias-corrected EMA (lazy table entries caught up on
+    /// the fly) or, with `ema = None`, the weights. Reads the state only.
+    fn inference_weights(#[extension_type] state: TrainState<Self>, layout: Arc<ModelLayout>, ema: Option<f32>, step: u32) -> InferenceWeights<Self>;
+
+    /// Brings every table entry's EMA up to `step` (before a snapshot).
+    fn catch_up_ema(#[extension_type] state: TrainState<Self>, layout: Arc<ModelLayout>, ema: f32, step: u32) -> TrainState<Self>;
+
+    /// Fused inference on packed query rows `[N, 17]` → radiance `[N, 3]`.
+    fn fused_infer(grid: FloatTensor<Self>, mlp: FloatTensor<Self>, queries: FloatTensor<Self>, layout: Arc<ModelLayout>) -> FloatTensor<Self>;
+}
+
+// ---------------------------------------------------------------------------------------------
+// Flex implementations.
+
+/// Contiguous f32 view of a Flex tensor (copies only when strided or of another dtype).
+fn flex_f32(t: &FlexTensor) -> Cow<'_, [f32]> {
+    if t.dtype() == DType::F32
+        && let Some(s) = t.as_slice::<f32>()
+    {
+        return Cow::Borrowed(s);
+    }
+    Cow::Owned(t.clone().into_data().convert::<f32>().try_to_vec::<f32>().expect("f32 data"))
+}
+
+/// A uniquely owned, contiguous f32 Flex tensor whose storage can be mutated in place.
+fn flex_owned_f32(t: FlexTensor) -> FlexTensor {
+    if t.dtype() == DType::F32 && t.is_contiguous() && t.layout().start_offset() == 0 {
+        t
+    } else {
+        FlexTensor::from_data(t.into_data().convert::<f32>())
+    }
+}
+
+fn flex_mut_f32(t: &mut FlexTensor) -> &mut [f32] {
+    let n = t.shape().num_elements();
+    &mut t.storage_mut::<f32>()[..n]
+}
+
+fn flex_from(values: Vec<f32>, shape: &[usize]) -> FlexTensor {
+    FlexTensor::from_data(TensorData::new(values, shape.to_vec()))
+}
+
+fn flex_last_mut(t: &mut FlexTensor) -> &mut [u32] {
+    let n = t.shape().num_elements();
+    assert_eq!(t.dtype(), DType::I32, "the EMA step table is stored as i32");
+    bytemuck::cast_slice_mut(&mut t.storage_mut::<i32>()[..n])
+}
+
+impl MlpOps for Flex {
+    fn mlp_forward(weights: FlexTensor, input: FlexTensor, layers: Arc<Vec<LayerShape>>) -> FlexTensor {
+        let k = layers[0].inputs;
+        let x = flex_f32(&input);
+        let n = x.len() / k;
+        let prepared = PreparedMlp::new(&layers, &flex_f32(&weights));
+        let mut out = vec![0f32; n * 3];
+        out.par_chunks_mut(TILE * 3).zip(x.par_chunks(TILE * k)).for_each_init(
+            || TileScratch::new(k, prepared.hidden()),
+            |s, (o, xt)| {
+                let m = xt.len() / k;
+                s.x[..xt.len()].copy_from_slice(xt);
+                forward_tile(&prepared, m, s);
+                for i in 0..m {
+                    o[i * 3..i * 3 + 3].copy_from_slice(&s.out[i * OUT_PAD..i * OUT_PAD + 3]);
+                }
+            },
+        );
+        flex_from(out, &[n, 3])
+    }
+
+    fn mlp_backward(weights: FlexTensor, input: FlexTensor, grad_out: FlexTensor, layers: Arc<Vec<LayerShape>>, needs: Needs) -> (FlexTensor, FlexTensor) {
+        let k = layers[0].inputs;
+        let x = flex_f32(&input);
+        let dy = flex_f32(&grad_out);
+        let n = x.len() / k;
+        let w = flex_f32(&weights);
+        let prepared = PreparedMlp::new(&layers, &w);
+        let mut dx = vec![0f32; if needs.input { n * k } else { k }];
+        let dx_chunk = if needs.input { TILE * k } else { k };
+        let grad = x
+            .par_chunks(TILE * k)
+            .zip(dy.par_chunks(TILE * 3))
+            .zip(dx.par_chunks_mut(dx_chunk))
+            .fold(
+                || (MlpGrad::zeros(&prepared), TileScratch::new(k, prepared.hidden())),
+                |(mut g, mut s), ((xt, dyt), dxt)| {
+                    let m = xt.len() / k;
+                    s.x[..xt.len()].copy_from_slice(xt);
+                    forward_tile(&prepared, m, &mut s);
+                    for i in 0..m {
+                        let d = &mut s.dout[i * OUT_PAD..(i + 1) * OUT_PAD];
+                        d[..3].copy_from_slice(&dyt[i * 3..i * 3 + 3]);
+                        d[3..].fill(0.0);
+                    }
+                    backward_tile(&prepared, m, &mut s, &mut g, needs.input.then(|| (0, k, &mut dxt[..m * k])));
+                    (g, s)
+                },
+            )
+            .map(|(g, _)| g)
+            .reduce(
+                || MlpGrad::zeros(&prepared),
+                |mut a, b| {
+                    a.add(&b);
+                    a
+                },
+            );
+        let gw = if needs.params {
+            let mut flat = vec![0f32; w.len()];
+            grad.write_flat(&layers, &mut flat);
+            flex_from(flat, &[w.len()])
+        } else {
+            flex_from(Vec::new(), &[0])
+        };
+        let gx = if needs.input { flex_from(dx, &[n, k]) } else { flex_from(Vec::new(), &[0]) };
+        (gw, gx)
+    }
+}
+
+/// Unpacks a Flex training state into mutable slices, runs `f`, and packs it again.
+fn with_flex_state<R>(state: TrainState<Flex>, f: impl FnOnce(&mut [&mut [f32]; 9], &mut [u32]) -> R) -> (TrainState<Flex>, R) {
+    let TrainState { grid, grid_m, grid_v, grid_ema, grid_grad, grid_last, mlp, mlp_m, mlp_v, mlp_ema } = state;
+    let mut tensors = [grid, grid_m, grid_v, grid_ema, grid_grad, mlp, mlp_m, mlp_v, mlp_ema].map(flex_owned_f32);
+    let mut last = grid_last;
+    let r = {
+        let [a, b, c, d, e, g, h, i, j] = &mut tensors;
+        let mut slices = [flex_mut_f32(a), flex_mut_f32(b), flex_mut_f32(c), flex_mut_f32(d), flex_mut_f32(e), flex_mut_f32(g), flex_mut_f32(h), flex_mut_f32(i), flex_mut_f32(j)];
+        f(&mut slices, flex_last_mut(&mut last))
+    };
+    let [grid, grid_m, grid_v, grid_ema, grid_grad, mlp, mlp_m, mlp_v, mlp_ema] = tensors;
+    (TrainState { grid, grid_m, grid_v, grid_ema, grid_grad, grid_last: last, mlp, mlp_m, mlp_v, mlp_ema }, r)
+}
+
+impl NrcFusedOps for Flex {
+    fn fused_train_steps(state: TrainState<Self>, batch: FlexTensor, spec: StepSpec) -> TrainOutcome<Self> {
+        let rows = flex_f32(&batch);
+        let (state, losses) = with_flex_state(state, |s, last| {
+            let [grid, grid_m, grid_v, grid_ema, grid_grad, mlp, mlp_m, mlp_v, mlp_ema] = s;
+            let mut losses = Vec::with_capacity(spec.steps as usize);
+            for k in 1..=spec.steps {
+                let c = cpu::optim::StepConstants::new(spec.adam, spec.ema, spec.first_step + k);
+                let grid_state = (spec.layout.grid_params > 0).then(|| cpu::train::GridState {
+                    group: cpu::train::GroupState { w: &mut **grid, m: &mut **grid_m, v: &mut **grid_v, ema: &mut **grid_ema },
+                    grad: &mut **grid_grad,
+                    last: &mut *last,
+                });
+                let mlp_state = cpu::train::GroupState { w: &mut **mlp, m: &mut **mlp_m, v: &mut **mlp_v, ema: &mut **mlp_ema };
+                losses.push(cpu::train::train_step(&spec.layout, grid_state, mlp_state, &rows, &c, spec.loss));
+            }
+            losses
+        });
+        TrainOutcome { state, losses }
+    }
+
+    fn inference_weights(state: TrainState<Self>, layout: Arc<ModelLayout>, ema: Option<f32>, step: u32) -> InferenceWeights<Self> {
+        let grid = flex_f32(&state.grid);
+        let mlp = flex_f32(&state.mlp);
+        let (g, m) = match ema {
+            None => (grid.to_vec(), mlp.to_vec()),
+            Some(alpha) => {
+                let grid_ema = flex_f32(&state.grid_ema);
+                let mlp_ema = flex_f32(&state.mlp_ema);
+                let last_i32 = state.grid_last.as_slice::<i32>().map(Cow::Borrowed).unwrap_or_else(|| Cow::Owned(state.grid_last.clone().into_data().convert::<i32>().try_to_vec::<i32>().expect("i32 data")));
+                let last: &[u32] = bytemuck::cast_slice(&last_i32);
+                let mut g = vec![0f32; grid.len()];
+                if let Some((hg, _)) = layout.encoding.grid() {
+                    let f = hg.features();
+                    let outs = cpu::grid::split_levels(hg, f, &mut g[..]);
+                    outs.into_par_iter().enumerate().for_each(|(l, o)| {
+                        let level = &hg.levels[l];
+                        let (a, b) = (level.offset * f, (level.offset + level.entries as usize) * f);
+                        let lr = level.offset..level.offset + level.entries as usize;
+                        cpu::optim::materialize_grid(alpha, step, f, &grid[a..b], &grid_ema[a..b], &last[lr], o);
+                    });
+                }
+                let mut m = vec![0f32; mlp.len()];
+                cpu::optim::materialize_dense(alpha, step, &mlp, &mlp_ema, &mut m);
+                (g, m)
+            }
+        };
+        let (gl, ml) = (g.len(), m.len());
+        InferenceWeights { grid: flex_from(g, &[gl]), mlp: flex_from(m, &[ml]) }
+    }
+
+    fn catch_up_ema(state: TrainState<Self>, layout: Arc<ModelLayout>, ema: f32, step: u32) -> TrainState<Self> {
+        with_flex_state(state, |s, last| {
+            let [grid, _, _, grid_ema, ..] = s;
+            if let Some((hg, _)) = layout.encoding.grid() {
+                cpu::optim::catch_up(ema, step, hg.features(), grid, grid_ema, last);
+            }
+        })
+        .0
+    }
+
+    fn fused_infer(grid: FlexTensor, mlp: FlexTensor, queries: FlexTensor, layout: Arc<ModelLayout>) -> FlexTensor {
+        let rows = flex_f32(&queries);
+        let n = rows.len() / crate::batch::QUERY_ROW;
+        let mut out = vec![0f32; n * 3];
+        cpu::infer::infer(&layout, &flex_f32(&grid), &flex_f32(&mlp), &rows, &mut out);
+        flex_from(out, &[n, 3])
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Autodiff: the backward ops become the nodes' backward steps.
+
+impl<B: MlpOps, C: CheckpointStrategy> MlpOps for Autodiff<B, C> {
+    fn mlp_forward(weights: FloatTensor<Self>, input: FloatTensor<Self>, layers: Arc<Vec<LayerShape>>) -> FloatTensor<Self> {
+        #[derive(Debug)]
+        struct MlpBackward;
+
+        impl<B: MlpOps> Backward<B, 2> for MlpBackward {
+            type State = (FloatTensor<B>, FloatTensor<B>, Arc<Vec<LayerShape>>);
+
+            fn backward(self, ops: Ops<Self::State, 2>, grads: &mut Gradients, _checkpointer: &mut Checkpointer) {
+                let [node_w, node_x] = ops.parents;
+                let grad = grads.consume::<B>(&ops.node);
+                let (w, x, layers) = ops.state;
+                let needs = Needs { params: node_w.is_some(), input: node_x.is_some() };
+                let (gw, gx) = B::mlp_backward(w, x, grad, layers, needs);
+                if let Some(node) = node_w {
+                    grads.register::<B>(node.id, gw);
+                }
+                if let Some(node) = node_x {
+                    grads.register::<B>(node.id, gx);
+                }
+            }
+        }
+
+        match MlpBackward.prepare::<C>([weights.node(), input.node()]).compute_bound().stateful() {
+            OpsKind::Tracked(prep) => {
+                let w = weights.primitive().clone();
+                let x = input.primitive().clone();
+                let out = B::mlp_forward(w.clone(), x.clone(), layers.clone());
+                prep.finish((w, x, layers), out)
+            }
+            OpsKind::UnTracked(prep) => prep.finish(B::mlp_forward(weights.into_primitive(), input.into_primitive(), layers)),
+        }
+    }
+
+    fn mlp_backward(
+        weights: FloatTensor<Self>,
+        input: FloatTensor<Self>,
+        grad_out: FloatTensor<Self>,
+        layers: Arc<Vec<LayerShape>>,
+        needs: Needs,
+    ) -> (FloatTensor<Self>, FloatTensor<Self>) {
+        let (gw, gx) = B::mlp_backward(weights.into_primitive(), input.into_primitive(), grad_out.into_primitive(), layers, needs);
+        (<Self as AutodiffBackend>::from_inner(gw), <Self as AutodiffBackend>::from_inner(gx))
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Tensor-level entry points.
+
+/// The fused MLP on tensors: raw network outputs `[N, 3]` of `input` `[N, in]` with the MLP
+/// parameter group `weights` `[W]`; differentiable in both on an autodiff device.
+pub fn mlp(weights: Tensor<1>, input: Tensor<2>, layers: &Arc<Vec<LayerShape>>) -> Tensor<2> {
+    Tensor::from_dispatch(<Dispatch as MlpOps>::mlp_forward(weights.into_dispatch(), input.into_dispatch(), layers.clone()))
+}

@@ -1,0 +1,110 @@
+//! Plain records exchanged with the cache: queries, training batches and the raw input vector.
+//!
+//! Producers and inference passes build these without knowing anything of burn.
+
+/// One point of the radiance field to evaluate: where, in which direction, on what surface.
+#[derive(Clone, Copy, Debug, PartialEq, Default)]
+pub struct CacheQuery {
+    /// Position normalised to the scene box, in [0,1]³ (values outside are clamped).
+    pub position: [f32; 3],
+    /// Outgoing direction ω (need not be normalised; a zero or non-finite vector maps to +z).
+    pub direction: [f32; 3],
+    /// Surface normal (need not be normalised; a zero or non-finite vector maps to +z).
+    pub normal: [f32; 3],
+    /// Surface roughness r ≥ 0 (encoded as 1 − e^(−r)).
+    pub roughness: f32,
+    /// Diffuse reflectance α (RGB).
+    pub diffuse: [f32; 3],
+    /// Specular reflectance β (RGB).
+    pub specular: [f32; 3],
+}
+
+/// Queries with their radiance targets (RGB, emission excluded) and optional per-sample weights.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct TrainingBatch {
+    /// Where the radiance was measured.
+    pub queries: Vec<CacheQuery>,
+    /// Measured outgoing radiance, one per query.
+    pub targets: Vec<[f32; 3]>,
+    /// Optional non-negative weight per query (1 when absent).
+    pub weights: Option<Vec<f32>>,
+}
+
+/// Number of raw input dimensions a query becomes before encoding (see [`raw_inputs`]).
+pub const RAW_INPUT_DIMS: usize = 14;
+
+/// Converts a query into the 14 raw network inputs, each in [0,1] (or the reflectances as given):
+///
+/// | dims    | meaning                                                        |
+/// |---------|----------------------------------------------------------------|
+/// | 0..3    | position (clamped to [0,1]³)                                   |
+/// | 3, 4    | direction in spherical coordinates: θ/π, φ/(2π) wrapped to [0,1) |
+/// | 5, 6    | normal in spherical coordinates, as the direction              |
+/// | 7       | roughness as 1 − e^(−r)                                        |
+/// | 8..11   | diffuse reflectance                                            |
+/// | 11..14  | specular reflectance                                           |
+///
+/// Non-finite reflectances or roughness become 0; callers that need to know drop such queries
+/// beforehand ([`query_is_finite`]).
+pub fn raw_inputs(q: &CacheQuery) -> [f32; RAW_INPUT_DIMS] {
+    let mut out = [0.0; RAW_INPUT_DIMS];
+    for k in 0..3 {
+        let p = q.position[k];
+        out[k] = if p.is_finite() { p.clamp(0.0, 1.0) } else { 0.0 };
+    }
+    let (t, p) = spherical(q.direction);
+    out[3] = t;
+    out[4] = p;
+    let (t, p) = spherical(q.normal);
+    out[5] = t;
+    out[6] = p;
+    let r = if q.roughness.is_finite() { q.roughness.max(0.0) } else { 0.0 };
+    out[7] = 1.0 - (-r).exp();
+    for k in 0..3 {
+        out[8 + k] = finite_or_zero(q.diffuse[k]);
+        out[11 + k] = finite_or_zero(q.specular[k]);
+    }
+    out
+}
+
+/// Reflectance factor the network output is multiplied by: diffuse + specular, per channel,
+/// clamped to be non-negative and finite.
+pub fn reflectance_factor(q: &CacheQuery) -> [f32; 3] {
+    std::array::from_fn(|k| (finite_or_zero(q.diffuse[k]) + finite_or_zero(q.specular[k])).max(0.0))
+}
+
+/// Whether every field of a query is finite (training drops queries that are not).
+pub fn query_is_finite(q: &CacheQuery) -> bool {
+    q.position.iter().chain(&q.direction).chain(&q.normal).chain(&q.diffuse).chain(&q.specular).all(|v| v.is_finite())
+        && q.roughness.is_finite()
+}
+
+fn finite_or_zero(v: f32) -> f32 {
+    if v.is_finite() { v } else { 0.0 }
+}
+
+/// Spherical coordinates of a vector, normalised to [0,1]: (θ/π, φ/(2π) in [0,1)).
+/// Zero-length or non-finite vectors map to +z, i.e. (0, 0).
+pub fn spherical(v: [f32; 3]) -> (f32, f32) {
+    let len2 = v[0] * v[0] + v[1] * v[1] + v[2] * v[2];
+    if !len2.is_finite() || len2 < 1e-30 {
+        return (0.0, 0.0);
+    }
+    let inv = 1.0 / len2.sqrt();
+    let z = (v[2] * inv).clamp(-1.0, 1.0);
+    let theta = z.acos() * std::f32::consts::FRAC_1_PI;
+    let mut phi = v[1].atan2(v[0]) * (0.5 * std::f32::consts::FRAC_1_PI);
+    if phi < 0.0 {
+        phi += 1.0;
+    }
+    if phi >= 1.0 {
+        phi = 0.0;
+    }
+    (theta.clamp(0.0, 1.0), phi)
+}
+
+/// Rec. 709 luminance of a linear RGB triple.
+#[inline]
+pub fn luminance(c: [f32; 3]) -> f32 {
+    0.2126 * c[0] + 0.7152 * c[1] + 0.0722 * c[2]
+}

@@ -1,0 +1,197 @@
+//! Cache snapshots: one safetensors file holding the whole training state.
+//!
+//! # Format (version 1)
+//!
+//! A [safetensors](https://github.com/huggingface/safetensors) file with eight 1-D f32 tensors:
+//! `grid`, `grid_adam_m`, `grid_adam_v`, `grid_ema`, `mlp`, `mlp_adam_m`, `mlp_adam_v`, `mlp_ema`
+//! (weights, Adam moments and raw — not bias-corrected — EMA of the hash table and the MLP, in
+//! the layout of [`crate::model`]; the table may be empty). The safetensors header's
+//! `__metadata__` map has one key, `nrc_cache`, whose value is a JSON document:
+//!
+//! ```json
+//! { "magic": "nrc-cache-snapshot", "version": 1, "step": 1200,
+//!   "config": { ...the cache configuration... },
+//!   "scene_box": { "min": [..], "max": [..] },
+//!   "param_count": 12345, "checksum": "fnv1a64:0123456789abcdef" }
+//! ```
+//!
+//! `checksum` is FNV-1a (64-bit) over the little-endian 64-bit words of the eight tensors'
+//! bytes in the order above (a final partial word zero-padded). Every EMA entry is current at
+//! `step`. Files are written to a temporary name in the same directory and renamed.
+
+use std::io::Write;
+use std::path::Path;
+
+use safetensors::tensor::{Dtype, SafeTensors, TensorView};
+use serde::{Deserialize, Serialize};
+
+use crate::config::{CacheConfig, SceneBox};
+use crate::error::CacheError;
+use crate::model::ModelLayout;
+use crate::state::HostState;
+
+/// Value of the `magic` field.
+pub const MAGIC: &str = "nrc-cache-snapshot";
+/// Current format version.
+pub const VERSION: u32 = 1;
+const METADATA_KEY: &str = "nrc_cache";
+const NAMES: [&str; 8] = ["grid", "grid_adam_m", "grid_adam_v", "grid_ema", "mlp", "mlp_adam_m", "mlp_adam_v", "mlp_ema"];
+
+#[derive(Serialize, Deserialize)]
+struct Metadata {
+    magic: String,
+    version: u32,
+    step: u32,
+    config: serde_json::Value,
+    scene_box: SceneBox,
+    param_count: usize,
+    checksum: String,
+}
+
+/// A snapshot read back.
+#[derive(Clone, Debug)]
+pub struct Snapshot {
+    /// The configuration it was made with.
+    pub config: CacheConfig,
+    /// Its scene box.
+    pub scene_box: SceneBox,
+    /// Steps taken.
+    pub step: u32,
+    /// The training state.
+    pub state: HostState,
+}
+
+fn arrays(s: &HostState) -> [&[f32]; 8] {
+    [&s.grid, &s.grid_m, &s.grid_v, &s.grid_ema, &s.mlp, &s.mlp_m, &s.mlp_v, &s.mlp_ema]
+}
+
+/// FNV-1a over 64-bit words.
+fn checksum(parts: &[&[u8]]) -> String {
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    for p in parts {
+        let mut chunks = p.chunks_exact(8);
+        for c in &mut chunks {
+            h ^= u64::from_le_bytes(c.try_into().expect("8 bytes"));
+            h = h.wrapping_mul(0x0000_0100_0000_01b3);
+        }
+        let rest = chunks.remainder();
+        if !rest.is_empty() {
+            let mut w = [0u8; 8];
+            w[..rest.len()].copy_from_slice(rest);
+            h ^= u64::from_le_bytes(w);
+            h = h.wrapping_mul(0x0000_0100_0000_01b3);
+        }
+    }
+    format!("fnv1a64:{h:016x}")
+}
+
+fn io_err(path: &Path, e: impl std::fmt::Display) -> CacheError {
+    CacheError::Io { path: path.display().to_string(), message: e.to_string() }
+}
+
+fn bad(path: &Path, message: impl Into<String>) -> CacheError {
+    CacheError::Snapshot { path: path.display().to_string(), message: message.into() }
+}
+
+/// Writes a snapshot atomically (temporary file in the same directory, then rename).
+pub fn write(path: &Path, config: &CacheConfig, scene_box: &SceneBox, step: u32, state: &HostState) -> Result<(), CacheError> {
+    let bytes: Vec<&[u8]> = arrays(state).iter().map(|a| bytemuck::cast_slice::<f32, u8>(a)).collect();
+    let meta = Metadata {
+        magic: MAGIC.into(),
+        version: VERSION,
+        step,
+        config: serde_json::to_value(config).expect("config serialises"),
+        scene_box: *scene_box,
+        param_count: state.grid.len() + state.mlp.len(),
+        checksum: checksum(&bytes),
+    };
+    let mut views = Vec::with_capacity(8);
+    for (name, (b, a)) in NAMES.iter().zip(bytes.iter().zip(arrays(state))) {
+        let view = TensorView::new(Dtype::F32, vec![a.len()], b).map_err(|e| bad(path, format!("cannot encode tensor {name}: {e}")))?;
+        views.push((name.to_string(), view));
+    }
+    let metadata = std::collections::HashMap::from([(METADATA_KEY.to_string(), serde_json::to_string(&meta).expect("metadata serialises"))]);
+    let data = safetensors::tensor::serialize(views, Some(metadata)).map_err(|e| bad(path, format!("cannot encode: {e}")))?;
+
+    let dir = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    let name = path.file_name().ok_or_else(|| io_err(path, "not a file path"))?;
+    let tmp = dir.join(format!(".{}.tmp-{}", name.to_string_lossy(), std::process::id()));
+    let result = (|| {
+        let mut f = std::fs::File::create(&tmp)?;
+        f.write_all(&data)?;
+        f.sync_all()?;
+        std::fs::rename(&tmp, path)
+    })();
+    if let Err(e) = result {
+        let _ = std::fs::remove_file(&tmp);
+        return Err(io_err(path, e));
+    }
+    Ok(())
+}
+
+/// Reads and checks a snapshot: truncated, corrupted, foreign or inconsistent files are errors
+/// that say what is wrong.
+pub fn read(path: &Path) -> Result<Snapshot, CacheError> {
+    let data = std::fs::read(path).map_err(|e| io_err(path, e))?;
+    let (_, header) = SafeTensors::read_metadata(&data).map_err(|e| bad(path, format!("not a safetensors file or truncated header ({e})")))?;
+    let json = header
+        .metadata()
+        .as_ref()
+        .and_then(|m| m.get(METADATA_KEY))
+        .ok_or_else(|| bad(path, format!("not an nrc-cache snapshot: the safetensors metadata has no {METADATA_KEY:?} entry")))?;
+    let meta: Metadata = serde_json::from_str(json).map_err(|e| bad(path, format!("malformed metadata: {e}")))?;
+    if meta.magic != MAGIC {
+        return Err(bad(path, format!("not an nrc-cache snapshot (magic {:?})", meta.magic)));
+    }
+    if meta.version != VERSION {
+        return Err(bad(path, format!("format version {} is not supported (this build reads version {VERSION})", meta.version)));
+    }
+    let tensors = SafeTensors::deserialize(&data).map_err(|e| bad(path, format!("truncated or corrupted tensor data ({e})")))?;
+    let config: CacheConfig = serde_json::from_value(meta.config.clone()).map_err(|e| bad(path, format!("stored configuration is malformed: {e}")))?;
+    config.validate().map_err(|e| bad(path, format!("stored configuration is invalid: {e}")))?;
+    let layout = ModelLayout::new(&config);
+    let mut values: Vec<Vec<f32>> = Vec::with_capacity(8);
+    let mut raw: Vec<Vec<u8>> = Vec::with_capacity(8);
+    for (i, name) in NAMES.iter().enumerate() {
+        let t = tensors.tensor(name).map_err(|_| bad(path, format!("tensor {name:?} is missing")))?;
+        if t.dtype() != Dtype::F32 {
+            return Err(bad(path, format!("tensor {name:?} has dtype {:?}, expected F32", t.dtype())));
+        }
+        let expected = if i < 4 { layout.grid_params } else { layout.mlp_params() };
+        if t.shape() != [expected] {
+            return Err(bad(path, format!("tensor {name:?} has shape {:?}, but the stored configuration needs [{expected}]", t.shape())));
+        }
+        let v: Vec<f32> = t.data().chunks_exact(4).map(|c| f32::from_le_bytes(c.try_into().expect("4 bytes"))).collect();
+        raw.push(t.data().to_vec());
+        values.push(v);
+    }
+    let parts: Vec<&[u8]> = raw.iter().map(Vec::as_slice).collect();
+    let sum = checksum(&parts);
+    if sum != meta.checksum {
+        return Err(bad(path, format!("checksum mismatch (stored {}, computed {sum}): the tensor data is corrupted", meta.checksum)));
+    }
+    if meta.param_count != layout.param_count() {
+        return Err(bad(path, format!("parameter count {} does not match the configuration's {}", meta.param_count, layout.param_count())));
+    }
+    let mut it = values.into_iter();
+    let mut next = || it.next().expect("eight tensors");
+    let state = HostState { grid: next(), grid_m: next(), grid_v: next(), grid_ema: next(), mlp: next(), mlp_m: next(), mlp_v: next(), mlp_ema: next() };
+    Ok(Snapshot { config, scene_box: meta.scene_box, step: meta.step, state })
+}
+
+/// Error unless the snapshot's configuration equals `expected`, naming the first differing section.
+pub fn check_config(path: &Path, stored: &CacheConfig, expected: &CacheConfig) -> Result<(), CacheError> {
+    let sections = [
+        ("encoding", serde_json::to_value(&stored.encoding), serde_json::to_value(&expected.encoding)),
+        ("network", serde_json::to_value(&stored.network), serde_json::to_value(&expected.network)),
+        ("loss", serde_json::to_value(&stored.loss), serde_json::to_value(&expected.loss)),
+        ("optimizer", serde_json::to_value(&stored.optimizer), serde_json::to_value(&expected.optimizer)),
+        ("seed", serde_json::to_value(stored.seed), serde_json::to_value(expected.seed)),
+    ];
+    for (name, a, b) in sections {
+        if a.ok() != b.ok() {
+            return Err(bad(path, format!("made with a different configuration: the {name:?} section differs from the expected one")));
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,130 @@
+//! The training state as device tensors, and its host (plain `Vec`) form for snapshots.
+
+use burn::backend::Dispatch;
+use burn::tensor::{DType, Device, Int, Tensor, TensorCreationOptions, TensorData};
+
+use crate::ops::TrainState;
+
+/// All training state on the device (see [`TrainState`] for the fields' meaning).
+#[derive(Clone, Debug)]
+pub struct TensorState {
+    /// Hash table weights.
+    pub grid: Tensor<1>,
+    /// Adam first moment of the table.
+    pub grid_m: Tensor<1>,
+    /// Adam second moment of the table.
+    pub grid_v: Tensor<1>,
+    /// Raw EMA of the table.
+    pub grid_ema: Tensor<1>,
+    /// Gradient scratch of the table (fused path; empty otherwise).
+    pub grid_grad: Tensor<1>,
+    /// Step each table entry's EMA is current at (fused path).
+    pub grid_last: Tensor<1, Int>,
+    /// MLP weights.
+    pub mlp: Tensor<1>,
+    /// Adam first moment of the MLP.
+    pub mlp_m: Tensor<1>,
+    /// Adam second moment of the MLP.
+    pub mlp_v: Tensor<1>,
+    /// Raw EMA of the MLP.
+    pub mlp_ema: Tensor<1>,
+}
+
+/// The training state on the host, EMA fully caught up to the step count.
+#[derive(Clone, Debug, PartialEq)]
+pub struct HostState {
+    /// Hash table weights.
+    pub grid: Vec<f32>,
+    /// Adam first moment of the table.
+    pub grid_m: Vec<f32>,
+    /// Adam second moment of the table.
+    pub grid_v: Vec<f32>,
+    /// Raw EMA of the table.
+    pub grid_ema: Vec<f32>,
+    /// MLP weights.
+    pub mlp: Vec<f32>,
+    /// Adam first moment of the MLP.
+    pub mlp_m: Vec<f32>,
+    /// Adam second moment of the MLP.
+    pub mlp_v: Vec<f32>,
+    /// Raw EMA of the MLP.
+    pub mlp_ema: Vec<f32>,
+}
+
+/// A float vector on `device`.
+pub fn vec_tensor(values: Vec<f32>, device: &Device) -> Tensor<1> {
+    let n = values.len();
+    Tensor::from_data(TensorData::new(values, [n]), device)
+}
+
+/// A float vector's values on the host.
+pub fn tensor_vec(t: Tensor<1>) -> Vec<f32> {
+    t.into_data().convert::<f32>().try_to_vec::<f32>().expect("f32 tensor")
+}
+
+impl TensorState {
+    /// Uploads a host state; every table entry's EMA is current at `step`. `scratch` allocates
+    /// the table's gradient scratch (needed by the fused path only).
+    pub fn from_host(h: HostState, entries: usize, step: u32, scratch: bool, device: &Device) -> Self {
+        let grid_len = h.grid.len();
+        let last = vec![step as i32; entries];
+        Self {
+            grid: vec_tensor(h.grid, device),
+            grid_m: vec_tensor(h.grid_m, device),
+            grid_v: vec_tensor(h.grid_v, device),
+            grid_ema: vec_tensor(h.grid_ema, device),
+            grid_grad: vec_tensor(vec![0.0; if scratch { grid_len } else { 0 }], device),
+            grid_last: Tensor::from_data(TensorData::new(last, [entries]), TensorCreationOptions::new(device.clone()).with_dtype(DType::I32)),
+            mlp: vec_tensor(h.mlp, device),
+            mlp_m: vec_tensor(h.mlp_m, device),
+            mlp_v: vec_tensor(h.mlp_v, device),
+            mlp_ema: vec_tensor(h.mlp_ema, device),
+        }
+    }
+
+    /// Downloads the state (the caller has caught the EMA up).
+    pub fn to_host(&self) -> HostState {
+        HostState {
+            grid: tensor_vec(self.grid.clone()),
+            grid_m: tensor_vec(self.grid_m.clone()),
+            grid_v: tensor_vec(self.grid_v.clone()),
+            grid_ema: tensor_vec(self.grid_ema.clone()),
+            mlp: tensor_vec(self.mlp.clone()),
+            mlp_m: tensor_vec(self.mlp_m.clone()),
+            mlp_v: tensor_vec(self.mlp_v.clone()),
+            mlp_ema: tensor_vec(self.mlp_ema.clone()),
+        }
+    }
+
+    /// Hands the tensors to the dispatch layer (for the fused custom ops).
+    pub fn into_dispatch(self) -> TrainState<Dispatch> {
+        TrainState {
+            grid: self.grid.into_dispatch(),
+            grid_m: self.grid_m.into_dispatch(),
+            grid_v: self.grid_v.into_dispatch(),
+            grid_ema: self.grid_ema.into_dispatch(),
+            grid_grad: self.grid_grad.into_dispatch(),
+            grid_last: self.grid_last.into_dispatch(),
+            mlp: self.mlp.into_dispatch(),
+            mlp_m: self.mlp_m.into_dispatch(),
+            mlp_v: self.mlp_v.into_dispatch(),
+            mlp_ema: self.mlp_ema.into_dispatch(),
+        }
+    }
+
+    /// Takes the tensors back from the dispatch layer.
+    pub fn from_dispatch(s: TrainState<Dispatch>) -> Self {
+        Self {
+            grid: Tensor::from_dispatch(s.grid),
+            grid_m: Tensor::from_dispatch(s.grid_m),
+            grid_v: Tensor::from_dispatch(s.grid_v),
+            grid_ema: Tensor::from_dispatch(s.grid_ema),
+            grid_grad: Tensor::from_dispatch(s.grid_grad),
+            grid_last: Tensor::from_dispatch(s.grid_last),
+            mlp: Tensor::from_dispatch(s.mlp),
+            mlp_m: Tensor::from_dispatch(s.mlp_m),
+            mlp_v: Tensor::from_dispatch(s.mlp_v),
+            mlp_ema: Tensor::from_dispatch(s.mlp_ema),
+        }
+    }
+}
