@@ -252,6 +252,8 @@ def main():
         m = re.search(r"in ([0-9.]+) s", run.stdout)
         t_nrc.append(float(m.group(1)) if m else float("nan"))
     t_mitsuba, t_nrc = min(t_mitsuba), min(t_nrc)
+    # Mitsuba's EXR input/output waits on its thread pool and hangs with a pool of one.
+    dr.set_thread_count(max(2, os.cpu_count() or 2))
     mi.Bitmap(img).write(os.path.join(work, "mitsuba.exr"))
     a = np.array(mi.Bitmap(ours))[:, :, :3].astype(np.float64)
     b = img[:, :, :3].astype(np.float64)
