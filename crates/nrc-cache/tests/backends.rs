@@ -1,0 +1,201 @@
+//! CPU (Flex) and wgpu give the same encoding forward and backward, for every encoding.
+//!
+//! One generic test runs over a list of composite encodings (each kind alone, the hash grid at
+//! several feature counts with dense and hashed levels, and both shipped presets). For each,
+//! the same raw inputs, table and upstream gradient go through `InputEncoding::encode_tensor`
+//! on an autodiff Flex device and on an autodiff wgpu device; the encodings, the gradients
+//! w.r.t. the hash table (the custom op's backward: a plain scatter on Flex, a WGSL scatter
+//! with compare-and-swap float atomics on wgpu) and the gradients w.r.t. the raw inputs must
+//! agree. Both are also checked against the per-sample CPU kernels (`forward_one`,
+//! `backward_params_one`), the specification.
+//!
+//! wgpu runs on whatever adapter exists; in CI that is mesa's lavapipe (software Vulkan). On a
+//! machine with no adapter at all the test prints why and passes without comparing.
+
+use burn::tensor::{Device, Tensor, TensorData};
+use nrc_cache::config::CompositeConfig;
+use nrc_cache::encoding::{EncodingKind, InputEncoding};
+use nrc_cache::record::RAW_INPUT_DIMS;
+use rand::{Rng, SeedableRng};
+use rand_pcg::Pcg64Mcg;
+
+/// Samples per case: enough for many hash collisions and shared cells in the scatter.
+const SAMPLES: usize = 3000;
+/// Forward: both backends evaluate the same expressions; only fused multiply-adds differ.
+const FORWARD_RTOL: f32 = 1e-5;
+/// Backward: the wgpu scatter adds in an arbitrary order (atomics), the CPU in sample order.
+const BACKWARD_RTOL: f32 = 1e-4;
+
+/// The encodings under test, as composite configurations over the 14 raw inputs.
+fn cases() -> Vec<(&'static str, String)> {
+    let grid = |levels: u32, features: u32, log2t: u32, base: f32, scale: f32| {
+        format!(
+            r#"{{"otype": "HashGrid", "n_dims_to_encode": 3, "n_levels": {levels}, "n_features_per_level": {features},
+                "log2_hashmap_size": {log2t}, "base_resolution": {base}, "per_level_scale": {scale}}}"#
+        )
+    };
+    let composite = |nested: &[String]| {
+        format!(r#"{{"otype": "Composite", "nested": [{}], "pad_to_multiple": 16}}"#, nested.join(","))
+    };
+    let identity = |dims: u32| format!(r#"{{"otype": "Identity", "n_dims_to_encode": {dims}}}"#);
+    let preset = |file: &str| {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../models").join(file);
+        let json: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&path).expect("preset readable")).expect("preset is JSON");
+        json["encoding"].to_string()
+    };
+    vec![
+        // Coarse levels dense, fine levels hashed (r³ crosses T = 2^12 at level 3).
+        ("hash grid F=2", composite(&[grid(8, 2, 12, 4.0, 1.6), identity(11)])),
+        ("hash grid F=1", composite(&[grid(6, 1, 10, 3.0, 2.0), identity(11)])),
+        ("hash grid F=4", composite(&[grid(5, 4, 11, 8.0, 1.5), identity(11)])),
+        ("hash grid F=8", composite(&[grid(4, 8, 10, 2.0, 3.0), identity(11)])),
+        (
+            "one-blob",
+            composite(&[
+                r#"{"otype": "OneBlob", "n_dims_to_encode": 4, "n_bins": 8}"#.into(),
+                identity(10),
+            ]),
+        ),
+        (
+            "one-blob wrapped",
+            composite(&[
+                r#"{"otype": "OneBlob", "n_dims_to_encode": 4, "n_bins": 5, "wrap": true}"#.into(),
+                identity(10),
+            ]),
+        ),
+        (
+            "triangle wave",
+            composite(&[
+                r#"{"otype": "TriangleWave", "n_dims_to_encode": 3, "n_frequencies": 12}"#.into(),
+                identity(11),
+            ]),
+        ),
+        (
+            "identity (scaled)",
+            composite(&[r#"{"otype": "Identity", "n_dims_to_encode": 14, "scale": 2.0, "offset": -1.0}"#.into()]),
+        ),
+        ("composite: hash-grid preset", preset("nrc-hashgrid.json")),
+        ("composite: triangle-wave preset", preset("nrc-trianglewave.json")),
+    ]
+}
+
+/// What one backend computed for one case.
+struct Outcome {
+    encoded: Vec<f32>,
+    table_grad: Vec<f32>,
+    input_grad: Vec<f32>,
+}
+
+fn values<const D: usize>(t: Tensor<D>) -> Vec<f32> {
+    t.into_data().convert::<f32>().try_into_vec::<f32>().expect("f32 data")
+}
+
+/// Encodes on `device` (with autodiff) and back-propagates `⟨upstream, encoding⟩`.
+fn run(device: &Device, encoding: &InputEncoding, raw: &[f32], table: &[f32], upstream: &[f32]) -> Outcome {
+    let device = device.clone().autodiff();
+    let n = raw.len() / RAW_INPUT_DIMS;
+    let raw = Tensor::<2>::from_data(TensorData::new(raw.to_vec(), [n, RAW_INPUT_DIMS]), &device).require_grad();
+    let table_t = (!table.is_empty())
+        .then(|| Tensor::<1>::from_data(TensorData::new(table.to_vec(), [table.len()]), &device).require_grad());
+    let upstream = Tensor::<2>::from_data(TensorData::new(upstream.to_vec(), [n, encoding.padded_dims]), &device);
+
+    let encoded = encoding.encode_tensor(table_t.clone(), raw.clone());
+    let mut grads = (encoded.clone() * upstream).sum().backward();
+    let input_grad = raw.grad_remove(&mut grads).map(values).unwrap_or_else(|| vec![0.0; raw.dims()[0] * RAW_INPUT_DIMS]);
+    let table_grad = table_t
+        .and_then(|t| t.grad_remove(&mut grads))
+        .map(values)
+        .unwrap_or_default();
+    Outcome { encoded: values(encoded), table_grad, input_grad }
+}
+
+/// Largest violation of |a − b| ≤ rtol·max(|a|, |b|) + atol over two arrays, as a multiple of
+/// the allowed error (≤ 1 passes). `atol` is rtol times the RMS of `a`: rounding differences
+/// scale with the magnitude of the summed terms, not with a result that happens to cancel.
+fn worst(a: &[f32], b: &[f32], rtol: f32) -> (f32, usize) {
+    assert_eq!(a.len(), b.len(), "array lengths differ");
+    let rms = (a.iter().map(|x| f64::from(*x).powi(2)).sum::<f64>() / a.len().max(1) as f64).sqrt() as f32;
+    let atol = rtol * rms.max(f32::MIN_POSITIVE);
+    let mut worst = (0.0f32, 0usize);
+    for (i, (x, y)) in a.iter().zip(b).enumerate() {
+        let allowed = rtol * x.abs().max(y.abs()) + atol;
+        let ratio = if x.is_finite() && y.is_finite() { (x - y).abs() / allowed } else { f32::INFINITY };
+        if ratio > worst.0 {
+            worst = (ratio, i);
+        }
+    }
+    worst
+}
+
+fn check(case: &str, what: &str, a: &[f32], b: &[f32], rtol: f32) {
+    let (ratio, i) = worst(a, b, rtol);
+    assert!(
+        ratio <= 1.0,
+        "{case}: {what} differs at {i}: {} vs {} ({ratio:.2}× the tolerance, rtol {rtol})",
+        a[i],
+        b[i]
+    );
+}
+
+#[test]
+fn cpu_and_wgpu_give_the_same_forward_and_backward() {
+    let wgpu = match nrc_cache::gpu::wgpu_device() {
+        Ok(device) => device,
+        Err(why) => {
+            println!("SKIPPED cpu_and_wgpu_give_the_same_forward_and_backward: {why}");
+            return;
+        }
+    };
+    for info in nrc_cache::gpu::adapters() {
+        println!("wgpu adapter: {} ({:?}, {:?})", info.name, info.device_type, info.backend);
+    }
+    let flex = Device::flex();
+    let mut rng = Pcg64Mcg::seed_from_u64(0x5eed_b0c5);
+
+    for (case, json) in cases() {
+        let config: CompositeConfig = serde_json::from_str(&json).unwrap_or_else(|e| panic!("{case}: {e}"));
+        let encoding = InputEncoding::new(&config);
+        let dims = encoding.padded_dims;
+
+        // Inputs in [0, 1] (positions, angles, roughness, reflectances); a table with values of
+        // order one so that the interpolation sums are not dominated by rounding; an arbitrary
+        // upstream gradient.
+        let raw: Vec<f32> = (0..SAMPLES * RAW_INPUT_DIMS).map(|_| rng.random::<f32>()).collect();
+        let table: Vec<f32> = (0..encoding.param_count()).map(|_| rng.random_range(-1.0..1.0)).collect();
+        let upstream: Vec<f32> = (0..SAMPLES * dims).map(|_| rng.random_range(-1.0..1.0)).collect();
+
+        let cpu = run(&flex, &encoding, &raw, &table, &upstream);
+        let gpu = run(&wgpu, &encoding, &raw, &table, &upstream);
+
+        // The specification: per-sample CPU kernels.
+        let mut spec_encoded = vec![0f32; SAMPLES * dims];
+        let mut spec_grad = vec![0f32; table.len()];
+        for ((x, out), up) in raw.chunks_exact(RAW_INPUT_DIMS).zip(spec_encoded.chunks_exact_mut(dims)).zip(upstream.chunks_exact(dims)) {
+            encoding.forward_one(&table, x, out);
+            if let Some((grid, part)) = encoding.grid() {
+                let d = &up[part.out_offset..part.out_offset + part.out_dims];
+                grid.backward_params_one([x[0], x[1], x[2]], d, &mut spec_grad);
+            }
+        }
+        check(case, "forward, Flex vs specification", &spec_encoded, &cpu.encoded, FORWARD_RTOL);
+        check(case, "forward, wgpu vs Flex", &cpu.encoded, &gpu.encoded, FORWARD_RTOL);
+        check(case, "table gradient, Flex vs specification", &spec_grad, &cpu.table_grad, BACKWARD_RTOL);
+        check(case, "table gradient, wgpu vs Flex", &cpu.table_grad, &gpu.table_grad, BACKWARD_RTOL);
+        check(case, "input gradient, wgpu vs Flex", &cpu.input_grad, &gpu.input_grad, BACKWARD_RTOL);
+
+        let has_grid = encoding.parts.iter().any(|p| matches!(p.kind, EncodingKind::HashGrid(_)));
+        assert_eq!(has_grid, !cpu.table_grad.is_empty(), "{case}: a table gradient exactly when there is a table");
+        if has_grid {
+            assert!(cpu.table_grad.iter().any(|g| *g != 0.0), "{case}: the table gradient is not all zero");
+        }
+        println!(
+            "{case}: {} outputs, {} table gradients agree (forward {:.2}, table grad {:.2}, input grad {:.2} × tolerance)",
+            cpu.encoded.len(),
+            cpu.table_grad.len(),
+            worst(&cpu.encoded, &gpu.encoded, FORWARD_RTOL).0,
+            worst(&cpu.table_grad, &gpu.table_grad, BACKWARD_RTOL).0,
+            worst(&cpu.input_grad, &gpu.input_grad, BACKWARD_RTOL).0,
+        );
+    }
+}
