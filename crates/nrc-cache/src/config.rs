@@ -53,8 +53,7 @@ fn default_pad() -> u32 {
 }
 
 /// One nested encoding of the composite.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(tag = "otype", deny_unknown_fields)]
+#[derive(Clone, Debug, PartialEq)]
 pub enum NestedEncoding {
     /// Multiresolution hash grid over 3 dimensions (see [`crate::encoding::hash_grid`]).
     HashGrid {
@@ -78,7 +77,6 @@ pub enum NestedEncoding {
         /// Bins per dimension.
         n_bins: u32,
         /// Periodic on [0,1).
-        #[serde(default)]
         wrap: bool,
     },
     /// Triangle-wave frequency encoding with `n_frequencies` octaves per dimension.
@@ -93,15 +91,13 @@ pub enum NestedEncoding {
         /// Dimensions consumed.
         n_dims_to_encode: u32,
         /// Multiplier.
-        #[serde(default = "one")]
         scale: f32,
         /// Offset.
-        #[serde(default)]
         offset: f32,
     },
 }
 
-fn one() -> f32 {
+pub(crate) fn one() -> f32 {
     1.0
 }
 
@@ -184,13 +180,11 @@ fn max_target() -> f32 {
 }
 
 /// Optimizer: `Adam`, or an `EMA` of the weights wrapping Adam (inference uses the average).
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(tag = "otype", deny_unknown_fields)]
+#[derive(Clone, Debug, PartialEq)]
 pub enum OptimizerConfig {
     /// Exponential moving average of the weights, bias-corrected: `ê_t = e_t / (1 − decay^t)`.
     EMA {
         /// α.
-        #[serde(default = "ema_decay")]
         decay: f32,
         /// The optimizer whose weights are averaged (must be Adam).
         nested: Box<OptimizerConfig>,
@@ -198,36 +192,31 @@ pub enum OptimizerConfig {
     /// Adam.
     Adam {
         /// Learning rate.
-        #[serde(default = "lr")]
         learning_rate: f32,
         /// β1.
-        #[serde(default = "beta1")]
         beta1: f32,
         /// β2.
-        #[serde(default = "beta2")]
         beta2: f32,
         /// ε.
-        #[serde(default = "adam_eps")]
         epsilon: f32,
         /// L2 regularisation added to the gradient (`g + l2_reg·w`).
-        #[serde(default)]
         l2_reg: f32,
     },
 }
 
-fn ema_decay() -> f32 {
+pub(crate) fn ema_decay() -> f32 {
     0.99
 }
-fn lr() -> f32 {
+pub(crate) fn lr() -> f32 {
     1e-2
 }
-fn beta1() -> f32 {
+pub(crate) fn beta1() -> f32 {
     0.9
 }
-fn beta2() -> f32 {
+pub(crate) fn beta2() -> f32 {
     0.99
 }
-fn adam_eps() -> f32 {
+pub(crate) fn adam_eps() -> f32 {
     1e-15
 }
 
@@ -317,8 +306,8 @@ impl CacheConfig {
     pub fn from_json_str(json: &str) -> Result<Self, CacheError> {
         let de = &mut serde_json::Deserializer::from_str(json);
         let config: Self = serde_path_to_error::deserialize(de).map_err(|e| {
-            let path = e.path().to_string();
-            CacheError::Config { field: if path == "." { "(document)".into() } else { path }, message: e.inner().to_string() }
+            let (field, message) = crate::config_serde::split_error(&e.path().to_string(), &e.inner().to_string());
+            CacheError::Config { field, message }
         })?;
         config.validate()?;
         Ok(config)

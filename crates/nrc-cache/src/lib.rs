@@ -26,6 +26,7 @@ pub mod batch;
 pub mod bench;
 pub mod cache;
 pub mod config;
+mod config_serde;
 pub mod cpu;
 pub mod device;
 pub mod encoding;

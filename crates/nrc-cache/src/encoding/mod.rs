@@ -286,9 +286,9 @@ pub fn triangle_wave_tensor(x: Tensor<2>, frequencies: usize) -> Tensor<2> {
     let freqs = row((0..frequencies).map(|j| (1u32 << j) as f32).collect(), &device);
     let mut outs = Vec::with_capacity(d);
     for k in 0..d {
-        let t = x.clone().narrow(1, k, 1) * freqs.clone(); // [N, n]
-        let frac = t.clone() - t.detach().floor();
-        outs.push(frac.mul_scalar(2.0).sub_scalar(1.0).abs().mul_scalar(2.0).sub_scalar(1.0));
+        let u = (x.clone().narrow(1, k, 1) * freqs.clone()).sub_scalar(0.25); // [N, n]
+        let frac = u.clone() - u.detach().floor();
+        outs.push(frac.sub_scalar(0.5).abs().mul_scalar(4.0).sub_scalar(1.0));
     }
     Tensor::cat(outs, 1)
 }
