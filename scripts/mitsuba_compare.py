@@ -29,6 +29,7 @@ import json
 import math
 import os
 import re
+import resource
 import struct
 import subprocess
 import sys
@@ -241,17 +242,25 @@ def main():
            "--threads", str(args.threads), "--seed", str(args.seed), "--out", ours,
            "--camera-pos", ",".join(map(str, pos)), "--camera-target", ",".join(map(str, target)),
            "--camera-up", ",".join(map(str, up)), "--fov-y", str(fov)]
-    t_mitsuba, t_nrc = [], []
+    # Wall-clock time (best of the repeats) and CPU time of all threads (mean over the
+    # repeats): on a machine shared with other work, wall time depends on the load and CPU
+    # time much less. nrc's CPU time is its whole process (scene loading included).
+    t_mitsuba, t_nrc, cpu_mitsuba, cpu_nrc = [], [], [], []
     for _ in range(max(1, args.repeats)):
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         img = np.array(mi.render(ms, spp=args.spp, seed=args.seed))
         t_mitsuba.append(time.perf_counter() - t0)
+        cpu_mitsuba.append(time.process_time() - c0)
+        r0 = resource.getrusage(resource.RUSAGE_CHILDREN)
         run = subprocess.run(cmd, capture_output=True, text=True)
+        r1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+        cpu_nrc.append(r1.ru_utime + r1.ru_stime - r0.ru_utime - r0.ru_stime)
         if run.returncode != 0:
             sys.exit("error: nrc render failed: " + run.stderr.strip())
         m = re.search(r"in ([0-9.]+) s", run.stdout)
         t_nrc.append(float(m.group(1)) if m else float("nan"))
     t_mitsuba, t_nrc = min(t_mitsuba), min(t_nrc)
+    cpu_mitsuba, cpu_nrc = np.mean(cpu_mitsuba), np.mean(cpu_nrc)
     # Mitsuba's EXR input/output waits on its thread pool and hangs with a pool of one.
     dr.set_thread_count(max(2, os.cpu_count() or 2))
     mi.Bitmap(img).write(os.path.join(work, "mitsuba.exr"))
@@ -269,6 +278,8 @@ def main():
         max(1, args.repeats), t_nrc, t_mitsuba, t_mitsuba / t_nrc))
     print("samples/s: nrc %.3f M, mitsuba %.3f M" % (
         args.width * args.height * args.spp / t_nrc * 1e-6, args.width * args.height * args.spp / t_mitsuba * 1e-6))
+    print("CPU time (mean of %d): nrc %.3f s, mitsuba %.3f s (nrc %.2fx less)" % (
+        max(1, args.repeats), cpu_nrc, cpu_mitsuba, cpu_mitsuba / cpu_nrc))
     print("mean radiance (r,g,b): nrc %s, mitsuba %s" % (np.round(a.reshape(-1, 3).mean(0), 5), np.round(b.reshape(-1, 3).mean(0), 5)))
     print("difference z-scores (r,g,b): %s -> %s" % (np.round(z, 2), "agree" if np.all(np.abs(z) < 4) else "DISAGREE"))
     print("images in %s" % work)

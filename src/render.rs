@@ -40,8 +40,8 @@ pub struct TracerArgs {
     pub max_depth: i32,
 
     /// Number of scattering events after which Russian roulette may end a path
-    /// (Mitsuba's rr_depth).
-    #[arg(long, default_value_t = 5)]
+    /// (Mitsuba's rr_depth), at most 1000.
+    #[arg(long, default_value_t = 5, value_parser = clap::value_parser!(u32).range(0..=1000))]
     pub rr_depth: u32,
 
     /// Estimators of direct illumination.

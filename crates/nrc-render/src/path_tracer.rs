@@ -89,6 +89,12 @@ impl PathTracer {
 
     /// One sample of the radiance arriving at `ray.o` along `-ray.d`: the estimate of one
     /// path started with `ray`. Allocation-free; the random numbers come from `sampler`.
+    ///
+    /// `ray` is treated as a camera ray: emission it finds counts fully (no strategy could
+    /// have sampled it otherwise), and it is the path's first segment for `max_depth`.
+    /// With unlimited depth, paths end only by Russian roulette (which ends at least 5% of
+    /// paths per scattering event from `rr_depth` on) or by escaping, so `rr_depth` bounds
+    /// the cost of a path in a closed, lossless scene.
     pub fn radiance(
         &self,
         scene: &Scene,
