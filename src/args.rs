@@ -6,11 +6,15 @@ use glam::Vec3;
 pub fn parse_vec3(s: &str) -> Result<Vec3, String> {
     let parts: Vec<&str> = s.split(',').map(str::trim).collect();
     if parts.len() != 3 {
-        return Err(format!("expected three comma-separated numbers x,y,z, got `{s}`"));
+        return Err(format!(
+            "expected three comma-separated numbers x,y,z, got `{s}`"
+        ));
     }
     let mut v = [0.0f32; 3];
     for (slot, p) in v.iter_mut().zip(&parts) {
-        let x: f32 = p.parse().map_err(|_| format!("`{p}` is not a number (in `{s}`)"))?;
+        let x: f32 = p
+            .parse()
+            .map_err(|_| format!("`{p}` is not a number (in `{s}`)"))?;
         if !x.is_finite() {
             return Err(format!("`{p}` is not a finite number (in `{s}`)"));
         }
@@ -24,11 +28,16 @@ pub fn parse_rgb(s: &str) -> Result<Vec3, String> {
     let v = if s.contains(',') {
         parse_vec3(s)?
     } else {
-        let x: f32 = s.trim().parse().map_err(|_| format!("`{s}` is not a number"))?;
+        let x: f32 = s
+            .trim()
+            .parse()
+            .map_err(|_| format!("`{s}` is not a number"))?;
         Vec3::splat(x)
     };
     if !v.is_finite() || v.min_element() < 0.0 {
-        return Err(format!("radiance must be finite and non-negative, got `{s}`"));
+        return Err(format!(
+            "radiance must be finite and non-negative, got `{s}`"
+        ));
     }
     Ok(v)
 }

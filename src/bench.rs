@@ -19,7 +19,11 @@ use std::time::{Duration, Instant};
 use anyhow::{Result, bail};
 use glam::Vec2;
 use nrc_render::{PathTracer, PixelSampler, RenderSettings, render};
-use nrc_scene::{Ray, Scene, sampling::{Frame, sample_cosine_hemisphere}, spawn_ray};
+use nrc_scene::{
+    Ray, Scene,
+    sampling::{Frame, sample_cosine_hemisphere},
+    spawn_ray,
+};
 use rayon::prelude::*;
 
 use crate::render::{TracerArgs, thread_pool};
@@ -75,7 +79,11 @@ const CHUNK: usize = 256;
 /// Traces every ray (closest hit) on the current pool; returns the number of hits.
 fn trace_all(scene: &Scene, rays: &[Ray]) -> usize {
     rays.par_chunks(CHUNK)
-        .map(|c| c.iter().filter(|r| black_box(scene.intersect(r)).is_some()).count())
+        .map(|c| {
+            c.iter()
+                .filter(|r| black_box(scene.intersect(r)).is_some())
+                .count()
+        })
         .sum()
 }
 
@@ -115,7 +123,11 @@ fn measure<T>(repeats: u32, mut f: impl FnMut() -> T) -> Timing<T> {
         (Some(a), Some(b)) if b > a => Some((b - a) / repeats),
         _ => None,
     };
-    Timing { best, cpu_per_run, value: last.expect("at least one run") }
+    Timing {
+        best,
+        cpu_per_run,
+        value: last.expect("at least one run"),
+    }
 }
 
 /// One jittered camera ray per pixel sample.
@@ -162,7 +174,13 @@ fn trace(args: &TraceArgs) -> Result<()> {
     let primary = primary_rays(&scene, w, h, spp);
     let bounce = all.install(|| bounce_rays(&scene, &primary));
     let tracer: PathTracer = args.tracer.tracer();
-    let settings = RenderSettings { width: w, height: h, spp, seed: 1, variance: false };
+    let settings = RenderSettings {
+        width: w,
+        height: h,
+        spp,
+        seed: 1,
+        variance: false,
+    };
 
     struct Row {
         name: &'static str,
@@ -171,16 +189,34 @@ fn trace(args: &TraceArgs) -> Result<()> {
         values: [f64; 3],
     }
     let mut rows = vec![
-        Row { name: "primary rays", unit: "Mrays/s", values: [0.0; 3] },
-        Row { name: "incoherent (diffuse-bounce) rays", unit: "Mrays/s", values: [0.0; 3] },
-        Row { name: "path tracer", unit: "M samples/s", values: [0.0; 3] },
-        Row { name: "path tracer rays", unit: "Mrays/s", values: [0.0; 3] },
+        Row {
+            name: "primary rays",
+            unit: "Mrays/s",
+            values: [0.0; 3],
+        },
+        Row {
+            name: "incoherent (diffuse-bounce) rays",
+            unit: "Mrays/s",
+            values: [0.0; 3],
+        },
+        Row {
+            name: "path tracer",
+            unit: "M samples/s",
+            values: [0.0; 3],
+        },
+        Row {
+            name: "path tracer rays",
+            unit: "Mrays/s",
+            values: [0.0; 3],
+        },
     ];
     let rate = |work: f64, t: Duration| work / t.as_secs_f64() * 1e-6;
     let per_cpu = |work: f64, t: Option<Duration>| t.map_or(f64::NAN, |t| rate(work, t));
     let mut hits = (0, 0);
     for (col, pool) in [&one, &all].into_iter().enumerate() {
-        let m = measure(args.repeats, || pool.install(|| trace_all(&scene, &primary)));
+        let m = measure(args.repeats, || {
+            pool.install(|| trace_all(&scene, &primary))
+        });
         rows[0].values[col] = rate(primary.len() as f64, m.best);
         rows[0].values[2] = per_cpu(primary.len() as f64, m.cpu_per_run);
         hits.0 = m.value;
@@ -191,7 +227,10 @@ fn trace(args: &TraceArgs) -> Result<()> {
         let m = measure(args.repeats, || {
             pool.install(|| render(&scene, &scene.camera, &tracer, &settings, &|_| {}))
         });
-        let (samples, rays) = (m.value.stats.samples as f64, m.value.stats.rays.rays() as f64);
+        let (samples, rays) = (
+            m.value.stats.samples as f64,
+            m.value.stats.rays.rays() as f64,
+        );
         rows[2].values[col] = rate(samples, m.best);
         rows[2].values[2] = per_cpu(samples, m.cpu_per_run);
         rows[3].values[col] = rate(rays, m.best);

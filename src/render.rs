@@ -129,10 +129,20 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         bail!("--exposure must be a finite number");
     }
     // Fail before a long render, not after it, when an output cannot be written.
-    for path in std::iter::once(&args.out).chain(&args.png).chain(&args.variance) {
-        let parent = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(std::path::Path::new("."));
+    for path in std::iter::once(&args.out)
+        .chain(&args.png)
+        .chain(&args.variance)
+    {
+        let parent = path
+            .parent()
+            .filter(|p| !p.as_os_str().is_empty())
+            .unwrap_or(std::path::Path::new("."));
         if !parent.is_dir() {
-            bail!("{}: the folder {} does not exist", path.display(), parent.display());
+            bail!(
+                "{}: the folder {} does not exist",
+                path.display(),
+                parent.display()
+            );
         }
     }
     let scene = args.scene.load()?;
@@ -157,10 +167,16 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     // Updating the bar from every tile would contend on its lock; batch the counts.
     let done = AtomicU64::new(0);
     let out = pool.install(|| {
-        render(&scene, &scene.camera, &args.tracer.tracer(), &settings, &|n| {
-            let d = done.fetch_add(n, Ordering::Relaxed) + n;
-            bar.set_position(d);
-        })
+        render(
+            &scene,
+            &scene.camera,
+            &args.tracer.tracer(),
+            &settings,
+            &|n| {
+                let d = done.fetch_add(n, Ordering::Relaxed) + n;
+                bar.set_position(d);
+            },
+        )
     });
     bar.finish_and_clear();
 
@@ -176,7 +192,10 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     }
     let s = &out.stats;
     if s.invalid_samples > 0 {
-        eprintln!("warning: {} samples were NaN or infinite and counted as black", s.invalid_samples);
+        eprintln!(
+            "warning: {} samples were NaN or infinite and counted as black",
+            s.invalid_samples
+        );
     }
     println!(
         "rendered {}x{} at {} spp in {:.3} s on {} threads: {:.3} M samples/s, {:.2} M rays/s",

@@ -42,7 +42,9 @@ impl SceneArgs {
     /// Loads the scene and applies the camera and background overrides.
     pub fn load(&self) -> Result<Scene> {
         let mut scene = Scene::load(&self.scene)?;
-        scene.camera = self.camera(&scene.camera).with_context(|| "invalid camera")?;
+        scene.camera = self
+            .camera(&scene.camera)
+            .with_context(|| "invalid camera")?;
         if let Some(b) = self.background {
             scene.background = b;
         }

@@ -6,11 +6,16 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
 fn nrc(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_nrc")).args(args).output().expect("nrc runs")
+    Command::new(env!("CARGO_BIN_EXE_nrc"))
+        .args(args)
+        .output()
+        .expect("nrc runs")
 }
 
 fn scene(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes").join(name)
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("scenes")
+        .join(name)
 }
 
 fn text(b: &[u8]) -> String {
@@ -26,7 +31,10 @@ fn assert_clean_error(out: &Output, needle: &str) {
     let lines: Vec<&str> = err.lines().filter(|l| !l.trim().is_empty()).collect();
     assert_eq!(lines.len(), 1, "expected one error line, got: {err}");
     assert!(lines[0].starts_with("error: "), "not an error line: {err}");
-    assert!(lines[0].contains(needle), "error line does not name `{needle}`: {err}");
+    assert!(
+        lines[0].contains(needle),
+        "error line does not name `{needle}`: {err}"
+    );
 }
 
 #[test]
@@ -37,23 +45,53 @@ fn render_writes_exr_png_and_variance() {
     let var = dir.path().join("var.exr");
     let cornell = scene("cornell-box.gltf");
     let out = nrc(&[
-        "render", "--scene", cornell.to_str().unwrap(), "--spp", "4", "--width", "40", "--height", "30",
-        "--out", exr.to_str().unwrap(), "--png", png.to_str().unwrap(), "--variance", var.to_str().unwrap(),
-        "--exposure", "1", "--seed", "3", "--max-depth", "5", "--threads", "2",
+        "render",
+        "--scene",
+        cornell.to_str().unwrap(),
+        "--spp",
+        "4",
+        "--width",
+        "40",
+        "--height",
+        "30",
+        "--out",
+        exr.to_str().unwrap(),
+        "--png",
+        png.to_str().unwrap(),
+        "--variance",
+        var.to_str().unwrap(),
+        "--exposure",
+        "1",
+        "--seed",
+        "3",
+        "--max-depth",
+        "5",
+        "--threads",
+        "2",
     ]);
     assert!(out.status.success(), "{}", text(&out.stderr));
     let stdout = text(&out.stdout);
-    assert!(stdout.contains("samples/s") && stdout.contains("rays/s"), "closing line: {stdout}");
+    assert!(
+        stdout.contains("samples/s") && stdout.contains("rays/s"),
+        "closing line: {stdout}"
+    );
     let img = nrc_scene::Image::read_exr(&exr).unwrap();
     assert_eq!((img.width, img.height), (40, 30));
     assert!(img.mean().max_element() > 0.0);
-    assert!(img.data.iter().all(|p| p.is_finite() && p.min_element() >= 0.0));
+    assert!(
+        img.data
+            .iter()
+            .all(|p| p.is_finite() && p.min_element() >= 0.0)
+    );
     let v = nrc_scene::Image::read_exr(&var).unwrap();
     assert_eq!((v.width, v.height), (40, 30));
     let bytes = std::fs::read(&png).unwrap();
     assert_eq!(&bytes[1..4], b"PNG");
     // No temporary files left behind by the atomic writes.
-    let names: Vec<_> = std::fs::read_dir(dir.path()).unwrap().map(|e| e.unwrap().file_name()).collect();
+    let names: Vec<_> = std::fs::read_dir(dir.path())
+        .unwrap()
+        .map(|e| e.unwrap().file_name())
+        .collect();
     assert_eq!(names.len(), 3, "{names:?}");
 }
 
@@ -64,8 +102,19 @@ fn render_is_reproducible_and_camera_overrides_apply() {
     let render = |name: &str, threads: &str, extra: &[&str]| {
         let path = dir.path().join(name);
         let mut args = vec![
-            "render", "--scene", cornell.to_str().unwrap(), "--spp", "2", "--width", "24", "--height", "16",
-            "--out", path.to_str().unwrap(), "--threads", threads,
+            "render",
+            "--scene",
+            cornell.to_str().unwrap(),
+            "--spp",
+            "2",
+            "--width",
+            "24",
+            "--height",
+            "16",
+            "--out",
+            path.to_str().unwrap(),
+            "--threads",
+            threads,
         ];
         args.extend_from_slice(extra);
         let out = nrc(&args);
@@ -76,16 +125,42 @@ fn render_is_reproducible_and_camera_overrides_apply() {
     let b = render("b.exr", "2", &[]);
     assert_eq!(a, b, "same seed, different thread counts");
     // Looking away from the box (from its front, outward) sees only black.
-    let away = render("c.exr", "2", &["--camera-pos", "0.278,0.273,-0.8", "--camera-target", "0.278,0.273,-2", "--fov-y", "30"]);
+    let away = render(
+        "c.exr",
+        "2",
+        &[
+            "--camera-pos",
+            "0.278,0.273,-0.8",
+            "--camera-target",
+            "0.278,0.273,-2",
+            "--fov-y",
+            "30",
+        ],
+    );
     assert_eq!(away.mean().max_element(), 0.0);
     // A grey background lights the view away from the box.
-    let sky = render("d.exr", "2", &["--camera-pos", "0.278,0.273,-0.8", "--camera-target", "0.278,0.273,-2", "--background", "0.5"]);
+    let sky = render(
+        "d.exr",
+        "2",
+        &[
+            "--camera-pos",
+            "0.278,0.273,-0.8",
+            "--camera-target",
+            "0.278,0.273,-2",
+            "--background",
+            "0.5",
+        ],
+    );
     assert!((sky.mean() - glam::Vec3::splat(0.5)).abs().max_element() < 1e-6);
 }
 
 #[test]
 fn info_prints_counts() {
-    let out = nrc(&["info", "--scene", scene("cornell-box.gltf").to_str().unwrap()]);
+    let out = nrc(&[
+        "info",
+        "--scene",
+        scene("cornell-box.gltf").to_str().unwrap(),
+    ]);
     assert!(out.status.success(), "{}", text(&out.stderr));
     let s = text(&out.stdout);
     for key in ["triangles:", "materials:", "lights:", "bounds:", "camera:"] {
@@ -102,8 +177,18 @@ fn info_prints_counts() {
 #[test]
 fn bench_trace_prints_table() {
     let out = nrc(&[
-        "bench", "trace", "--scene", scene("cornell-box.gltf").to_str().unwrap(), "--width", "16", "--height", "16",
-        "--spp", "1", "--repeats", "1",
+        "bench",
+        "trace",
+        "--scene",
+        scene("cornell-box.gltf").to_str().unwrap(),
+        "--width",
+        "16",
+        "--height",
+        "16",
+        "--spp",
+        "1",
+        "--repeats",
+        "1",
     ]);
     assert!(out.status.success(), "{}", text(&out.stderr));
     let s = text(&out.stdout);
@@ -118,7 +203,13 @@ fn missing_scene_is_one_error_line() {
     assert_clean_error(&out, "nothing.gltf");
     let dir = tempfile::tempdir().unwrap();
     let exr = dir.path().join("o.exr");
-    let out = nrc(&["render", "--scene", "/nonexistent/nothing.glb", "--out", exr.to_str().unwrap()]);
+    let out = nrc(&[
+        "render",
+        "--scene",
+        "/nonexistent/nothing.glb",
+        "--out",
+        exr.to_str().unwrap(),
+    ]);
     assert_clean_error(&out, "nothing.glb");
 }
 
@@ -126,8 +217,15 @@ fn missing_scene_is_one_error_line() {
 fn malformed_scenes_are_one_error_line() {
     let dir = tempfile::tempdir().unwrap();
     let json = dir.path().join("bad.gltf");
-    std::fs::write(&json, "{ \"asset\": { \"version\": \"2.0\" }, \"nodes\": [ oops ").unwrap();
-    assert_clean_error(&nrc(&["info", "--scene", json.to_str().unwrap()]), "bad.gltf");
+    std::fs::write(
+        &json,
+        "{ \"asset\": { \"version\": \"2.0\" }, \"nodes\": [ oops ",
+    )
+    .unwrap();
+    assert_clean_error(
+        &nrc(&["info", "--scene", json.to_str().unwrap()]),
+        "bad.gltf",
+    );
 
     // A .glb header that promises more bytes than the file holds.
     let glb = dir.path().join("truncated.glb");
@@ -139,7 +237,15 @@ fn malformed_scenes_are_one_error_line() {
     std::fs::write(&glb, &bytes).unwrap();
     let exr = dir.path().join("o.exr");
     assert_clean_error(
-        &nrc(&["render", "--scene", glb.to_str().unwrap(), "--out", exr.to_str().unwrap(), "--spp", "1"]),
+        &nrc(&[
+            "render",
+            "--scene",
+            glb.to_str().unwrap(),
+            "--out",
+            exr.to_str().unwrap(),
+            "--spp",
+            "1",
+        ]),
         "truncated.glb",
     );
 
@@ -154,7 +260,10 @@ fn malformed_scenes_are_one_error_line() {
             "nodes":[{"mesh":0}],"scenes":[{"nodes":[0]}],"scene":0}"#,
     )
     .unwrap();
-    assert_clean_error(&nrc(&["info", "--scene", nobuf.to_str().unwrap()]), "nobuffer.gltf");
+    assert_clean_error(
+        &nrc(&["info", "--scene", nobuf.to_str().unwrap()]),
+        "nobuffer.gltf",
+    );
     assert!(!exr.exists(), "no output after a failed load");
 }
 
@@ -163,7 +272,13 @@ fn bad_options_are_errors() {
     let dir = tempfile::tempdir().unwrap();
     let exr = dir.path().join("o.exr");
     let cornell = scene("cornell-box.gltf");
-    let base = ["render", "--scene", cornell.to_str().unwrap(), "--out", exr.to_str().unwrap()];
+    let base = [
+        "render",
+        "--scene",
+        cornell.to_str().unwrap(),
+        "--out",
+        exr.to_str().unwrap(),
+    ];
     let with = |extra: &[&str]| {
         let mut a = base.to_vec();
         a.extend_from_slice(extra);
@@ -171,12 +286,32 @@ fn bad_options_are_errors() {
     };
     assert_clean_error(&with(&["--spp", "0"]), "spp");
     assert_clean_error(&with(&["--width", "0"]), "0x");
-    assert_clean_error(&with(&["--camera-pos", "0.278,0.273,-0.8", "--camera-target", "0.278,0.273,-0.8"]), "camera");
+    assert_clean_error(
+        &with(&[
+            "--camera-pos",
+            "0.278,0.273,-0.8",
+            "--camera-target",
+            "0.278,0.273,-0.8",
+        ]),
+        "camera",
+    );
     // Value syntax errors come from the argument parser: non-zero, no panic.
     let out = with(&["--camera-pos", "1,2"]);
     assert!(!out.status.success());
     assert!(!text(&out.stderr).contains("panicked"));
     // An output folder that does not exist.
-    let out = nrc(&["render", "--scene", cornell.to_str().unwrap(), "--out", "/nonexistent/dir/o.exr", "--spp", "1", "--width", "8", "--height", "8"]);
+    let out = nrc(&[
+        "render",
+        "--scene",
+        cornell.to_str().unwrap(),
+        "--out",
+        "/nonexistent/dir/o.exr",
+        "--spp",
+        "1",
+        "--width",
+        "8",
+        "--height",
+        "8",
+    ]);
     assert_clean_error(&out, "/nonexistent/dir/o.exr");
 }

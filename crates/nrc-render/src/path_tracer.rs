@@ -84,7 +84,11 @@ impl PathStats {
 impl PathTracer {
     /// The maximum number of segments as an unsigned bound (`u32::MAX` for unlimited).
     fn segment_limit(&self) -> u32 {
-        if self.max_depth <= 0 { u32::MAX } else { self.max_depth as u32 }
+        if self.max_depth <= 0 {
+            u32::MAX
+        } else {
+            self.max_depth as u32
+        }
     }
 
     /// One sample of the radiance arriving at `ray.o` along `-ray.d`: the estimate of one

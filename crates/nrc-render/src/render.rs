@@ -120,15 +120,24 @@ pub fn render(
     for p in &pixels {
         stats.rays.add(&p.rays);
         stats.invalid_samples += p.invalid;
-        mean.push(Vec3::new(p.mean[0] as f32, p.mean[1] as f32, p.mean[2] as f32));
+        mean.push(Vec3::new(
+            p.mean[0] as f32,
+            p.mean[1] as f32,
+            p.mean[2] as f32,
+        ));
         if settings.variance && spp >= 2 {
             let d = (spp - 1) as f64;
-            var.push(Vec3::new((p.m2[0] / d) as f32, (p.m2[1] / d) as f32, (p.m2[2] / d) as f32));
+            var.push(Vec3::new(
+                (p.m2[0] / d) as f32,
+                (p.m2[1] / d) as f32,
+                (p.m2[2] / d) as f32,
+            ));
         }
     }
     RenderOutput {
         mean: Image::from_data(w as usize, h as usize, mean).expect("one value per pixel"),
-        variance: (!var.is_empty()).then(|| Image::from_data(w as usize, h as usize, var).expect("one value per pixel")),
+        variance: (!var.is_empty())
+            .then(|| Image::from_data(w as usize, h as usize, var).expect("one value per pixel")),
         stats,
     }
 }

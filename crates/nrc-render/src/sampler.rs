@@ -32,9 +32,13 @@ impl PixelSampler {
     /// `y · width + x`) for render seed `seed`.
     #[inline]
     pub fn new(seed: u64, pixel: u64, sample: u64) -> Self {
-        let key = mix64(mix64(seed.wrapping_add(GOLDEN)) ^ pixel.wrapping_mul(0xD1B5_4A32_D192_ED03))
-            ^ mix64(sample.wrapping_mul(0xA24B_AED4_963E_E407).wrapping_add(1));
-        Self { key: mix64(key), dimension: 0 }
+        let key =
+            mix64(mix64(seed.wrapping_add(GOLDEN)) ^ pixel.wrapping_mul(0xD1B5_4A32_D192_ED03))
+                ^ mix64(sample.wrapping_mul(0xA24B_AED4_963E_E407).wrapping_add(1));
+        Self {
+            key: mix64(key),
+            dimension: 0,
+        }
     }
 
     /// The next uniform number in `[0, 1)` (24 random bits, so never 1.0 in f32).
@@ -95,7 +99,9 @@ mod tests {
         }
         let chi2 = |bins: &[u32]| {
             let e = N as f64 / bins.len() as f64;
-            bins.iter().map(|&o| (o as f64 - e).powi(2) / e).sum::<f64>()
+            bins.iter()
+                .map(|&o| (o as f64 - e).powi(2) / e)
+                .sum::<f64>()
         };
         let c1 = chi2(&bins1);
         let c2 = chi2(&bins2);

@@ -36,7 +36,12 @@ pub fn tiles(width: u32, height: u32, size: u32) -> Vec<Tile> {
     let mut out = Vec::new();
     for y0 in (0..height).step_by(size as usize) {
         for x0 in (0..width).step_by(size as usize) {
-            out.push(Tile { x0, y0, x1: (x0 + size).min(width), y1: (y0 + size).min(height) });
+            out.push(Tile {
+                x0,
+                y0,
+                x1: (x0 + size).min(width),
+                y1: (y0 + size).min(height),
+            });
         }
     }
     out
@@ -100,9 +105,14 @@ mod tests {
     fn map_pixels_is_row_major() {
         let (w, h) = (37, 21);
         let done = std::sync::atomic::AtomicUsize::new(0);
-        let v = map_pixels(w, h, |x, y| y * 1000 + x, |n| {
-            done.fetch_add(n, std::sync::atomic::Ordering::Relaxed);
-        });
+        let v = map_pixels(
+            w,
+            h,
+            |x, y| y * 1000 + x,
+            |n| {
+                done.fetch_add(n, std::sync::atomic::Ordering::Relaxed);
+            },
+        );
         for y in 0..h {
             for x in 0..w {
                 assert_eq!(v[(y * w + x) as usize], y * 1000 + x);

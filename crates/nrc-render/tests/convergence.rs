@@ -37,7 +37,11 @@ fn cornell_box_converges_to_the_reference() {
     let mut var_sum = vec![0.0f64; n];
     for i in 0..k {
         let out = render_scene(&scene, &tracer, W, H, spp, i as u64);
-        for (j, (m, v)) in channels(&out.mean).iter().zip(channels(out.variance.as_ref().unwrap())).enumerate() {
+        for (j, (m, v)) in channels(&out.mean)
+            .iter()
+            .zip(channels(out.variance.as_ref().unwrap()))
+            .enumerate()
+        {
             sum[j] += m;
             var_sum[j] += v;
         }
@@ -60,13 +64,23 @@ fn cornell_box_converges_to_the_reference() {
                 outside += 1;
             }
         } else {
-            assert!((mean - r_mean[j]).abs() < 1e-6, "channel {j}: exact values differ");
+            assert!(
+                (mean - r_mean[j]).abs() < 1e-6,
+                "channel {j}: exact values differ"
+            );
         }
     }
     let frac = outside as f64 / tested as f64;
-    eprintln!("{:.2}% of {tested} pixel channels outside the 99% bound", 100.0 * frac);
+    eprintln!(
+        "{:.2}% of {tested} pixel channels outside the 99% bound",
+        100.0 * frac
+    );
     assert!(tested > n / 2, "only {tested} of {n} pixel channels vary");
-    assert!(frac < 0.03, "{:.2}% of pixel channels outside the 99% bound", 100.0 * frac);
+    assert!(
+        frac < 0.03,
+        "{:.2}% of pixel channels outside the 99% bound",
+        100.0 * frac
+    );
 
     // 2. MSE against spp.
     let ref_noise = r_var.iter().sum::<f64>() / n as f64 / n_ref as f64;
@@ -79,17 +93,27 @@ fn cornell_box_converges_to_the_reference() {
         let mut mse = 0.0;
         for s in 0..renders {
             let out = render_scene(&scene, &tracer, W, H, spp, 100 * (i as u64 + 1) + s as u64);
-            mse += channels(&out.mean).iter().zip(&r_mean).map(|(a, b)| (a - b).powi(2)).sum::<f64>() / n as f64;
+            mse += channels(&out.mean)
+                .iter()
+                .zip(&r_mean)
+                .map(|(a, b)| (a - b).powi(2))
+                .sum::<f64>()
+                / n as f64;
         }
         let mse = mse / renders as f64 - ref_noise;
         assert!(mse > 0.0, "MSE at {spp} spp below the reference noise");
         points.push(((spp as f64).ln(), mse.ln()));
     }
     let m = points.len() as f64;
-    let (sx, sy) = points.iter().fold((0.0, 0.0), |(a, b), (x, y)| (a + x, b + y));
+    let (sx, sy) = points
+        .iter()
+        .fold((0.0, 0.0), |(a, b), (x, y)| (a + x, b + y));
     let (mx, my) = (sx / m, sy / m);
     let slope = points.iter().map(|(x, y)| (x - mx) * (y - my)).sum::<f64>()
         / points.iter().map(|(x, _)| (x - mx).powi(2)).sum::<f64>();
     eprintln!("log MSE vs log spp: slope {slope:.3}; points {points:.3?}");
-    assert!((slope + 1.0).abs() < 0.2, "MSE falls with slope {slope:.3}, expected −1");
+    assert!(
+        (slope + 1.0).abs() < 0.2,
+        "MSE falls with slope {slope:.3}, expected −1"
+    );
 }

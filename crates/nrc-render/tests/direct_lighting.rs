@@ -26,12 +26,36 @@ fn scene() -> nrc_scene::Scene {
     let plastic = b.material(mat::plastic(Vec3::new(0.2, 0.4, 0.8), 0.4));
     let metal = b.material(mat::metal(Vec3::new(0.95, 0.64, 0.54), 0.5));
     let light = b.material(mat::emissive(Vec3::ZERO, Vec3::new(6.0, 5.0, 4.0), false));
-    b.mesh(&Mesh::quad(Vec3::ZERO, Vec3::new(3.0, 0.0, 0.0), Vec3::new(0.0, 0.0, -3.0)), floor, false)
-        .mesh(&Mesh::sphere(Vec3::new(-0.6, 0.5, 0.0), 0.5, 16, 32), plastic, true)
-        .mesh(&Mesh::cuboid(Vec3::new(0.3, 0.0, -0.5), Vec3::new(1.1, 0.8, 0.3), false), metal, false)
-        // Facing down: a × b = −y.
-        .mesh(&Mesh::quad(Vec3::new(0.0, 2.0, 0.0), Vec3::new(0.5, 0.0, 0.0), Vec3::new(0.0, 0.0, 0.5)), light, false)
-        .camera(Vec3::new(0.0, 1.6, 3.2), Vec3::new(0.0, 0.4, 0.0), 45.0);
+    b.mesh(
+        &Mesh::quad(
+            Vec3::ZERO,
+            Vec3::new(3.0, 0.0, 0.0),
+            Vec3::new(0.0, 0.0, -3.0),
+        ),
+        floor,
+        false,
+    )
+    .mesh(
+        &Mesh::sphere(Vec3::new(-0.6, 0.5, 0.0), 0.5, 16, 32),
+        plastic,
+        true,
+    )
+    .mesh(
+        &Mesh::cuboid(Vec3::new(0.3, 0.0, -0.5), Vec3::new(1.1, 0.8, 0.3), false),
+        metal,
+        false,
+    )
+    // Facing down: a × b = −y.
+    .mesh(
+        &Mesh::quad(
+            Vec3::new(0.0, 2.0, 0.0),
+            Vec3::new(0.5, 0.0, 0.0),
+            Vec3::new(0.0, 0.0, 0.5),
+        ),
+        light,
+        false,
+    )
+    .camera(Vec3::new(0.0, 1.6, 3.2), Vec3::new(0.0, 0.4, 0.0), 45.0);
     b.build()
 }
 
@@ -40,7 +64,13 @@ const H: u32 = 24;
 
 /// Per-channel differences of the means of `a` and `b` over `block × block` pixel blocks
 /// (1: per pixel), each with its standard error.
-fn block_differences(a: &RenderOutput, na: u32, b: &RenderOutput, nb: u32, block: u32) -> Vec<(f64, f64)> {
+fn block_differences(
+    a: &RenderOutput,
+    na: u32,
+    b: &RenderOutput,
+    nb: u32,
+    block: u32,
+) -> Vec<(f64, f64)> {
     let (ma, va) = (channels(&a.mean), channels(a.variance.as_ref().unwrap()));
     let (mb, vb) = (channels(&b.mean), channels(b.variance.as_ref().unwrap()));
     let mut out = Vec::new();
@@ -65,25 +95,40 @@ fn block_differences(a: &RenderOutput, na: u32, b: &RenderOutput, nb: u32, block
 
 /// Image-mean differences per channel in standard errors.
 fn image_mean_z(a: &RenderOutput, na: u32, b: &RenderOutput, nb: u32) -> Vec<f64> {
-    block_differences(a, na, b, nb, W.max(H)).iter().map(|(d, se)| d / se).collect()
+    block_differences(a, na, b, nb, W.max(H))
+        .iter()
+        .map(|(d, se)| d / se)
+        .collect()
 }
 
 #[test]
 fn nee_bsdf_sampling_and_mis_agree() {
     let scene = scene();
-    let tracer = |strategy| PathTracer { max_depth: 2, rr_depth: 5, strategy };
+    let tracer = |strategy| PathTracer {
+        max_depth: 2,
+        rr_depth: 5,
+        strategy,
+    };
     let (n_light, n_bsdf, n_mis) = (64, 1024, 64);
     let light = render_scene(&scene, &tracer(LightStrategy::LightOnly), W, H, n_light, 1);
     let bsdf = render_scene(&scene, &tracer(LightStrategy::BsdfOnly), W, H, n_bsdf, 2);
     let mis = render_scene(&scene, &tracer(LightStrategy::Mis), W, H, n_mis, 3);
     // The image is not black: direct light reaches most pixels.
-    let lit = light.mean.data.iter().filter(|p| p.max_element() > 0.01).count();
+    let lit = light
+        .mean
+        .data
+        .iter()
+        .filter(|p| p.max_element() > 0.01)
+        .count();
     assert!(lit > (W * H) as usize / 2, "only {lit} lit pixels");
 
     for (name, other, n) in [("BSDF sampling", &bsdf, n_bsdf), ("MIS", &mis, n_mis)] {
         let z = image_mean_z(&light, n_light, other, n);
         eprintln!("light sampling vs {name}: image-mean z {z:.2?}");
-        assert!(z.iter().all(|z| z.abs() < 4.0), "light sampling vs {name}: image means differ, z = {z:?}");
+        assert!(
+            z.iter().all(|z| z.abs() < 4.0),
+            "light sampling vs {name}: image means differ, z = {z:?}"
+        );
     }
 
     // Per pixel against MIS.
@@ -91,8 +136,16 @@ fn nee_bsdf_sampling_and_mis_agree() {
     let tested: Vec<&(f64, f64)> = px.iter().filter(|(_, se)| *se > 0.0).collect();
     let outside = tested.iter().filter(|(d, se)| d.abs() > 2.576 * se).count();
     let frac = outside as f64 / tested.len() as f64;
-    eprintln!("light sampling vs MIS: {:.2}% of {} pixel channels outside the 99% bound", 100.0 * frac, tested.len());
-    assert!(frac < 0.03, "light sampling vs MIS: {:.2}% of pixel channels outside the 99% bound", 100.0 * frac);
+    eprintln!(
+        "light sampling vs MIS: {:.2}% of {} pixel channels outside the 99% bound",
+        100.0 * frac,
+        tested.len()
+    );
+    assert!(
+        frac < 0.03,
+        "light sampling vs MIS: {:.2}% of pixel channels outside the 99% bound",
+        100.0 * frac
+    );
     for (d, se) in &px {
         if *se == 0.0 {
             assert!(d.abs() < 1e-6, "exact pixels differ by {d}");

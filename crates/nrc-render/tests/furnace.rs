@@ -52,8 +52,12 @@ fn assert_matches(out: &RenderOutput, spp: u32, expected: Vec3, what: &str) {
 fn emissive_enclosure(rho: Vec3) -> nrc_scene::Scene {
     let mut b = SceneBuilder::new();
     let m = b.material(mat::emissive(rho, Vec3::ONE, false));
-    b.mesh(&Mesh::cuboid(Vec3::splat(-1.0), Vec3::splat(1.0), true), m, false)
-        .camera(Vec3::new(0.1, 0.2, 0.3), Vec3::new(1.0, 0.5, -0.7), 90.0);
+    b.mesh(
+        &Mesh::cuboid(Vec3::splat(-1.0), Vec3::splat(1.0), true),
+        m,
+        false,
+    )
+    .camera(Vec3::new(0.1, 0.2, 0.3), Vec3::new(1.0, 0.5, -0.7), 90.0);
     b.build()
 }
 
@@ -70,7 +74,11 @@ fn emissive_enclosure_unlimited_depth() {
     let expected = Vec3::ONE / (Vec3::ONE - rho);
     let spp = 64;
     for (k, strategy) in STRATEGIES.into_iter().enumerate() {
-        let tracer = PathTracer { max_depth: -1, rr_depth: 3, strategy };
+        let tracer = PathTracer {
+            max_depth: -1,
+            rr_depth: 3,
+            strategy,
+        };
         let out = render_scene(&scene, &tracer, 16, 12, spp, 10 + k as u64);
         assert_eq!(out.stats.invalid_samples, 0);
         assert_matches(&out, spp, expected, &format!("{strategy:?}"));
@@ -85,13 +93,34 @@ fn emissive_enclosure_depth_follows_mitsuba_convention() {
     for max_depth in 1..=4 {
         let expected = (0..max_depth).fold(Vec3::ZERO, |s, i| s + rho.powf(i as f32));
         for (k, strategy) in STRATEGIES.into_iter().enumerate() {
-            let tracer = PathTracer { max_depth, rr_depth: 100, strategy };
-            let out = render_scene(&scene, &tracer, 12, 8, spp, 100 * max_depth as u64 + k as u64);
+            let tracer = PathTracer {
+                max_depth,
+                rr_depth: 100,
+                strategy,
+            };
+            let out = render_scene(
+                &scene,
+                &tracer,
+                12,
+                8,
+                spp,
+                100 * max_depth as u64 + k as u64,
+            );
             if max_depth == 1 {
                 // Only the emission seen by camera rays: exact.
-                assert!(out.mean.data.iter().all(|p| (*p - Vec3::ONE).abs().max_element() < 1e-6));
+                assert!(
+                    out.mean
+                        .data
+                        .iter()
+                        .all(|p| (*p - Vec3::ONE).abs().max_element() < 1e-6)
+                );
             } else {
-                assert_matches(&out, spp, expected, &format!("{strategy:?} max_depth {max_depth}"));
+                assert_matches(
+                    &out,
+                    spp,
+                    expected,
+                    &format!("{strategy:?} max_depth {max_depth}"),
+                );
             }
         }
     }
@@ -109,12 +138,32 @@ fn lossless_objects_under_uniform_background() {
     let white = b.material(mat::diffuse(Vec3::ONE));
     let glass = b.material(mat::glass(1.5, 0.0));
     let mirror = b.material(mat::metal(Vec3::ONE, 0.0));
-    b.mesh(&Mesh::sphere(Vec3::new(-1.1, 0.5, 0.0), 0.5, 12, 24), white, false)
-        .mesh(&Mesh::sphere(Vec3::new(0.0, 0.5, 0.0), 0.5, 16, 32), glass, false)
-        .mesh(&Mesh::sphere(Vec3::new(1.1, 0.5, 0.0), 0.5, 16, 32), mirror, false)
-        .mesh(&Mesh::quad(Vec3::ZERO, Vec3::new(3.0, 0.0, 0.0), Vec3::new(0.0, 0.0, -3.0)), white, false)
-        .camera(Vec3::new(0.0, 1.5, 3.5), Vec3::new(0.0, 0.4, 0.0), 45.0)
-        .background(Vec3::ONE);
+    b.mesh(
+        &Mesh::sphere(Vec3::new(-1.1, 0.5, 0.0), 0.5, 12, 24),
+        white,
+        false,
+    )
+    .mesh(
+        &Mesh::sphere(Vec3::new(0.0, 0.5, 0.0), 0.5, 16, 32),
+        glass,
+        false,
+    )
+    .mesh(
+        &Mesh::sphere(Vec3::new(1.1, 0.5, 0.0), 0.5, 16, 32),
+        mirror,
+        false,
+    )
+    .mesh(
+        &Mesh::quad(
+            Vec3::ZERO,
+            Vec3::new(3.0, 0.0, 0.0),
+            Vec3::new(0.0, 0.0, -3.0),
+        ),
+        white,
+        false,
+    )
+    .camera(Vec3::new(0.0, 1.5, 3.5), Vec3::new(0.0, 0.4, 0.0), 45.0)
+    .background(Vec3::ONE);
     let scene = b.build();
     let spp = 128;
     let tracer = PathTracer::default();

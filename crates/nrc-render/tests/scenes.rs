@@ -33,10 +33,23 @@ fn check(path: &Path) {
     }
     let out = render_scene(&scene, &PathTracer::default(), 32, 24, 4, 1);
     for (i, p) in out.mean.data.iter().enumerate() {
-        assert!(p.is_finite() && p.min_element() >= 0.0, "{}: pixel {i} = {p}", path.display());
+        assert!(
+            p.is_finite() && p.min_element() >= 0.0,
+            "{}: pixel {i} = {p}",
+            path.display()
+        );
     }
-    assert_eq!(out.stats.invalid_samples, 0, "{}: NaN or infinite samples", path.display());
-    assert!(out.mean.mean().max_element() > 0.0, "{}: black image", path.display());
+    assert_eq!(
+        out.stats.invalid_samples,
+        0,
+        "{}: NaN or infinite samples",
+        path.display()
+    );
+    assert!(
+        out.mean.mean().max_element() > 0.0,
+        "{}: black image",
+        path.display()
+    );
     eprintln!("{}: ok, mean {:.4}", path.display(), out.mean.mean());
 }
 
@@ -45,7 +58,9 @@ fn shipped_scenes_render() {
     let files = gltf_files(&project_scenes(), false);
     for name in ["cornell-box", "caustics", "ajar", "glossy"] {
         assert!(
-            files.iter().any(|f| f.file_stem().is_some_and(|s| s == name)),
+            files
+                .iter()
+                .any(|f| f.file_stem().is_some_and(|s| s == name)),
             "scenes/{name}.gltf is missing"
         );
     }

@@ -15,27 +15,53 @@ pub mod mat {
 
     /// A purely diffuse (Lambertian) material of albedo `rho`.
     pub fn diffuse(rho: Vec3) -> Material {
-        Material { base_color: rho, metallic: 0.0, roughness: 1.0, specular: 0.0, ..Default::default() }
+        Material {
+            base_color: rho,
+            metallic: 0.0,
+            roughness: 1.0,
+            specular: 0.0,
+            ..Default::default()
+        }
     }
 
     /// A diffuse emitter of albedo `rho` emitting radiance `le` from its front face (or both).
     pub fn emissive(rho: Vec3, le: Vec3, double_sided: bool) -> Material {
-        Material { emissive: le, double_sided, ..diffuse(rho) }
+        Material {
+            emissive: le,
+            double_sided,
+            ..diffuse(rho)
+        }
     }
 
     /// A smooth or rough clear dielectric of index `ior`.
     pub fn glass(ior: f32, roughness: f32) -> Material {
-        Material { metallic: 0.0, roughness, transmission: 1.0, ior, ..Default::default() }
+        Material {
+            metallic: 0.0,
+            roughness,
+            transmission: 1.0,
+            ior,
+            ..Default::default()
+        }
     }
 
     /// A GGX conductor of normal reflectance `f0`.
     pub fn metal(f0: Vec3, roughness: f32) -> Material {
-        Material { base_color: f0, metallic: 1.0, roughness, ..Default::default() }
+        Material {
+            base_color: f0,
+            metallic: 1.0,
+            roughness,
+            ..Default::default()
+        }
     }
 
     /// glTF's blend: a diffuse base under a dielectric GGX layer.
     pub fn plastic(base: Vec3, roughness: f32) -> Material {
-        Material { base_color: base, metallic: 0.0, roughness, ..Default::default() }
+        Material {
+            base_color: base,
+            metallic: 0.0,
+            roughness,
+            ..Default::default()
+        }
     }
 }
 
@@ -65,7 +91,12 @@ impl Mesh {
                     p[v] = if b > 0.0 { hi[v] } else { lo[v] };
                     p
                 };
-                let quad = [corner(-1.0, -1.0), corner(1.0, -1.0), corner(1.0, 1.0), corner(-1.0, 1.0)];
+                let quad = [
+                    corner(-1.0, -1.0),
+                    corner(1.0, -1.0),
+                    corner(1.0, 1.0),
+                    corner(-1.0, 1.0),
+                ];
                 m.add_quad(quad, if inward { -n } else { n });
             }
         }
@@ -76,12 +107,17 @@ impl Mesh {
     pub fn add_quad(&mut self, q: [Vec3; 4], normal: Vec3) {
         let base = self.positions.len() as u32;
         let geometric = (q[1] - q[0]).cross(q[2] - q[0]);
-        let order: [usize; 4] = if geometric.dot(normal) >= 0.0 { [0, 1, 2, 3] } else { [0, 3, 2, 1] };
+        let order: [usize; 4] = if geometric.dot(normal) >= 0.0 {
+            [0, 1, 2, 3]
+        } else {
+            [0, 3, 2, 1]
+        };
         for i in order {
             self.positions.push(q[i]);
             self.normals.push(normal.normalize());
         }
-        self.indices.extend_from_slice(&[base, base + 1, base + 2, base, base + 2, base + 3]);
+        self.indices
+            .extend_from_slice(&[base, base + 1, base + 2, base, base + 2, base + 3]);
     }
 
     /// A quad centred at `c` spanned by half-extents `a` and `b`, facing `a × b`.
@@ -98,7 +134,11 @@ impl Mesh {
             let theta = std::f32::consts::PI * r as f32 / rings as f32;
             for s in 0..=segments {
                 let phi = std::f32::consts::TAU * s as f32 / segments as f32;
-                let n = Vec3::new(theta.sin() * phi.cos(), theta.cos(), theta.sin() * phi.sin());
+                let n = Vec3::new(
+                    theta.sin() * phi.cos(),
+                    theta.cos(),
+                    theta.sin() * phi.sin(),
+                );
                 m.positions.push(center + radius * n);
                 m.normals.push(n);
             }
@@ -128,7 +168,12 @@ pub struct SceneBuilder {
 
 impl SceneBuilder {
     pub fn new() -> Self {
-        Self { desc: SceneDescription { source: PathBuf::from("<test scene>"), ..Default::default() } }
+        Self {
+            desc: SceneDescription {
+                source: PathBuf::from("<test scene>"),
+                ..Default::default()
+            },
+        }
     }
 
     /// Adds a material; returns its index.
@@ -141,13 +186,20 @@ impl SceneBuilder {
     pub fn mesh(&mut self, mesh: &Mesh, material: u32, smooth: bool) -> &mut Self {
         let base = self.desc.positions.len() as u32;
         self.desc.positions.extend_from_slice(&mesh.positions);
-        let normals: Vec<Vec3> =
-            if smooth && !mesh.normals.is_empty() { mesh.normals.clone() } else { vec![Vec3::ZERO; mesh.positions.len()] };
+        let normals: Vec<Vec3> = if smooth && !mesh.normals.is_empty() {
+            mesh.normals.clone()
+        } else {
+            vec![Vec3::ZERO; mesh.positions.len()]
+        };
         self.desc.normals.extend(normals);
-        self.desc.mesh_names.push(format!("mesh {}", self.desc.mesh_names.len()));
+        self.desc
+            .mesh_names
+            .push(format!("mesh {}", self.desc.mesh_names.len()));
         let mesh_index = self.desc.mesh_names.len() as u32 - 1;
         for t in mesh.indices.chunks_exact(3) {
-            self.desc.triangles.push([base + t[0], base + t[1], base + t[2]]);
+            self.desc
+                .triangles
+                .push([base + t[0], base + t[1], base + t[2]]);
             self.desc.triangle_materials.push(material);
             self.desc.triangle_meshes.push(mesh_index);
         }
@@ -170,8 +222,21 @@ impl SceneBuilder {
 }
 
 /// Renders `scene` with its camera at `w × h`, `spp` samples, per-pixel variance on.
-pub fn render_scene(scene: &Scene, tracer: &PathTracer, w: u32, h: u32, spp: u32, seed: u64) -> RenderOutput {
-    let settings = RenderSettings { width: w, height: h, spp, seed, variance: true };
+pub fn render_scene(
+    scene: &Scene,
+    tracer: &PathTracer,
+    w: u32,
+    h: u32,
+    spp: u32,
+    seed: u64,
+) -> RenderOutput {
+    let settings = RenderSettings {
+        width: w,
+        height: h,
+        spp,
+        seed,
+        variance: true,
+    };
     render(scene, &scene.camera, tracer, &settings, &|_| {})
 }
 
@@ -180,13 +245,39 @@ pub fn render_scene(scene: &Scene, tracer: &PathTracer, w: u32, h: u32, spp: u32
 pub fn z_two_sided(alpha: f64) -> f64 {
     let p = alpha / 2.0;
     // Lower-tail quantile of p, then negate.
-    let a = [-3.969683028665376e+01, 2.209460984245205e+02, -2.759285104469687e+02, 1.383577518672690e+02, -3.066479806614716e+01, 2.506628277459239e+00];
-    let b = [-5.447609879822406e+01, 1.615858368580409e+02, -1.556989798598866e+02, 6.680131188771972e+01, -1.328068155288572e+01];
-    let c = [-7.784894002430293e-03, -3.223964580411365e-01, -2.400758277161838e+00, -2.549732539343734e+00, 4.374664141464968e+00, 2.938163982698783e+00];
-    let d = [7.784695709041462e-03, 3.224671290700398e-01, 2.445134137142996e+00, 3.754408661907416e+00];
+    let a = [
+        -3.969683028665376e+01,
+        2.209460984245205e+02,
+        -2.759285104469687e+02,
+        1.383577518672690e+02,
+        -3.066479806614716e+01,
+        2.506628277459239e+00,
+    ];
+    let b = [
+        -5.447609879822406e+01,
+        1.615858368580409e+02,
+        -1.556989798598866e+02,
+        6.680131188771972e+01,
+        -1.328068155288572e+01,
+    ];
+    let c = [
+        -7.784894002430293e-03,
+        -3.223964580411365e-01,
+        -2.400758277161838e+00,
+        -2.549732539343734e+00,
+        4.374664141464968e+00,
+        2.938163982698783e+00,
+    ];
+    let d = [
+        7.784695709041462e-03,
+        3.224671290700398e-01,
+        2.445134137142996e+00,
+        3.754408661907416e+00,
+    ];
     let q = if p < 0.02425 {
         let q = (-2.0 * p.ln()).sqrt();
-        (((((c[0] * q + c[1]) * q + c[2]) * q + c[3]) * q + c[4]) * q + c[5]) / ((((d[0] * q + d[1]) * q + d[2]) * q + d[3]) * q + 1.0)
+        (((((c[0] * q + c[1]) * q + c[2]) * q + c[3]) * q + c[4]) * q + c[5])
+            / ((((d[0] * q + d[1]) * q + d[2]) * q + d[3]) * q + 1.0)
     } else {
         let q = p - 0.5;
         let r = q * q;
@@ -198,7 +289,10 @@ pub fn z_two_sided(alpha: f64) -> f64 {
 
 /// Per-channel pixel values of an image as f64, flattened.
 pub fn channels(img: &Image) -> Vec<f64> {
-    img.data.iter().flat_map(|p| [p.x as f64, p.y as f64, p.z as f64]).collect()
+    img.data
+        .iter()
+        .flat_map(|p| [p.x as f64, p.y as f64, p.z as f64])
+        .collect()
 }
 
 /// The folder of third-party scenes, if present.
