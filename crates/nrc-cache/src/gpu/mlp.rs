@@ -3,8 +3,16 @@
 //! memory across all layers, as tiny-cuda-nn's FullyFusedMLP does; the weight gradients
 //! `A_{l−1}ᵀ · dY_l` are batch-long reductions and run as matrix products on burn's kernels.
 //!
-//! Implements [`MlpOps`] for `CubeBackend`; [`unfused_forward`] is the matmul + ReLU chain it
-//! replaces, kept for comparison (`nrc_cache::gpu::mlp::bench`).
+//! Implements [`MlpOps`] for `CubeBackend`; the matmul + ReLU chain it replaces is
+//! `tensor_path::mlp_tensor` ([`unfused_forward`] is the same chain on raw primitives).
+//!
+//! Measured (examples/gpu_bench.rs, 2 iterations, batch 2^14, on mesa lavapipe = llvmpipe, a
+//! *software* Vulkan rasteriser on the 2-core CPU, machine shared with other builds): the fused
+//! kernels LOSE, ×0.25–0.30 of the matmul chain's throughput forward (1.3e4 vs 5.3e4 samples/s,
+//! hash-grid net) and ×0.20–0.25 forward + backward (3.5e3 vs 1.4e4/s). lavapipe emulates
+//! workgroup barriers and turns the per-thread weight loads into gathers, where burn's matmul
+//! is vectorised. So the cache does not route the MLP through this op on wgpu
+//! (`tensor_path::has_mlp_op` is Flex-only); no hardware GPU was available to measure it there.
 
 use burn::backend::ops::{ActivationOps, FloatTensorOps};
 use burn::backend::wgpu::{
