@@ -42,8 +42,16 @@ fn mlp_case(device: &Device, layers: &Arc<Vec<LayerShape>>, batch: usize, iterat
     let count = layers.last().map_or(0, |l| l.offset + l.len());
     let w = Tensor::<1>::random([count], Distribution::Uniform(-0.2, 0.2), device);
     let x = Tensor::<2>::random([batch, inputs], Distribution::Uniform(-1.0, 1.0), device);
-    let fused = time(device, iterations, || drop(nrc_cache::ops::mlp(w.clone(), x.clone(), layers)));
-    let unfused = time(device, iterations, || drop(nrc_cache::tensor_path::mlp_tensor(w.clone(), x.clone(), layers)));
+    let fused = time(device, iterations, || {
+        drop(nrc_cache::ops::mlp(w.clone(), x.clone(), layers))
+    });
+    let unfused = time(device, iterations, || {
+        drop(nrc_cache::tensor_path::mlp_tensor(
+            w.clone(),
+            x.clone(),
+            layers,
+        ))
+    });
 
     let ad = device.clone().autodiff();
     let train = |fused: bool| {
@@ -78,7 +86,12 @@ fn mlp_case(device: &Device, layers: &Arc<Vec<LayerShape>>, batch: usize, iterat
 
 fn grid_case(device: &Device, grid: &HashGrid, batch: usize, iterations: usize) {
     let ad = device.clone().autodiff();
-    let table = Tensor::<1>::random([grid.param_count()], Distribution::Uniform(-1e-4, 1e-4), &ad).require_grad();
+    let table = Tensor::<1>::random(
+        [grid.param_count()],
+        Distribution::Uniform(-1e-4, 1e-4),
+        &ad,
+    )
+    .require_grad();
     let p = Tensor::<2>::random([batch, 3], Distribution::Uniform(0.0, 1.0), &ad);
     let run = |op: bool| {
         let (table, p, grid) = (table.clone(), p.clone(), grid.clone());
@@ -106,7 +119,10 @@ fn grid_case(device: &Device, grid: &HashGrid, batch: usize, iterations: usize) 
 }
 
 fn main() {
-    let iterations = std::env::args().nth(1).and_then(|s| s.parse().ok()).unwrap_or(10);
+    let iterations = std::env::args()
+        .nth(1)
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(10);
     let device = match nrc_cache::gpu::wgpu_device() {
         Ok(device) => device,
         Err(why) => {
@@ -115,16 +131,25 @@ fn main() {
         }
     };
     for info in nrc_cache::gpu::adapters() {
-        println!("wgpu adapter: {} ({:?}, {:?}, driver {})", info.name, info.device_type, info.backend, info.driver_info);
+        println!(
+            "wgpu adapter: {} ({:?}, {:?}, driver {})",
+            info.name, info.device_type, info.backend, info.driver_info
+        );
     }
-    let presets = [CacheConfig::hash_grid_preset(), CacheConfig::triangle_wave_preset()];
+    let presets = [
+        CacheConfig::hash_grid_preset(),
+        CacheConfig::triangle_wave_preset(),
+    ];
     for batch in [1 << 14, 1 << 16] {
         for config in &presets {
             let layout = ModelLayout::new(config);
             mlp_case(&device, &Arc::new(layout.layers.clone()), batch, iterations);
         }
         let layout = ModelLayout::new(&presets[0]);
-        let (grid, _) = layout.encoding.grid().expect("the hash-grid preset has a grid");
+        let (grid, _) = layout
+            .encoding
+            .grid()
+            .expect("the hash-grid preset has a grid");
         grid_case(&device, grid, batch, iterations);
     }
 }

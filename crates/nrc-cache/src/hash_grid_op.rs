@@ -81,10 +81,20 @@ impl HashGridOps for CubeBackend {
 
 /// The f32 values of a Flex tensor, borrowed when it is contiguous.
 fn flex_values(tensor: &FlexTensor) -> Cow<'_, [f32]> {
-    assert_eq!(tensor.dtype(), DType::F32, "hash grid on Flex: tensors must be f32");
+    assert_eq!(
+        tensor.dtype(),
+        DType::F32,
+        "hash grid on Flex: tensors must be f32"
+    );
     match tensor.as_slice::<f32>() {
         Some(values) => Cow::Borrowed(values),
-        None => Cow::Owned(tensor.to_contiguous().into_data().try_into_vec::<f32>().expect("f32 data")),
+        None => Cow::Owned(
+            tensor
+                .to_contiguous()
+                .into_data()
+                .try_into_vec::<f32>()
+                .expect("f32 data"),
+        ),
     }
 }
 
@@ -100,7 +110,11 @@ impl HashGridOps for Flex {
     ) -> FloatTensor<Self> {
         let p = flex_values(&positions);
         let table = flex_values(&table);
-        assert_eq!(table.len(), grid.param_count(), "hash grid on Flex: table size");
+        assert_eq!(
+            table.len(),
+            grid.param_count(),
+            "hash grid on Flex: table size"
+        );
         let n = p.len() / 3;
         let mut out = vec![0f32; n * grid.output_dims()];
         crate::cpu::grid::forward(&grid, &table, &p, &mut out);
@@ -159,16 +173,15 @@ impl<B: HashGridOps, C: CheckpointStrategy> HashGridOps for Autodiff<B, C> {
             .stateful()
         {
             OpsKind::Tracked(prep) => {
-                let output = B::hash_grid_forward(
-                    positions.clone(),
-                    table.into_primitive(),
-                    grid.clone(),
-                );
+                let output =
+                    B::hash_grid_forward(positions.clone(), table.into_primitive(), grid.clone());
                 prep.finish((positions, grid), output)
             }
-            OpsKind::UnTracked(prep) => {
-                prep.finish(B::hash_grid_forward(positions, table.into_primitive(), grid))
-            }
+            OpsKind::UnTracked(prep) => prep.finish(B::hash_grid_forward(
+                positions,
+                table.into_primitive(),
+                grid,
+            )),
         }
     }
 

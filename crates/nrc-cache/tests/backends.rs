@@ -35,21 +35,39 @@ fn cases() -> Vec<(&'static str, String)> {
         )
     };
     let composite = |nested: &[String]| {
-        format!(r#"{{"otype": "Composite", "nested": [{}], "pad_to_multiple": 16}}"#, nested.join(","))
+        format!(
+            r#"{{"otype": "Composite", "nested": [{}], "pad_to_multiple": 16}}"#,
+            nested.join(",")
+        )
     };
     let identity = |dims: u32| format!(r#"{{"otype": "Identity", "n_dims_to_encode": {dims}}}"#);
     let preset = |file: &str| {
-        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../models").join(file);
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../../models")
+            .join(file);
         let json: serde_json::Value =
-            serde_json::from_str(&std::fs::read_to_string(&path).expect("preset readable")).expect("preset is JSON");
+            serde_json::from_str(&std::fs::read_to_string(&path).expect("preset readable"))
+                .expect("preset is JSON");
         json["encoding"].to_string()
     };
     vec![
         // Coarse levels dense, fine levels hashed (r³ crosses T = 2^12 at level 3).
-        ("hash grid F=2", composite(&[grid(8, 2, 12, 4.0, 1.6), identity(11)])),
-        ("hash grid F=1", composite(&[grid(6, 1, 10, 3.0, 2.0), identity(11)])),
-        ("hash grid F=4", composite(&[grid(5, 4, 11, 8.0, 1.5), identity(11)])),
-        ("hash grid F=8", composite(&[grid(4, 8, 10, 2.0, 3.0), identity(11)])),
+        (
+            "hash grid F=2",
+            composite(&[grid(8, 2, 12, 4.0, 1.6), identity(11)]),
+        ),
+        (
+            "hash grid F=1",
+            composite(&[grid(6, 1, 10, 3.0, 2.0), identity(11)]),
+        ),
+        (
+            "hash grid F=4",
+            composite(&[grid(5, 4, 11, 8.0, 1.5), identity(11)]),
+        ),
+        (
+            "hash grid F=8",
+            composite(&[grid(4, 8, 10, 2.0, 3.0), identity(11)]),
+        ),
         (
             "one-blob",
             composite(&[
@@ -73,10 +91,16 @@ fn cases() -> Vec<(&'static str, String)> {
         ),
         (
             "identity (scaled)",
-            composite(&[r#"{"otype": "Identity", "n_dims_to_encode": 14, "scale": 2.0, "offset": -1.0}"#.into()]),
+            composite(&[
+                r#"{"otype": "Identity", "n_dims_to_encode": 14, "scale": 2.0, "offset": -1.0}"#
+                    .into(),
+            ]),
         ),
         ("composite: hash-grid preset", preset("nrc-hashgrid.json")),
-        ("composite: triangle-wave preset", preset("nrc-trianglewave.json")),
+        (
+            "composite: triangle-wave preset",
+            preset("nrc-trianglewave.json"),
+        ),
     ]
 }
 
@@ -88,26 +112,48 @@ struct Outcome {
 }
 
 fn values<const D: usize>(t: Tensor<D>) -> Vec<f32> {
-    t.into_data().convert::<f32>().try_into_vec::<f32>().expect("f32 data")
+    t.into_data()
+        .convert::<f32>()
+        .try_into_vec::<f32>()
+        .expect("f32 data")
 }
 
 /// Encodes on `device` (with autodiff) and back-propagates `⟨upstream, encoding⟩`.
-fn run(device: &Device, encoding: &InputEncoding, raw: &[f32], table: &[f32], upstream: &[f32]) -> Outcome {
+fn run(
+    device: &Device,
+    encoding: &InputEncoding,
+    raw: &[f32],
+    table: &[f32],
+    upstream: &[f32],
+) -> Outcome {
     let device = device.clone().autodiff();
     let n = raw.len() / RAW_INPUT_DIMS;
-    let raw = Tensor::<2>::from_data(TensorData::new(raw.to_vec(), [n, RAW_INPUT_DIMS]), &device).require_grad();
-    let table_t = (!table.is_empty())
-        .then(|| Tensor::<1>::from_data(TensorData::new(table.to_vec(), [table.len()]), &device).require_grad());
-    let upstream = Tensor::<2>::from_data(TensorData::new(upstream.to_vec(), [n, encoding.padded_dims]), &device);
+    let raw = Tensor::<2>::from_data(TensorData::new(raw.to_vec(), [n, RAW_INPUT_DIMS]), &device)
+        .require_grad();
+    let table_t = (!table.is_empty()).then(|| {
+        Tensor::<1>::from_data(TensorData::new(table.to_vec(), [table.len()]), &device)
+            .require_grad()
+    });
+    let upstream = Tensor::<2>::from_data(
+        TensorData::new(upstream.to_vec(), [n, encoding.padded_dims]),
+        &device,
+    );
 
     let encoded = encoding.encode_tensor(table_t.clone(), raw.clone());
     let mut grads = (encoded.clone() * upstream).sum().backward();
-    let input_grad = raw.grad_remove(&mut grads).map(values).unwrap_or_else(|| vec![0.0; raw.dims()[0] * RAW_INPUT_DIMS]);
+    let input_grad = raw
+        .grad_remove(&mut grads)
+        .map(values)
+        .unwrap_or_else(|| vec![0.0; raw.dims()[0] * RAW_INPUT_DIMS]);
     let table_grad = table_t
         .and_then(|t| t.grad_remove(&mut grads))
         .map(values)
         .unwrap_or_default();
-    Outcome { encoded: values(encoded), table_grad, input_grad }
+    Outcome {
+        encoded: values(encoded),
+        table_grad,
+        input_grad,
+    }
 }
 
 /// Largest violation of |a − b| ≤ rtol·max(|a|, |b|) + atol over two arrays, as a multiple of
@@ -115,12 +161,17 @@ fn run(device: &Device, encoding: &InputEncoding, raw: &[f32], table: &[f32], up
 /// scale with the magnitude of the summed terms, not with a result that happens to cancel.
 fn worst(a: &[f32], b: &[f32], rtol: f32) -> (f32, usize) {
     assert_eq!(a.len(), b.len(), "array lengths differ");
-    let rms = (a.iter().map(|x| f64::from(*x).powi(2)).sum::<f64>() / a.len().max(1) as f64).sqrt() as f32;
+    let rms = (a.iter().map(|x| f64::from(*x).powi(2)).sum::<f64>() / a.len().max(1) as f64).sqrt()
+        as f32;
     let atol = rtol * rms.max(f32::MIN_POSITIVE);
     let mut worst = (0.0f32, 0usize);
     for (i, (x, y)) in a.iter().zip(b).enumerate() {
         let allowed = rtol * x.abs().max(y.abs()) + atol;
-        let ratio = if x.is_finite() && y.is_finite() { (x - y).abs() / allowed } else { f32::INFINITY };
+        let ratio = if x.is_finite() && y.is_finite() {
+            (x - y).abs() / allowed
+        } else {
+            f32::INFINITY
+        };
         if ratio > worst.0 {
             worst = (ratio, i);
         }
@@ -148,22 +199,32 @@ fn cpu_and_wgpu_give_the_same_forward_and_backward() {
         }
     };
     for info in nrc_cache::gpu::adapters() {
-        println!("wgpu adapter: {} ({:?}, {:?})", info.name, info.device_type, info.backend);
+        println!(
+            "wgpu adapter: {} ({:?}, {:?})",
+            info.name, info.device_type, info.backend
+        );
     }
     let flex = Device::flex();
     let mut rng = Pcg64Mcg::seed_from_u64(0x5eed_b0c5);
 
     for (case, json) in cases() {
-        let config: CompositeConfig = serde_json::from_str(&json).unwrap_or_else(|e| panic!("{case}: {e}"));
+        let config: CompositeConfig =
+            serde_json::from_str(&json).unwrap_or_else(|e| panic!("{case}: {e}"));
         let encoding = InputEncoding::new(&config);
         let dims = encoding.padded_dims;
 
         // Inputs in [0, 1] (positions, angles, roughness, reflectances); a table with values of
         // order one so that the interpolation sums are not dominated by rounding; an arbitrary
         // upstream gradient.
-        let raw: Vec<f32> = (0..SAMPLES * RAW_INPUT_DIMS).map(|_| rng.random::<f32>()).collect();
-        let table: Vec<f32> = (0..encoding.param_count()).map(|_| rng.random_range(-1.0..1.0)).collect();
-        let upstream: Vec<f32> = (0..SAMPLES * dims).map(|_| rng.random_range(-1.0..1.0)).collect();
+        let raw: Vec<f32> = (0..SAMPLES * RAW_INPUT_DIMS)
+            .map(|_| rng.random::<f32>())
+            .collect();
+        let table: Vec<f32> = (0..encoding.param_count())
+            .map(|_| rng.random_range(-1.0..1.0))
+            .collect();
+        let upstream: Vec<f32> = (0..SAMPLES * dims)
+            .map(|_| rng.random_range(-1.0..1.0))
+            .collect();
 
         let cpu = run(&flex, &encoding, &raw, &table, &upstream);
         let gpu = run(&wgpu, &encoding, &raw, &table, &upstream);
@@ -171,23 +232,67 @@ fn cpu_and_wgpu_give_the_same_forward_and_backward() {
         // The specification: per-sample CPU kernels.
         let mut spec_encoded = vec![0f32; SAMPLES * dims];
         let mut spec_grad = vec![0f32; table.len()];
-        for ((x, out), up) in raw.chunks_exact(RAW_INPUT_DIMS).zip(spec_encoded.chunks_exact_mut(dims)).zip(upstream.chunks_exact(dims)) {
+        for ((x, out), up) in raw
+            .chunks_exact(RAW_INPUT_DIMS)
+            .zip(spec_encoded.chunks_exact_mut(dims))
+            .zip(upstream.chunks_exact(dims))
+        {
             encoding.forward_one(&table, x, out);
             if let Some((grid, part)) = encoding.grid() {
                 let d = &up[part.out_offset..part.out_offset + part.out_dims];
                 grid.backward_params_one([x[0], x[1], x[2]], d, &mut spec_grad);
             }
         }
-        check(case, "forward, Flex vs specification", &spec_encoded, &cpu.encoded, FORWARD_RTOL);
-        check(case, "forward, wgpu vs Flex", &cpu.encoded, &gpu.encoded, FORWARD_RTOL);
-        check(case, "table gradient, Flex vs specification", &spec_grad, &cpu.table_grad, BACKWARD_RTOL);
-        check(case, "table gradient, wgpu vs Flex", &cpu.table_grad, &gpu.table_grad, BACKWARD_RTOL);
-        check(case, "input gradient, wgpu vs Flex", &cpu.input_grad, &gpu.input_grad, BACKWARD_RTOL);
+        check(
+            case,
+            "forward, Flex vs specification",
+            &spec_encoded,
+            &cpu.encoded,
+            FORWARD_RTOL,
+        );
+        check(
+            case,
+            "forward, wgpu vs Flex",
+            &cpu.encoded,
+            &gpu.encoded,
+            FORWARD_RTOL,
+        );
+        check(
+            case,
+            "table gradient, Flex vs specification",
+            &spec_grad,
+            &cpu.table_grad,
+            BACKWARD_RTOL,
+        );
+        check(
+            case,
+            "table gradient, wgpu vs Flex",
+            &cpu.table_grad,
+            &gpu.table_grad,
+            BACKWARD_RTOL,
+        );
+        check(
+            case,
+            "input gradient, wgpu vs Flex",
+            &cpu.input_grad,
+            &gpu.input_grad,
+            BACKWARD_RTOL,
+        );
 
-        let has_grid = encoding.parts.iter().any(|p| matches!(p.kind, EncodingKind::HashGrid(_)));
-        assert_eq!(has_grid, !cpu.table_grad.is_empty(), "{case}: a table gradient exactly when there is a table");
+        let has_grid = encoding
+            .parts
+            .iter()
+            .any(|p| matches!(p.kind, EncodingKind::HashGrid(_)));
+        assert_eq!(
+            has_grid,
+            !cpu.table_grad.is_empty(),
+            "{case}: a table gradient exactly when there is a table"
+        );
         if has_grid {
-            assert!(cpu.table_grad.iter().any(|g| *g != 0.0), "{case}: the table gradient is not all zero");
+            assert!(
+                cpu.table_grad.iter().any(|g| *g != 0.0),
+                "{case}: the table gradient is not all zero"
+            );
         }
         println!(
             "{case}: {} outputs, {} table gradients agree (forward {:.2}, table grad {:.2}, input grad {:.2} × tolerance)",
@@ -216,8 +321,14 @@ fn cpu_and_wgpu_fused_mlp_agree() {
     let flex = Device::flex();
     let mut rng = Pcg64Mcg::seed_from_u64(0x0f05_ed41);
     for (name, config) in [
-        ("hash-grid preset network", nrc_cache::CacheConfig::hash_grid_preset()),
-        ("triangle-wave preset network", nrc_cache::CacheConfig::triangle_wave_preset()),
+        (
+            "hash-grid preset network",
+            nrc_cache::CacheConfig::hash_grid_preset(),
+        ),
+        (
+            "triangle-wave preset network",
+            nrc_cache::CacheConfig::triangle_wave_preset(),
+        ),
     ] {
         let layout = nrc_cache::model::ModelLayout::new(&config);
         let layers = std::sync::Arc::new(layout.layers.clone());
@@ -229,17 +340,23 @@ fn cpu_and_wgpu_fused_mlp_agree() {
             .iter()
             .flat_map(|l| {
                 let s = (6.0 / l.inputs as f32).sqrt();
-                (0..l.len()).map(|_| rng.random_range(-s..s)).collect::<Vec<_>>()
+                (0..l.len())
+                    .map(|_| rng.random_range(-s..s))
+                    .collect::<Vec<_>>()
             })
             .collect();
         assert_eq!(w.len(), weight_count);
-        let x: Vec<f32> = (0..n * inputs).map(|_| rng.random_range(-1.0..1.0)).collect();
+        let x: Vec<f32> = (0..n * inputs)
+            .map(|_| rng.random_range(-1.0..1.0))
+            .collect();
         let up: Vec<f32> = (0..n * 3).map(|_| rng.random_range(-1.0..1.0)).collect();
 
         let run = |device: &Device| {
             let device = device.clone().autodiff();
-            let wt = Tensor::<1>::from_data(TensorData::new(w.clone(), [weight_count]), &device).require_grad();
-            let xt = Tensor::<2>::from_data(TensorData::new(x.clone(), [n, inputs]), &device).require_grad();
+            let wt = Tensor::<1>::from_data(TensorData::new(w.clone(), [weight_count]), &device)
+                .require_grad();
+            let xt = Tensor::<2>::from_data(TensorData::new(x.clone(), [n, inputs]), &device)
+                .require_grad();
             let ut = Tensor::<2>::from_data(TensorData::new(up.clone(), [n, 3]), &device);
             let out = nrc_cache::ops::mlp(wt.clone(), xt.clone(), &layers);
             let mut grads = (out.clone() * ut).sum().backward();
@@ -249,10 +366,31 @@ fn cpu_and_wgpu_fused_mlp_agree() {
         };
         let (cpu_out, cpu_gw, cpu_gx) = run(&flex);
         let (gpu_out, gpu_gw, gpu_gx) = run(&wgpu);
-        check(name, "MLP output, wgpu vs Flex", &cpu_out, &gpu_out, FORWARD_RTOL);
-        check(name, "MLP weight gradient, wgpu vs Flex", &cpu_gw, &gpu_gw, BACKWARD_RTOL);
-        check(name, "MLP input gradient, wgpu vs Flex", &cpu_gx, &gpu_gx, BACKWARD_RTOL);
-        assert!(cpu_gw.iter().filter(|g| **g != 0.0).count() > weight_count / 2, "{name}: most weights get a gradient");
+        check(
+            name,
+            "MLP output, wgpu vs Flex",
+            &cpu_out,
+            &gpu_out,
+            FORWARD_RTOL,
+        );
+        check(
+            name,
+            "MLP weight gradient, wgpu vs Flex",
+            &cpu_gw,
+            &gpu_gw,
+            BACKWARD_RTOL,
+        );
+        check(
+            name,
+            "MLP input gradient, wgpu vs Flex",
+            &cpu_gx,
+            &gpu_gx,
+            BACKWARD_RTOL,
+        );
+        assert!(
+            cpu_gw.iter().filter(|g| **g != 0.0).count() > weight_count / 2,
+            "{name}: most weights get a gradient"
+        );
         println!(
             "{name}: outputs {:.2}, weight grads {:.2}, input grads {:.2} × tolerance",
             worst(&cpu_out, &gpu_out, FORWARD_RTOL).0,

@@ -114,7 +114,11 @@ fn cube_count(threads: usize) -> CubeCount {
 
 fn check_inputs(positions: &CubeTensor, grid: &HashGrid) -> usize {
     let features = grid.features();
-    assert_eq!(positions.dtype, DType::F32, "hash grid on wgpu: positions must be f32");
+    assert_eq!(
+        positions.dtype,
+        DType::F32,
+        "hash grid on wgpu: positions must be f32"
+    );
     let shape = positions.meta.shape();
     assert!(
         shape.num_dims() == 2 && shape[1] == 3,
@@ -146,7 +150,11 @@ pub fn forward(positions: CubeTensor, params: CubeTensor, grid: &HashGrid) -> Cu
         grid.param_count(),
         "hash grid on wgpu: parameter table size"
     );
-    assert_eq!(params.dtype, DType::F32, "hash grid on wgpu: parameters must be f32");
+    assert_eq!(
+        params.dtype,
+        DType::F32,
+        "hash grid on wgpu: parameters must be f32"
+    );
     let positions = into_contiguous(positions);
     let params = into_contiguous(params);
     let client = positions.client.clone();
@@ -189,7 +197,11 @@ pub fn backward(positions: CubeTensor, grad_encoded: CubeTensor, grid: &HashGrid
     let samples = check_inputs(&positions, grid);
     let (levels, features) = (GpuLevel::all(grid), grid.features());
     let n_params = grid.param_count();
-    assert_eq!(grad_encoded.dtype, DType::F32, "hash grid on wgpu: gradient must be f32");
+    assert_eq!(
+        grad_encoded.dtype,
+        DType::F32,
+        "hash grid on wgpu: gradient must be f32"
+    );
     assert_eq!(
         grad_encoded.meta.shape().num_elements(),
         samples * levels.len() * features,
@@ -197,11 +209,8 @@ pub fn backward(positions: CubeTensor, grad_encoded: CubeTensor, grid: &HashGrid
     );
     let positions = into_contiguous(positions);
     let grad_encoded = into_contiguous(grad_encoded);
-    let grad_params = CubeBackend::float_zeros(
-        Shape::new([n_params]),
-        &positions.device,
-        FloatDType::F32,
-    );
+    let grad_params =
+        CubeBackend::float_zeros(Shape::new([n_params]), &positions.device, FloatDType::F32);
     if samples == 0 || levels.is_empty() {
         return grad_params;
     }

@@ -55,7 +55,9 @@ struct MlpKernel {
 impl KernelSource for MlpKernel {
     fn source(&self) -> SourceTemplate {
         let template = match self.pass {
-            Pass::Forward { store } => SourceTemplate::new(FORWARD).register("store", store.to_string()),
+            Pass::Forward { store } => {
+                SourceTemplate::new(FORWARD).register("store", store.to_string())
+            }
             Pass::Backward { input_grad } => {
                 SourceTemplate::new(BACKWARD).register("input_grad", input_grad.to_string())
             }
@@ -77,8 +79,15 @@ impl KernelSource for MlpKernel {
 /// Checks the network has the shape the kernels assume: 64-wide hidden layers, 3 outputs,
 /// weights of the f32 group in order. Returns (inputs, hidden layers).
 fn shape_of(layers: &[LayerShape], weights: &CubeTensor) -> (usize, usize) {
-    assert!(layers.len() >= 2, "fused MLP on wgpu: needs at least one hidden layer");
-    assert_eq!(weights.dtype, DType::F32, "fused MLP on wgpu: weights must be f32");
+    assert!(
+        layers.len() >= 2,
+        "fused MLP on wgpu: needs at least one hidden layer"
+    );
+    assert_eq!(
+        weights.dtype,
+        DType::F32,
+        "fused MLP on wgpu: weights must be f32"
+    );
     let hidden = layers.len() - 1;
     for (l, layer) in layers.iter().enumerate() {
         let outputs = if l == hidden { OUTPUTS } else { WIDTH };
@@ -120,8 +129,16 @@ fn info(samples: usize, layers: &[LayerShape]) -> Vec<u32> {
 }
 
 fn empty(like: &CubeTensor, shape: Shape) -> CubeTensor {
-    let handle = like.client.empty(shape.num_elements().max(1) * size_of::<f32>());
-    CubeTensor::new_contiguous(like.client.clone(), like.device.clone(), shape, handle, DType::F32)
+    let handle = like
+        .client
+        .empty(shape.num_elements().max(1) * size_of::<f32>());
+    CubeTensor::new_contiguous(
+        like.client.clone(),
+        like.device.clone(),
+        shape,
+        handle,
+        DType::F32,
+    )
 }
 
 /// Runs the forward kernel; with `store`, also returns the hidden activations [H·n·64].
@@ -133,20 +150,35 @@ fn forward_pass(
 ) -> (CubeTensor, CubeTensor) {
     let (inputs, hidden) = shape_of(layers, weights);
     let samples = input.meta.shape()[0];
-    assert_eq!(input.meta.shape().num_dims(), 2, "fused MLP on wgpu: input must be [n, in]");
-    assert_eq!(input.meta.shape()[1], inputs, "fused MLP on wgpu: input width");
+    assert_eq!(
+        input.meta.shape().num_dims(),
+        2,
+        "fused MLP on wgpu: input must be [n, in]"
+    );
+    assert_eq!(
+        input.meta.shape()[1],
+        inputs,
+        "fused MLP on wgpu: input width"
+    );
     assert!(
         fits(input, inputs),
         "fused MLP on wgpu: {inputs} inputs need more workgroup memory than the device has"
     );
     let output = empty(input, Shape::new([samples, OUTPUTS]));
-    let activations = empty(input, Shape::new([if store { hidden * samples * WIDTH } else { 1 }]));
+    let activations = empty(
+        input,
+        Shape::new([if store { hidden * samples * WIDTH } else { 1 }]),
+    );
     if samples == 0 {
         return (output, activations);
     }
     let client = &input.client;
     let info = client.create_from_slice(bytemuck::cast_slice(&info(samples, layers)));
-    let kernel = MlpKernel { pass: Pass::Forward { store }, inputs: inputs as u32, hidden: hidden as u32 };
+    let kernel = MlpKernel {
+        pass: Pass::Forward { store },
+        inputs: inputs as u32,
+        hidden: hidden as u32,
+    };
     client.launch(
         Box::new(SourceKernel::new(kernel, CubeDim::new_1d(THREADS))),
         cube_count(samples),
@@ -183,12 +215,17 @@ pub fn backward(
     let (_, activations) = forward_pass(&weights, &input, layers, true);
 
     let grad_hidden = empty(&input, Shape::new([hidden * samples * WIDTH]));
-    let grad_input = empty(&input, Shape::new([if needs.input { samples } else { 0 }, inputs]));
+    let grad_input = empty(
+        &input,
+        Shape::new([if needs.input { samples } else { 0 }, inputs]),
+    );
     if samples > 0 {
         let client = &input.client;
         let info = client.create_from_slice(bytemuck::cast_slice(&info(samples, layers)));
         let kernel = MlpKernel {
-            pass: Pass::Backward { input_grad: needs.input },
+            pass: Pass::Backward {
+                input_grad: needs.input,
+            },
             inputs: inputs as u32,
             hidden: hidden as u32,
         };
@@ -226,8 +263,16 @@ pub fn backward(
         .iter()
         .enumerate()
         .map(|(l, layer)| {
-            let a = if l == 0 { input.clone() } else { layer_of(&activations, l - 1) };
-            let dy = if l == hidden { grad_output.clone() } else { layer_of(&grad_hidden, l) };
+            let a = if l == 0 {
+                input.clone()
+            } else {
+                layer_of(&activations, l - 1)
+            };
+            let dy = if l == hidden {
+                grad_output.clone()
+            } else {
+                layer_of(&grad_hidden, l)
+            };
             let g = CubeBackend::float_matmul(CubeBackend::float_transpose(a), dy);
             CubeBackend::float_reshape(g, Shape::new([layer.len()]))
         })
@@ -236,11 +281,18 @@ pub fn backward(
 }
 
 /// The chain of matrix products and ReLUs the fused forward replaces (burn's own kernels).
-pub fn unfused_forward(weights: CubeTensor, input: CubeTensor, layers: &[LayerShape]) -> CubeTensor {
+pub fn unfused_forward(
+    weights: CubeTensor,
+    input: CubeTensor,
+    layers: &[LayerShape],
+) -> CubeTensor {
     let last = layers.len() - 1;
     let mut h = input;
     for (l, layer) in layers.iter().enumerate() {
-        let m = CubeBackend::float_slice(weights.clone(), &[Slice::from(layer.offset..layer.offset + layer.len())]);
+        let m = CubeBackend::float_slice(
+            weights.clone(),
+            &[Slice::from(layer.offset..layer.offset + layer.len())],
+        );
         let m = CubeBackend::float_reshape(m, Shape::new([layer.inputs, layer.outputs]));
         h = CubeBackend::float_matmul(h, m);
         if l < last {
@@ -251,7 +303,11 @@ pub fn unfused_forward(weights: CubeTensor, input: CubeTensor, layers: &[LayerSh
 }
 
 impl MlpOps for CubeBackend {
-    fn mlp_forward(weights: CubeTensor, input: CubeTensor, layers: Arc<Vec<LayerShape>>) -> CubeTensor {
+    fn mlp_forward(
+        weights: CubeTensor,
+        input: CubeTensor,
+        layers: Arc<Vec<LayerShape>>,
+    ) -> CubeTensor {
         forward(weights, input, &layers)
     }
 
