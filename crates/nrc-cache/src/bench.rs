@@ -65,16 +65,51 @@ pub fn synthetic_batch(n: usize, seed: u64) -> TrainingBatch {
     TrainingBatch { queries, targets, weights: None }
 }
 
-/// Runs `f` (doing `work` units per call) until `min_time` has passed; units per second.
-fn rate(min_time: Duration, work: usize, mut f: impl FnMut()) -> f64 {
+/// CPU time (user + system) this process has used, from `/proc/self/stat` (Linux; 10 ms
+/// resolution), or None elsewhere.
+fn process_cpu_seconds() -> Option<f64> {
+    let stat = std::fs::read_to_string("/proc/self/stat").ok()?;
+    // Fields after the parenthesised command name; utime and stime are the 12th and 13th.
+    let rest = stat.rsplit_once(')')?.1;
+    let fields: Vec<&str> = rest.split_whitespace().collect();
+    let ticks: f64 = fields.get(11)?.parse::<f64>().ok()? + fields.get(12)?.parse::<f64>().ok()?;
+    Some(ticks / 100.0)
+}
+
+/// A throughput measured over wall-clock time, with the process's CPU time over the same span.
+#[derive(Clone, Copy, Debug)]
+struct Rate {
+    /// Units per wall-clock second.
+    per_s: f64,
+    /// Units per CPU-second of this process, times the thread count: the rate had the cores
+    /// been ours alone (other processes on a shared machine inflate wall time).
+    per_cpu_s: Option<f64>,
+}
+
+/// Runs `f` (doing `work` units per call) until `min_time` has passed.
+fn rate(min_time: Duration, work: usize, mut f: impl FnMut()) -> Rate {
     f(); // warm-up
+    let cpu0 = process_cpu_seconds();
     let start = Instant::now();
     let mut calls = 0usize;
     while calls == 0 || start.elapsed() < min_time {
         f();
         calls += 1;
     }
-    (calls * work) as f64 / start.elapsed().as_secs_f64()
+    let wall = start.elapsed().as_secs_f64();
+    let units = (calls * work) as f64;
+    let per_cpu_s = match (cpu0, process_cpu_seconds()) {
+        (Some(a), Some(b)) if b > a => Some(units / (b - a) * rayon::current_num_threads() as f64),
+        _ => None,
+    };
+    Rate { per_s: units / wall, per_cpu_s }
+}
+
+fn show(r: Rate) -> String {
+    match r.per_cpu_s {
+        Some(c) => format!("{:>10.0} ({:>10.0} per core-share)", r.per_s, c),
+        None => format!("{:>10.0}", r.per_s),
+    }
 }
 
 /// MACs per sample of one training step's MLP (forward, weight gradients, input gradients
@@ -135,21 +170,29 @@ pub fn run(options: &BenchOptions) -> Vec<BenchFigure> {
                     std::hint::black_box(cache.infer(&batch.queries));
                 });
                 println!(
-                    "  batch {batch_size:>6} [{}]: train {:>10.0} samples/s ({:.1} GFLOP/s in the MLP), infer {:>10.0} queries/s; EMA materialisation {:.1} ms",
+                    "  batch {batch_size:>6} [{}]: train {} samples/s, infer {} queries/s; EMA materialisation {:.1} ms",
                     device.default_path(),
-                    train,
-                    train * (fwd + train_macs) as f64 * 2.0 / 1e9,
-                    infer,
+                    show(train),
+                    show(infer),
                     materialise.as_secs_f64() * 1e3
                 );
                 if device == CacheDevice::Cpu {
                     let phases: Vec<f64> = PHASE_NANOS.iter().map(|p| p.load(std::sync::atomic::Ordering::Relaxed) as f64 * 1e-9).collect();
+                    let samples = train.per_s * wall;
+                    let per_sample = |t: f64| t / samples * 1e9;
                     println!(
-                        "    time per phase (thread-seconds / wall {:.2} s): pack+upload {:.2}, encode {:.2}, MLP+loss {:.2}, grid scatter+Adam+EMA {:.2}, MLP Adam {:.3}",
-                        wall, phases[4], phases[0], phases[1], phases[2], phases[3]
+                        "    thread-time per sample: encode {:.0} ns, MLP+loss {:.0} ns ({:.1} GFLOP/s per thread), grid scatter {:.0} ns + sparse Adam/EMA {:.0} ns (phase wall {:.0} ns), MLP Adam {:.1} ns, packing {:.1} ns",
+                        per_sample(phases[0]),
+                        per_sample(phases[1]),
+                        2.0 * (fwd + train_macs) as f64 / per_sample(phases[1]),
+                        per_sample(phases[5]),
+                        per_sample(phases[6]),
+                        per_sample(phases[2]),
+                        per_sample(phases[3]),
+                        per_sample(phases[4]),
                     );
                 }
-                figures.push(BenchFigure { preset: name.to_string(), device, path: device.default_path(), batch: batch_size, train_per_s: Some(train), infer_per_s: Some(infer) });
+                figures.push(BenchFigure { preset: name.to_string(), device, path: device.default_path(), batch: batch_size, train_per_s: Some(train.per_s), infer_per_s: Some(infer.per_s) });
             }
             if options.compare_paths {
                 figures.extend(compare(name, config, device, options));
@@ -166,7 +209,7 @@ fn compare(name: &str, config: &CacheConfig, device: CacheDevice, options: &Benc
     let batch = synthetic_batch(n, 2);
     let short = options.min_time / 2;
     let paths: &[ComputePath] = if device == CacheDevice::Cpu { &[ComputePath::Fused, ComputePath::CustomOps, ComputePath::Unfused] } else { &[ComputePath::CustomOps, ComputePath::Unfused] };
-    let mut base: Option<(f64, f64)> = None;
+    let mut base: Option<(Rate, Rate)> = None;
     for &path in paths {
         let Ok(mut cache) = RadianceCache::with_path(config.clone(), SceneBox::default(), device, path) else { continue };
         let train = rate(short, n, || {
@@ -176,8 +219,12 @@ fn compare(name: &str, config: &CacheConfig, device: CacheDevice, options: &Benc
             std::hint::black_box(cache.infer(&batch.queries));
         });
         let (bt, bi) = *base.get_or_insert((train, infer));
-        println!("  path {path:<10} batch {n}: train {train:>10.0} samples/s, infer {infer:>10.0} queries/s  (fastest path is {:.1}× / {:.1}× this)", bt / train, bi / infer);
-        out.push(BenchFigure { preset: name.to_string(), device, path, batch: n, train_per_s: Some(train), infer_per_s: Some(infer) });
+        let ratio = |a: Rate, b: Rate| match (a.per_cpu_s, b.per_cpu_s) {
+            (Some(x), Some(y)) => x / y,
+            _ => a.per_s / b.per_s,
+        };
+        println!("  path {path:<10} batch {n}: train {} samples/s, infer {} queries/s  (first path / this: {:.1}× train, {:.1}× infer)", show(train), show(infer), ratio(bt, train), ratio(bi, infer));
+        out.push(BenchFigure { preset: name.to_string(), device, path, batch: n, train_per_s: Some(train.per_s), infer_per_s: Some(infer.per_s) });
     }
     if let Ok(d) = device.burn_device() {
         mlp_alone(config, &d, n, short);
@@ -209,8 +256,8 @@ fn mlp_alone(config: &CacheConfig, device: &Device, n: usize, min_time: Duration
             let grads = o.sum().backward();
             std::hint::black_box(w.grad(&grads).expect("gradient").into_data());
         });
-        results.push(per_s);
-        println!("  MLP alone, forward + backward, {}: {per_s:>10.0} samples/s", if fused { "fused op" } else { "burn matmul + relu" });
+        results.push(per_s.per_cpu_s.unwrap_or(per_s.per_s));
+        println!("  MLP alone, forward + backward, {}: {} samples/s", if fused { "fused op" } else { "burn matmul + relu" }, show(per_s));
     }
     if results.len() == 2 {
         println!("  MLP fused / unfused: {:.1}×", results[0] / results[1]);

@@ -109,7 +109,8 @@ impl RadianceCache {
         let layout = Arc::new(ModelLayout::new(&config));
         let burn_device = device.burn_device()?;
         let (adam, ema) = config.optimizer.resolve();
-        let state = TensorState::from_host(host, layout.grid_entries(), step, path == ComputePath::Fused, &burn_device);
+        let packed = (path == ComputePath::Fused).then(|| layout.encoding.grid().map(|(g, _)| g.features())).flatten();
+        let state = TensorState::from_host(host, layout.grid_entries(), step, packed, &burn_device);
         Ok(Self { config, layout, scene_box, device, burn_device, path, adam, ema, step, state: Some(state), inference: Mutex::new(None) })
     }
 
@@ -228,6 +229,7 @@ impl RadianceCache {
         let rows = Tensor::<2>::from_data(TensorData::new(packed.rows, [packed.len, TRAIN_ROW]), &self.burn_device);
         crate::cpu::train::PHASE_NANOS[4].fetch_add(t_pack.elapsed().as_nanos() as u64, std::sync::atomic::Ordering::Relaxed);
         let state = self.state.take().expect("state present between calls");
+        let state_packed = state.packed;
         let losses: Vec<f64> = match self.path {
             ComputePath::Fused => {
                 let spec = StepSpec {
@@ -239,7 +241,7 @@ impl RadianceCache {
                     steps,
                 };
                 let out = <Dispatch as NrcFusedOps>::fused_train_steps(state.into_dispatch(), rows.into_dispatch(), spec);
-                self.state = Some(TensorState::from_dispatch(out.state));
+                self.state = Some(TensorState::from_dispatch(out.state, state_packed));
                 out.losses
             }
             ComputePath::CustomOps | ComputePath::Unfused => {
@@ -289,13 +291,13 @@ impl RadianceCache {
         }
         let state = self.state.as_ref().expect("state present");
         let (grid, mlp) = match (self.path, self.ema) {
-            (_, None) => (state.grid.clone(), state.mlp.clone()),
-            (ComputePath::Fused, Some(alpha)) => {
+            (ComputePath::Fused, ema) => {
                 // The op takes the state by value; the clones share storage and the kernel only
                 // reads it.
-                let w = <Dispatch as NrcFusedOps>::inference_weights(state.clone().into_dispatch(), self.layout.clone(), Some(alpha), self.step);
+                let w = <Dispatch as NrcFusedOps>::inference_weights(state.clone().into_dispatch(), self.layout.clone(), ema, self.step);
                 (Tensor::from_dispatch(w.grid), Tensor::from_dispatch(w.mlp))
             }
+            (_, None) => (state.grid.clone(), state.mlp.clone()),
             (_, Some(alpha)) => {
                 if self.step == 0 {
                     (state.grid.clone(), state.mlp.clone())
@@ -313,8 +315,9 @@ impl RadianceCache {
     pub fn host_state(&mut self) -> HostState {
         if let (ComputePath::Fused, Some(alpha)) = (self.path, self.ema) {
             let state = self.state.take().expect("state present");
+            let packed = state.packed;
             let s = <Dispatch as NrcFusedOps>::catch_up_ema(state.into_dispatch(), self.layout.clone(), alpha, self.step);
-            self.state = Some(TensorState::from_dispatch(s));
+            self.state = Some(TensorState::from_dispatch(s, packed));
         }
         self.state.as_ref().expect("state present").to_host()
     }
@@ -322,7 +325,11 @@ impl RadianceCache {
     /// The current weights (hash table, MLP), not averaged.
     pub fn weights(&self) -> (Vec<f32>, Vec<f32>) {
         let s = self.state.as_ref().expect("state present");
-        (tensor_vec(s.grid.clone()), tensor_vec(s.mlp.clone()))
+        let grid = match s.packed {
+            Some(f) => crate::cpu::optim::unpack_records(f, &tensor_vec(s.grid.clone()))[0].clone(),
+            None => tensor_vec(s.grid.clone()),
+        };
+        (grid, tensor_vec(s.mlp.clone()))
     }
 
     /// Replaces the current weights (moments and EMA untouched); lengths must match the layout.
@@ -336,8 +343,15 @@ impl RadianceCache {
                 self.layout.mlp_params()
             )));
         }
+        *self.inference.lock().expect("inference lock") = None;
         let s = self.state.as_mut().expect("state present");
-        s.grid = vec_tensor(grid, &self.burn_device);
+        s.grid = match s.packed {
+            Some(f) => {
+                let [_, m, v, e] = crate::cpu::optim::unpack_records(f, &tensor_vec(s.grid.clone()));
+                vec_tensor(crate::cpu::optim::pack_records(f, &grid, &m, &v, &e), &self.burn_device)
+            }
+            None => vec_tensor(grid, &self.burn_device),
+        };
         s.mlp = vec_tensor(mlp, &self.burn_device);
         *self.inference.lock().expect("inference lock") = None;
         Ok(())

@@ -7,9 +7,9 @@
 //! * [`NrcFusedOps`] — the whole CPU training step (encode, MLP forward/backward, loss, sparse
 //!   Adam + EMA) and fused inference, on tensors that live on the device.
 //!
-//! Both are implemented for Flex (rayon kernels in [`crate::cpu`]). A wgpu implementation plugs
-//! in by adding `Cube` to a selector list and implementing the trait for `CubeBackend`; without
-//! one the cache runs the generic tensor-op path on wgpu (with the hash-grid op's WGSL kernels).
+//! Both are implemented for Flex (rayon kernels in [`crate::cpu`]); [`MlpOps`] also for wgpu
+//! (`CubeBackend`, WGSL kernels in [`crate::gpu::mlp`]). The fused step exists on Flex only; on
+//! wgpu the cache trains along the tensor path with the hash-grid op's WGSL kernels.
 
 use std::borrow::Cow;
 use std::sync::Arc;
@@ -39,8 +39,9 @@ pub struct Needs {
     pub input: bool,
 }
 
-/// The fused MLP as a differentiable custom op.
-#[backend_extension(Flex, Autodiff)]
+/// The fused MLP as a differentiable custom op (rayon tiles on Flex, WGSL kernels in
+/// [`crate::gpu::mlp`] on wgpu).
+#[backend_extension(Cube, Flex, Autodiff)]
 pub trait MlpOps: burn::backend::Backend {
     /// Fused MLP (ReLU hidden layers, no biases, linear output): `weights` is the MLP parameter
     /// group `[W]` (layout of [`LayerShape`]), `input` `[N, in]` → raw outputs `[N, 3]`.
@@ -59,16 +60,18 @@ pub trait MlpOps: burn::backend::Backend {
 
 /// The complete training state on the device: the two parameter groups with their Adam
 /// moments and raw EMA, the hash-table gradient scratch (zero between steps) and, per table
-/// entry, the step its EMA is current at (i32 storage of a u32 step count).
+/// entry, the step its EMA is current at (i32 storage of a u32 step count). The fused ops keep
+/// the table as per-entry records `[w | m | v | ema]` in `grid` (see [`crate::cpu::optim`]),
+/// with `grid_m`, `grid_v`, `grid_ema` empty.
 #[derive(ExtensionType)]
 pub struct TrainState<B: Backend> {
-    /// Hash table weights `[entries·F]` (empty without a hash grid).
+    /// Hash table records `[entries·4F]` (empty without a hash grid).
     pub grid: FloatTensor<B>,
-    /// Adam first moment of the table.
+    /// Unused by the fused ops (empty).
     pub grid_m: FloatTensor<B>,
-    /// Adam second moment of the table.
+    /// Unused by the fused ops (empty).
     pub grid_v: FloatTensor<B>,
-    /// Raw EMA of the table.
+    /// Unused by the fused ops (empty).
     pub grid_ema: FloatTensor<B>,
     /// Gradient scratch of the table.
     pub grid_grad: FloatTensor<B>,
@@ -243,34 +246,36 @@ impl MlpOps for Flex {
     }
 }
 
-/// Unpacks a Flex training state into mutable slices, runs `f`, and packs it again.
-fn with_flex_state<R>(state: TrainState<Flex>, f: impl FnOnce(&mut [&mut [f32]; 9], &mut [u32]) -> R) -> (TrainState<Flex>, R) {
+/// Unpacks a Flex training state into mutable slices (`[records, grad, mlp, mlp_m, mlp_v,
+/// mlp_ema]` and the step table), runs `f`, and packs it again.
+fn with_flex_state<R>(state: TrainState<Flex>, f: impl FnOnce(&mut [&mut [f32]; 6], &mut [u32]) -> R) -> (TrainState<Flex>, R) {
     let TrainState { grid, grid_m, grid_v, grid_ema, grid_grad, grid_last, mlp, mlp_m, mlp_v, mlp_ema } = state;
-    let mut tensors = [grid, grid_m, grid_v, grid_ema, grid_grad, mlp, mlp_m, mlp_v, mlp_ema].map(flex_owned_f32);
+    let mut tensors = [grid, grid_grad, mlp, mlp_m, mlp_v, mlp_ema].map(flex_owned_f32);
     let mut last = grid_last;
     let r = {
-        let [a, b, c, d, e, g, h, i, j] = &mut tensors;
-        let mut slices = [flex_mut_f32(a), flex_mut_f32(b), flex_mut_f32(c), flex_mut_f32(d), flex_mut_f32(e), flex_mut_f32(g), flex_mut_f32(h), flex_mut_f32(i), flex_mut_f32(j)];
+        let [a, b, c, d, e, g] = &mut tensors;
+        let mut slices = [flex_mut_f32(a), flex_mut_f32(b), flex_mut_f32(c), flex_mut_f32(d), flex_mut_f32(e), flex_mut_f32(g)];
         f(&mut slices, flex_last_mut(&mut last))
     };
-    let [grid, grid_m, grid_v, grid_ema, grid_grad, mlp, mlp_m, mlp_v, mlp_ema] = tensors;
+    let [grid, grid_grad, mlp, mlp_m, mlp_v, mlp_ema] = tensors;
     (TrainState { grid, grid_m, grid_v, grid_ema, grid_grad, grid_last: last, mlp, mlp_m, mlp_v, mlp_ema }, r)
+}
+
+/// The step table of a Flex state, read-only.
+fn flex_last(t: &FlexTensor) -> Cow<'_, [i32]> {
+    t.as_slice::<i32>().map(Cow::Borrowed).unwrap_or_else(|| Cow::Owned(t.clone().into_data().convert::<i32>().try_to_vec::<i32>().expect("i32 data")))
 }
 
 impl NrcFusedOps for Flex {
     fn fused_train_steps(state: TrainState<Self>, batch: FlexTensor, spec: StepSpec) -> TrainOutcome<Self> {
         let rows = flex_f32(&batch);
         let (state, losses) = with_flex_state(state, |s, last| {
-            let [grid, grid_m, grid_v, grid_ema, grid_grad, mlp, mlp_m, mlp_v, mlp_ema] = s;
+            let [records, grid_grad, mlp, mlp_m, mlp_v, mlp_ema] = s;
             let mut losses = Vec::with_capacity(spec.steps as usize);
             for k in 1..=spec.steps {
                 let c = cpu::optim::StepConstants::new(spec.adam, spec.ema, spec.first_step + k);
-                let grid_state = (spec.layout.grid_params > 0).then(|| cpu::train::GridState {
-                    group: cpu::train::GroupState { w: &mut **grid, m: &mut **grid_m, v: &mut **grid_v, ema: &mut **grid_ema },
-                    grad: &mut **grid_grad,
-                    last: &mut *last,
-                });
-                let mlp_state = cpu::train::GroupState { w: &mut **mlp, m: &mut **mlp_m, v: &mut **mlp_v, ema: &mut **mlp_ema };
+                let grid_state = (spec.layout.grid_params > 0).then_some(cpu::train::GridState { records, grad: grid_grad, last: &mut *last });
+                let mlp_state = cpu::train::GroupState { w: mlp, m: mlp_m, v: mlp_v, ema: mlp_ema };
                 losses.push(cpu::train::train_step(&spec.layout, grid_state, mlp_state, &rows, &c, spec.loss));
             }
             losses
@@ -279,30 +284,28 @@ impl NrcFusedOps for Flex {
     }
 
     fn inference_weights(state: TrainState<Self>, layout: Arc<ModelLayout>, ema: Option<f32>, step: u32) -> InferenceWeights<Self> {
-        let grid = flex_f32(&state.grid);
+        let records = flex_f32(&state.grid);
         let mlp = flex_f32(&state.mlp);
-        let (g, m) = match ema {
-            None => (grid.to_vec(), mlp.to_vec()),
+        let last_i32 = flex_last(&state.grid_last);
+        let last: &[u32] = bytemuck::cast_slice(&last_i32);
+        let mut g = vec![0f32; layout.grid_params];
+        if let Some((hg, _)) = layout.encoding.grid() {
+            let f = hg.features();
+            let rec = cpu::optim::RECORD * f;
+            let outs = cpu::grid::split_levels(hg, f, &mut g[..]);
+            outs.into_par_iter().enumerate().for_each(|(l, o)| {
+                let level = &hg.levels[l];
+                let (a, b) = (level.offset, level.offset + level.entries as usize);
+                cpu::optim::materialize_grid(ema, step, f, &records[a * rec..b * rec], &last[a..b], o);
+            });
+        }
+        let m = match ema {
             Some(alpha) => {
-                let grid_ema = flex_f32(&state.grid_ema);
-                let mlp_ema = flex_f32(&state.mlp_ema);
-                let last_i32 = state.grid_last.as_slice::<i32>().map(Cow::Borrowed).unwrap_or_else(|| Cow::Owned(state.grid_last.clone().into_data().convert::<i32>().try_to_vec::<i32>().expect("i32 data")));
-                let last: &[u32] = bytemuck::cast_slice(&last_i32);
-                let mut g = vec![0f32; grid.len()];
-                if let Some((hg, _)) = layout.encoding.grid() {
-                    let f = hg.features();
-                    let outs = cpu::grid::split_levels(hg, f, &mut g[..]);
-                    outs.into_par_iter().enumerate().for_each(|(l, o)| {
-                        let level = &hg.levels[l];
-                        let (a, b) = (level.offset * f, (level.offset + level.entries as usize) * f);
-                        let lr = level.offset..level.offset + level.entries as usize;
-                        cpu::optim::materialize_grid(alpha, step, f, &grid[a..b], &grid_ema[a..b], &last[lr], o);
-                    });
-                }
                 let mut m = vec![0f32; mlp.len()];
-                cpu::optim::materialize_dense(alpha, step, &mlp, &mlp_ema, &mut m);
-                (g, m)
+                cpu::optim::materialize_dense(alpha, step, &mlp, &flex_f32(&state.mlp_ema), &mut m);
+                m
             }
+            None => mlp.to_vec(),
         };
         let (gl, ml) = (g.len(), m.len());
         InferenceWeights { grid: flex_from(g, &[gl]), mlp: flex_from(m, &[ml]) }
@@ -310,9 +313,8 @@ impl NrcFusedOps for Flex {
 
     fn catch_up_ema(state: TrainState<Self>, layout: Arc<ModelLayout>, ema: f32, step: u32) -> TrainState<Self> {
         with_flex_state(state, |s, last| {
-            let [grid, _, _, grid_ema, ..] = s;
             if let Some((hg, _)) = layout.encoding.grid() {
-                cpu::optim::catch_up(ema, step, hg.features(), grid, grid_ema, last);
+                cpu::optim::catch_up(ema, step, hg.features(), s[0], last);
             }
         })
         .0

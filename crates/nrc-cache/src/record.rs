@@ -48,9 +48,8 @@ pub const RAW_INPUT_DIMS: usize = 14;
 /// beforehand ([`query_is_finite`]).
 pub fn raw_inputs(q: &CacheQuery) -> [f32; RAW_INPUT_DIMS] {
     let mut out = [0.0; RAW_INPUT_DIMS];
-    for k in 0..3 {
-        let p = q.position[k];
-        out[k] = if p.is_finite() { p.clamp(0.0, 1.0) } else { 0.0 };
+    for (o, p) in out.iter_mut().zip(q.position) {
+        *o = if p.is_finite() { p.clamp(0.0, 1.0) } else { 0.0 };
     }
     let (t, p) = spherical(q.direction);
     out[3] = t;

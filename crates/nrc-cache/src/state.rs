@@ -6,9 +6,15 @@ use burn::tensor::{DType, Device, Int, Tensor, TensorCreationOptions, TensorData
 use crate::ops::TrainState;
 
 /// All training state on the device (see [`TrainState`] for the fields' meaning).
+///
+/// With `packed = Some(F)` (the fused CPU path) `grid` holds the table's per-entry records
+/// `[w | m | v | ema]` ([`crate::cpu::optim::RECORD`]·F floats per entry) and `grid_m`,
+/// `grid_v`, `grid_ema` are empty; otherwise the four are separate arrays.
 #[derive(Clone, Debug)]
 pub struct TensorState {
-    /// Hash table weights.
+    /// Features per table entry when the table is stored as records.
+    pub packed: Option<usize>,
+    /// Hash table weights (or records).
     pub grid: Tensor<1>,
     /// Adam first moment of the table.
     pub grid_m: Tensor<1>,
@@ -33,7 +39,7 @@ pub struct TensorState {
 /// The training state on the host, EMA fully caught up to the step count.
 #[derive(Clone, Debug, PartialEq)]
 pub struct HostState {
-    /// Hash table weights.
+    /// Hash table weights `[entry][feature]`.
     pub grid: Vec<f32>,
     /// Adam first moment of the table.
     pub grid_m: Vec<f32>,
@@ -63,17 +69,22 @@ pub fn tensor_vec(t: Tensor<1>) -> Vec<f32> {
 }
 
 impl TensorState {
-    /// Uploads a host state; every table entry's EMA is current at `step`. `scratch` allocates
-    /// the table's gradient scratch (needed by the fused path only).
-    pub fn from_host(h: HostState, entries: usize, step: u32, scratch: bool, device: &Device) -> Self {
+    /// Uploads a host state; every table entry's EMA is current at `step`. `packed = Some(F)`
+    /// stores the table as records with a gradient scratch (the fused path).
+    pub fn from_host(h: HostState, entries: usize, step: u32, packed: Option<usize>, device: &Device) -> Self {
         let grid_len = h.grid.len();
         let last = vec![step as i32; entries];
+        let (grid, grid_m, grid_v, grid_ema) = match packed {
+            Some(f) => (crate::cpu::optim::pack_records(f, &h.grid, &h.grid_m, &h.grid_v, &h.grid_ema), Vec::new(), Vec::new(), Vec::new()),
+            None => (h.grid, h.grid_m, h.grid_v, h.grid_ema),
+        };
         Self {
-            grid: vec_tensor(h.grid, device),
-            grid_m: vec_tensor(h.grid_m, device),
-            grid_v: vec_tensor(h.grid_v, device),
-            grid_ema: vec_tensor(h.grid_ema, device),
-            grid_grad: vec_tensor(vec![0.0; if scratch { grid_len } else { 0 }], device),
+            packed,
+            grid: vec_tensor(grid, device),
+            grid_m: vec_tensor(grid_m, device),
+            grid_v: vec_tensor(grid_v, device),
+            grid_ema: vec_tensor(grid_ema, device),
+            grid_grad: vec_tensor(vec![0.0; if packed.is_some() { grid_len } else { 0 }], device),
             grid_last: Tensor::from_data(TensorData::new(last, [entries]), TensorCreationOptions::new(device.clone()).with_dtype(DType::I32)),
             mlp: vec_tensor(h.mlp, device),
             mlp_m: vec_tensor(h.mlp_m, device),
@@ -84,11 +95,18 @@ impl TensorState {
 
     /// Downloads the state (the caller has caught the EMA up).
     pub fn to_host(&self) -> HostState {
+        let (grid, grid_m, grid_v, grid_ema) = match self.packed {
+            Some(f) => {
+                let [w, m, v, e] = crate::cpu::optim::unpack_records(f, &tensor_vec(self.grid.clone()));
+                (w, m, v, e)
+            }
+            None => (tensor_vec(self.grid.clone()), tensor_vec(self.grid_m.clone()), tensor_vec(self.grid_v.clone()), tensor_vec(self.grid_ema.clone())),
+        };
         HostState {
-            grid: tensor_vec(self.grid.clone()),
-            grid_m: tensor_vec(self.grid_m.clone()),
-            grid_v: tensor_vec(self.grid_v.clone()),
-            grid_ema: tensor_vec(self.grid_ema.clone()),
+            grid,
+            grid_m,
+            grid_v,
+            grid_ema,
             mlp: tensor_vec(self.mlp.clone()),
             mlp_m: tensor_vec(self.mlp_m.clone()),
             mlp_v: tensor_vec(self.mlp_v.clone()),
@@ -113,8 +131,9 @@ impl TensorState {
     }
 
     /// Takes the tensors back from the dispatch layer.
-    pub fn from_dispatch(s: TrainState<Dispatch>) -> Self {
+    pub fn from_dispatch(s: TrainState<Dispatch>, packed: Option<usize>) -> Self {
         Self {
+            packed,
             grid: Tensor::from_dispatch(s.grid),
             grid_m: Tensor::from_dispatch(s.grid_m),
             grid_v: Tensor::from_dispatch(s.grid_v),

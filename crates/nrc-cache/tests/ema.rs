@@ -2,7 +2,7 @@
 //! `ê_t = Σ_{i≤t} (1 − α) α^(t−i) w_i / (1 − α^t)` of the weights after each step.
 
 use nrc_cache::config::{AdamParams, NestedEncoding};
-use nrc_cache::cpu::optim::{StepConstants, catch_up, dense_step, materialize_dense, materialize_grid, sparse_step};
+use nrc_cache::cpu::optim::{StepConstants, catch_up, dense_step, materialize_dense, materialize_grid, pack_records, sparse_step, unpack_records};
 use nrc_cache::state::tensor_vec;
 use nrc_cache::{CacheConfig, CacheDevice, CacheQuery, ComputePath, RadianceCache, SceneBox, TrainingBatch};
 use rand::{Rng, SeedableRng};
@@ -26,11 +26,13 @@ fn lazy_sparse_and_dense_ema_match_the_closed_form_on_a_toy_sequence() {
     let alpha = 0.9f32; // a short memory makes early steps matter
     let (entries, f) = (40, 2);
     let mut r = Pcg64Mcg::seed_from_u64(1);
-    let mut w: Vec<f32> = (0..entries * f).map(|_| r.random_range(-1.0..1.0)).collect();
-    let (mut m, mut v, mut e, mut grad) = (vec![0f32; w.len()], vec![0f32; w.len()], vec![0f32; w.len()], vec![0f32; w.len()]);
+    let w0: Vec<f32> = (0..entries * f).map(|_| r.random_range(-1.0..1.0)).collect();
+    let zeros = vec![0f32; w0.len()];
+    let mut records = pack_records(f, &w0, &zeros, &zeros, &zeros);
+    let mut grad = zeros.clone();
     let mut last = vec![0u32; entries];
-    let mut dw = w.clone();
-    let (mut dm, mut dv, mut de) = (vec![0f32; w.len()], vec![0f32; w.len()], vec![0f32; w.len()]);
+    let mut dw = w0.clone();
+    let (mut dm, mut dv, mut de) = (zeros.clone(), zeros.clone(), zeros.clone());
     let (mut history, mut dense_history) = (Vec::new(), Vec::new());
     for step in 1..=25u32 {
         let c = StepConstants::new(adam(), Some(alpha), step);
@@ -44,17 +46,17 @@ fn lazy_sparse_and_dense_ema_match_the_closed_form_on_a_toy_sequence() {
                 }
             }
         }
-        sparse_step(&c, f, &mut touched, &mut w, &mut m, &mut v, &mut e, &mut grad, &mut last);
+        sparse_step(&c, f, &mut touched, &mut records, &mut grad, &mut last);
         assert!(grad.iter().all(|g| *g == 0.0), "the step consumes the gradient");
-        history.push(w.clone());
+        history.push(unpack_records(f, &records)[0].clone());
         // Dense on the side.
         let g: Vec<f32> = (0..dw.len()).map(|_| r.random_range(-1.0..1.0)).collect();
         dense_step(&c, &mut dw, &mut dm, &mut dv, &mut de, &g);
         dense_history.push(dw.clone());
 
         let expect = closed_form(f64::from(alpha), &history);
-        let mut got = vec![0f32; w.len()];
-        materialize_grid(alpha, step, f, &w, &e, &last, &mut got);
+        let mut got = vec![0f32; w0.len()];
+        materialize_grid(Some(alpha), step, f, &records, &last, &mut got);
         for (j, (a, b)) in got.iter().zip(&expect).enumerate() {
             assert!((f64::from(*a) - b).abs() < 1e-5 * (1.0 + b.abs()), "step {step} entry {j}: {a} vs closed form {b}");
         }
@@ -66,16 +68,17 @@ fn lazy_sparse_and_dense_ema_match_the_closed_form_on_a_toy_sequence() {
         }
     }
     // Untouched entries never moved, and their average is exactly their weight.
+    let w = unpack_records(f, &records)[0].clone();
     for en in (0..entries).step_by(7) {
-        assert_eq!(w[en * f], history[0][en * f]);
+        assert_eq!(w[en * f], w0[en * f]);
     }
     // Catching every entry up changes nothing about the materialised average.
     let mut before = vec![0f32; w.len()];
-    materialize_grid(alpha, 25, f, &w, &e, &last, &mut before);
-    catch_up(alpha, 25, f, &w, &mut e, &mut last);
+    materialize_grid(Some(alpha), 25, f, &records, &last, &mut before);
+    catch_up(alpha, 25, f, &mut records, &mut last);
     assert!(last.iter().all(|l| *l == 25));
     let mut after = vec![0f32; w.len()];
-    materialize_grid(alpha, 25, f, &w, &e, &last, &mut after);
+    materialize_grid(Some(alpha), 25, f, &records, &last, &mut after);
     assert_eq!(before, after);
 }
 

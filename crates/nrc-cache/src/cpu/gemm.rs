@@ -38,7 +38,7 @@ pub enum Store {
 
 /// `C[m×n] (op)= A[m×k] · B[k×n]`; `n` must be a multiple of 8.
 pub fn gemm(m: usize, n: usize, k: usize, a: Strided<'_>, b: Rows<&[f32]>, c: Rows<&mut [f32]>, store: Store) {
-    assert!(n % 8 == 0, "gemm: n = {n} must be a multiple of 8");
+    assert!(n.is_multiple_of(8), "gemm: n = {n} must be a multiple of 8");
     if m == 0 || n == 0 {
         return;
     }

@@ -5,7 +5,79 @@
 
 use rayon::prelude::*;
 
-use crate::encoding::hash_grid::HashGrid;
+use crate::encoding::hash_grid::{FastLevel, HashGrid};
+
+/// Hints the cache to fetch the line holding `p` (a no-op off x86-64).
+#[inline(always)]
+pub fn prefetch<T>(p: *const T) {
+    #[cfg(target_arch = "x86_64")]
+    // SAFETY: prefetching never faults, whatever the address.
+    unsafe {
+        std::arch::x86_64::_mm_prefetch::<{ std::arch::x86_64::_MM_HINT_T0 }>(p.cast());
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = p;
+}
+
+/// Per-sample vertex indices and weights of one level, reused between the two passes of
+/// [`encode_tile`] and [`scatter_level`].
+pub type CornerScratch = Vec<([u32; 8], [f32; 8])>;
+
+/// Encodes the hash grid of `m` samples into columns `col..col + L·F` of `out` (row stride
+/// `stride`), level by level. Entry `e`'s features are `table[e·table_stride..][..F]` (the
+/// plain table has `table_stride = F`, the training records `4F`). For each level, a first pass computes every sample's vertices
+/// and prefetches their table lines, so the misses overlap; the second pass gathers and
+/// interpolates from cache.
+pub fn encode_tile(
+    grid: &HashGrid,
+    levels: &[FastLevel],
+    table: &[f32],
+    table_stride: usize,
+    m: usize,
+    position: impl Fn(usize) -> [f32; 3],
+    out: &mut [f32],
+    stride: usize,
+    col: usize,
+    scratch: &mut CornerScratch,
+) {
+    let f = grid.features();
+    scratch.resize(m, ([0; 8], [0.0; 8]));
+    for (l, level) in levels.iter().enumerate() {
+        for (i, c) in scratch.iter_mut().enumerate().take(m) {
+            *c = level.corners(position(i));
+            for &e in &c.0 {
+                prefetch(table.as_ptr().wrapping_add(e as usize * table_stride));
+            }
+        }
+        let o = col + l * f;
+        match f {
+            2 => {
+                for (i, (idx, w)) in scratch.iter().enumerate().take(m) {
+                    let (mut a, mut b) = (0f32, 0f32);
+                    for k in 0..8 {
+                        let e = idx[k] as usize * table_stride;
+                        a += w[k] * table[e];
+                        b += w[k] * table[e + 1];
+                    }
+                    out[i * stride + o] = a;
+                    out[i * stride + o + 1] = b;
+                }
+            }
+            _ => {
+                for (i, (idx, w)) in scratch.iter().enumerate().take(m) {
+                    let dst = &mut out[i * stride + o..i * stride + o + f];
+                    dst.fill(0.0);
+                    for k in 0..8 {
+                        let e = idx[k] as usize * table_stride;
+                        for (j, d) in dst.iter_mut().enumerate() {
+                            *d += w[k] * table[e + j];
+                        }
+                    }
+                }
+            }
+        }
+    }
+}
 
 /// Splits a per-entry array (`f` values per entry) into one mutable slice per level.
 pub fn split_levels<'a, T>(grid: &HashGrid, f: usize, mut data: &'a mut [T]) -> Vec<&'a mut [T]> {
@@ -21,10 +93,10 @@ pub fn split_levels<'a, T>(grid: &HashGrid, f: usize, mut data: &'a mut [T]) -> 
 /// Encodes `positions` (`[N][3]`) into `out` (`[N][L·F]`).
 pub fn forward(grid: &HashGrid, table: &[f32], positions: &[f32], out: &mut [f32]) {
     let d = grid.output_dims();
-    out.par_chunks_mut(d * 256).zip(positions.par_chunks(3 * 256)).for_each(|(o, p)| {
-        for (oi, pi) in o.chunks_mut(d).zip(p.chunks(3)) {
-            grid.forward_one(table, [pi[0], pi[1], pi[2]], oi);
-        }
+    let levels = grid.fast_levels();
+    out.par_chunks_mut(d * 256).zip(positions.par_chunks(3 * 256)).for_each_init(CornerScratch::new, |scratch, (o, p)| {
+        let m = p.len() / 3;
+        encode_tile(grid, &levels, table, grid.features(), m, |i| [p[3 * i], p[3 * i + 1], p[3 * i + 2]], o, d, 0, scratch);
     });
 }
 
@@ -49,7 +121,8 @@ pub fn backward_positions(grid: &HashGrid, table: &[f32], positions: &[f32], dou
 }
 
 /// Scatters level `l`'s gradient of `n` samples into that level's table gradient `grad`
-/// (level-local entries), marking referenced entries in `touched` when given.
+/// (level-local entries), marking referenced entries in `touched` when given. Works in chunks:
+/// vertices of a chunk are computed and their gradient lines prefetched, then accumulated.
 #[inline]
 pub fn scatter_level<'p, 'd>(
     grid: &HashGrid,
@@ -60,21 +133,34 @@ pub fn scatter_level<'p, 'd>(
     grad: &mut [f32],
     mut touched: Option<&mut [u64]>,
 ) {
+    const CHUNK: usize = 256;
     let f = grid.features();
-    let level = grid.levels[l];
-    let offset = level.offset as u32;
-    for i in 0..n {
-        let c = grid.corners(&level, position(i));
-        let d = dout(i);
-        for k in 0..8 {
-            let e = (c.index[k] - offset) as usize;
-            let w = c.weight[k];
-            for j in 0..f {
-                grad[e * f + j] += w * d[j];
+    let fast = FastLevel::new(&grid.levels[l]);
+    let offset = grid.levels[l].offset as u32;
+    let mut corners = [([0u32; 8], [0f32; 8]); CHUNK];
+    let mut start = 0;
+    while start < n {
+        let m = CHUNK.min(n - start);
+        for (i, c) in corners.iter_mut().enumerate().take(m) {
+            let (mut idx, w) = fast.corners(position(start + i));
+            for e in idx.iter_mut() {
+                *e -= offset;
+                prefetch(grad.as_ptr().wrapping_add(*e as usize * f));
             }
-            if let Some(t) = touched.as_deref_mut() {
-                t[e / 64] |= 1u64 << (e % 64);
+            *c = (idx, w);
+        }
+        for (i, (idx, w)) in corners.iter().enumerate().take(m) {
+            let d = dout(start + i);
+            for k in 0..8 {
+                let e = idx[k] as usize;
+                for j in 0..f {
+                    grad[e * f + j] += w[k] * d[j];
+                }
+                if let Some(t) = touched.as_deref_mut() {
+                    t[e / 64] |= 1u64 << (e % 64);
+                }
             }
         }
+        start += m;
     }
 }

@@ -2,6 +2,7 @@
 
 use rayon::prelude::*;
 
+use super::grid::encode_tile;
 use super::mlp::{OUT_PAD, PreparedMlp, TILE, TileScratch, forward_tile};
 use crate::batch::{FACTOR_AT, QUERY_ROW};
 use crate::loss::activate;
@@ -25,12 +26,17 @@ pub fn network_outputs(layout: &ModelLayout, prepared: &PreparedMlp, grid: &[f32
     let n = rows.len() / QUERY_ROW;
     let k_in = prepared.inputs();
     let mut out = vec![0f32; n * 3];
+    let fast = layout.encoding.grid().map(|(g, _)| g.fast_levels()).unwrap_or_default();
     out.par_chunks_mut(TILE * 3).zip(rows.par_chunks(TILE * QUERY_ROW)).for_each_init(
         || TileScratch::new(k_in, prepared.hidden()),
         |s, (o, r)| {
             let m = r.len() / QUERY_ROW;
             for i in 0..m {
-                layout.encoding.forward_one(grid, &r[i * QUERY_ROW..i * QUERY_ROW + RAW_INPUT_DIMS], &mut s.x[i * k_in..(i + 1) * k_in]);
+                layout.encoding.forward_one_without_grid(&r[i * QUERY_ROW..i * QUERY_ROW + RAW_INPUT_DIMS], &mut s.x[i * k_in..(i + 1) * k_in]);
+            }
+            if let Some((hg, part)) = layout.encoding.grid() {
+                let at = part.in_offset;
+                encode_tile(hg, &fast, grid, hg.features(), m, |i| [r[i * QUERY_ROW + at], r[i * QUERY_ROW + at + 1], r[i * QUERY_ROW + at + 2]], &mut s.x, k_in, part.out_offset, &mut s.corners);
             }
             forward_tile(prepared, m, s);
             for i in 0..m {

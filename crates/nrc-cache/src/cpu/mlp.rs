@@ -77,6 +77,8 @@ pub struct TileScratch {
     pub out: Vec<f32>,
     /// Loss gradient with respect to `out` `[TILE][8]`.
     pub dout: Vec<f32>,
+    /// Hash-grid vertex scratch of the encoder.
+    pub corners: super::grid::CornerScratch,
     dh: [Vec<f32>; 2],
 }
 
@@ -88,6 +90,7 @@ impl TileScratch {
             h: vec![vec![0.0; TILE * WIDTH]; hidden],
             out: vec![0.0; TILE * OUT_PAD],
             dout: vec![0.0; TILE * OUT_PAD],
+            corners: Vec::with_capacity(TILE),
             dh: [vec![0.0; TILE * WIDTH], vec![0.0; TILE * WIDTH]],
         }
     }
@@ -236,12 +239,12 @@ pub fn backward_tile(mlp: &PreparedMlp, m: usize, s: &mut TileScratch, grad: &mu
     }
 }
 
-/// `d ⊙= (h > 0)`: the ReLU derivative, from the activation after ReLU.
+/// `d ⊙= (h > 0)`: the ReLU derivative, from the activation after ReLU. Written as a select
+/// so it vectorises: about half the activations are zero, and a branch per element
+/// mispredicted often enough to cost a quarter of the MLP's time (measured with perf).
 #[inline]
 fn relu_mask(d: &mut [f32], h: &[f32]) {
     for (dv, hv) in d.iter_mut().zip(h) {
-        if *hv <= 0.0 {
-            *dv = 0.0;
-        }
+        *dv = if *hv > 0.0 { *dv } else { 0.0 };
     }
 }

@@ -7,7 +7,7 @@ use std::time::Instant;
 
 use rayon::prelude::*;
 
-use super::grid::{scatter_level, split_levels};
+use super::grid::{encode_tile, scatter_level, split_levels};
 use super::mlp::{MlpGrad, OUT_PAD, PreparedMlp, TILE, TileScratch, backward_tile, forward_tile};
 use super::optim::{StepConstants, dense_step, sparse_step};
 use crate::batch::{FACTOR_AT, TARGET_AT, TRAIN_ROW, WEIGHT_AT};
@@ -19,8 +19,9 @@ use crate::record::RAW_INPUT_DIMS;
 /// Accumulated nanoseconds per phase, read by the benchmark: 0 encode (summed over threads),
 /// 1 MLP forward + loss + backward (summed over threads), 2 hash-grid scatter + sparse
 /// Adam/EMA (wall), 3 MLP Adam/EMA (wall), 4 packing and upload of the batch (wall, counted by
-/// [`crate::RadianceCache::train`]).
-pub static PHASE_NANOS: [AtomicU64; 5] = [const { AtomicU64::new(0) }; 5];
+/// [`crate::RadianceCache::train`]), 5 hash-grid scatter and 6 sparse Adam/EMA (summed over
+/// threads).
+pub static PHASE_NANOS: [AtomicU64; 7] = [const { AtomicU64::new(0) }; 7];
 
 fn add_phase(i: usize, since: Instant) {
     PHASE_NANOS[i].fetch_add(since.elapsed().as_nanos() as u64, Ordering::Relaxed);
@@ -39,12 +40,12 @@ pub struct GroupState<'a> {
     pub ema: &'a mut [f32],
 }
 
-/// Hash-table state: the group plus the gradient scratch (all zeros between steps) and the
-/// step each entry's EMA is current at.
+/// Hash-table state: the per-entry records (see [`super::optim::RECORD`]), the gradient
+/// scratch (all zeros between steps) and the step each entry's EMA is current at.
 #[derive(Debug)]
 pub struct GridState<'a> {
-    /// Weights, moments, EMA.
-    pub group: GroupState<'a>,
+    /// Records `[w | m | v | ema]` per entry.
+    pub records: &'a mut [f32],
     /// Gradient accumulator, zero between steps.
     pub grad: &'a mut [f32],
     /// Step each entry's EMA is current at.
@@ -62,13 +63,15 @@ pub struct LossSettings {
 
 /// Phase A of a step, parallel over tiles: forward, loss and backward of every tile. Returns
 /// the summed loss, the MLP weight gradients, and ∂L/∂(hash-grid columns) `[n][L·F]`.
-fn forward_backward(layout: &ModelLayout, grid_w: &[f32], mlp_w: &[f32], rows: &[f32], loss: LossSettings) -> (f64, MlpGrad, Vec<f32>) {
+/// `grid_w` holds entry `e`'s features at `grid_w[e·grid_stride..]`.
+fn forward_backward(layout: &ModelLayout, grid_w: &[f32], grid_stride: usize, mlp_w: &[f32], rows: &[f32], loss: LossSettings) -> (f64, MlpGrad, Vec<f32>) {
     let n = rows.len() / TRAIN_ROW;
     let prepared = PreparedMlp::new(&layout.layers, mlp_w);
     let k_in = prepared.inputs();
     let hidden = prepared.hidden();
     let (grid_col, grid_dims) = layout.encoding.grid().map_or((0, 0), |(g, p)| (p.out_offset, g.output_dims()));
     let scale = 1.0 / (3.0 * n as f32);
+    let fast = layout.encoding.grid().map(|(g, _)| g.fast_levels()).unwrap_or_default();
     let mut dxg = vec![0f32; n * grid_dims.max(1)];
     let (loss_sum, mgrad) = rows
         .par_chunks(TILE * TRAIN_ROW)
@@ -80,7 +83,11 @@ fn forward_backward(layout: &ModelLayout, grid_w: &[f32], mlp_w: &[f32], rows: &
                 let t_encode = Instant::now();
                 for i in 0..m {
                     let row = &rows_t[i * TRAIN_ROW..(i + 1) * TRAIN_ROW];
-                    layout.encoding.forward_one(grid_w, &row[..RAW_INPUT_DIMS], &mut s.x[i * k_in..(i + 1) * k_in]);
+                    layout.encoding.forward_one_without_grid(&row[..RAW_INPUT_DIMS], &mut s.x[i * k_in..(i + 1) * k_in]);
+                }
+                if let Some((hg, part)) = layout.encoding.grid() {
+                    let at = part.in_offset;
+                    encode_tile(hg, &fast, grid_w, grid_stride, m, |i| [rows_t[i * TRAIN_ROW + at], rows_t[i * TRAIN_ROW + at + 1], rows_t[i * TRAIN_ROW + at + 2]], &mut s.x, k_in, part.out_offset, &mut s.corners);
                 }
                 add_phase(0, t_encode);
                 let t_mlp = Instant::now();
@@ -123,7 +130,8 @@ fn forward_backward(layout: &ModelLayout, grid_w: &[f32], mlp_w: &[f32], rows: &
 /// mean loss, ∂L/∂table (dense), ∂L/∂MLP weights.
 pub fn gradients(layout: &ModelLayout, grid_w: &[f32], mlp_w: &[f32], rows: &[f32], loss: LossSettings) -> (f64, Vec<f32>, Vec<f32>) {
     let n = rows.len() / TRAIN_ROW;
-    let (loss_sum, mgrad, dxg) = forward_backward(layout, grid_w, mlp_w, rows, loss);
+    let f = layout.encoding.grid().map_or(1, |(g, _)| g.features());
+    let (loss_sum, mgrad, dxg) = forward_backward(layout, grid_w, f, mlp_w, rows, loss);
     let mut mlp = vec![0f32; mlp_w.len()];
     mgrad.write_flat(&layout.layers, &mut mlp);
     let mut grid = vec![0f32; grid_w.len()];
@@ -162,44 +170,50 @@ pub fn train_step(
     let n = rows.len() / TRAIN_ROW;
     let grid_part = layout.encoding.grid();
     let (grid_dims, grid_in) = grid_part.map_or((0, 0), |(g, p)| (g.output_dims(), p.in_offset));
-    let grid_w: &[f32] = grid.as_ref().map_or(&[], |g| &*g.group.w);
-    let (loss_sum, mgrad, dxg) = forward_backward(layout, grid_w, mlp.w, rows, loss);
+    let grid_w: &[f32] = grid.as_ref().map_or(&[], |g| &*g.records);
+    let stride = grid_part.map_or(1, |(g, _)| g.features() * super::optim::RECORD);
+    let (loss_sum, mgrad, dxg) = forward_backward(layout, grid_w, stride, mlp.w, rows, loss);
 
     // Phase C: hash-grid scatter + sparse Adam/EMA, one task per level.
     let t_grid = Instant::now();
     if let (Some(g), Some((hg, _))) = (grid, grid_part) {
         let f = hg.features();
-        let GridState { group, grad, last } = g;
-        let ws = split_levels(hg, f, group.w);
-        let ms = split_levels(hg, f, group.m);
-        let vs = split_levels(hg, f, group.v);
-        let es = split_levels(hg, f, group.ema);
+        let GridState { records, grad, last } = g;
+        let rs = split_levels(hg, f * super::optim::RECORD, records);
         let gs = split_levels(hg, f, grad);
         let ls = split_levels(hg, 1, last);
-        let dxg = &dxg;
-        ws.into_par_iter()
-            .zip(ms)
-            .zip(vs)
-            .zip(es)
+        // Level-major copies of the gradient columns and compact positions, so each level's
+        // pass streams through ~130 KiB + 200 KiB instead of strided rows.
+        let mut by_level = vec![0f32; n * grid_dims];
+        by_level.par_chunks_mut(n * f).enumerate().for_each(|(l, out)| {
+            for i in 0..n {
+                out[i * f..(i + 1) * f].copy_from_slice(&dxg[i * grid_dims + l * f..i * grid_dims + (l + 1) * f]);
+            }
+        });
+        let mut pos = vec![0f32; n * 3];
+        pos.par_chunks_mut(3).enumerate().for_each(|(i, p)| p.copy_from_slice(&rows[i * TRAIN_ROW + grid_in..i * TRAIN_ROW + grid_in + 3]));
+        let (by_level, pos) = (&by_level, &pos);
+        rs.into_par_iter()
             .zip(gs)
             .zip(ls)
             .enumerate()
-            .for_each(|(l, (((((w, m), v), e), gr), la))| {
+            .for_each(|(l, ((rec, gr), la))| {
                 let entries = hg.levels[l].entries as usize;
                 let mut touched = vec![0u64; entries.div_ceil(64)];
+                let t_scatter = Instant::now();
                 scatter_level(
                     hg,
                     l,
                     n,
-                    |i| {
-                        let r = &rows[i * TRAIN_ROW + grid_in..];
-                        [r[0], r[1], r[2]]
-                    },
-                    |i| &dxg[i * grid_dims + l * f..i * grid_dims + (l + 1) * f],
+                    |i| [pos[3 * i], pos[3 * i + 1], pos[3 * i + 2]],
+                    |i| &by_level[(l * n + i) * f..(l * n + i + 1) * f],
                     gr,
                     Some(&mut touched),
                 );
-                sparse_step(c, f, &mut touched, w, m, v, e, gr, la);
+                add_phase(5, t_scatter);
+                let t_adam = Instant::now();
+                sparse_step(c, f, &mut touched, rec, gr, la);
+                add_phase(6, t_adam);
             });
     }
 

@@ -12,7 +12,7 @@
 //! * otherwise it is **hashed**: `E_l = T` and the index is
 //!   `(x·1 ⊕ y·2654435761 ⊕ z·805459861) & (T − 1)` with wrapping u32 products.
 //!
-//! For an input `p ∈ [0,1]³`: `pos = p·s_l + 0.5`, `cell = floor(pos)`, `w = pos − cell`; the
+//! For an input `p` (clamped to [0,1]³): `pos = p·s_l + 0.5`, `cell = floor(pos)`, `w = pos − cell`; the
 //! level's `F` features are the trilinear interpolation of the 8 vertices `cell + c`,
 //! `c ∈ {0,1}³`, with weight `Π_d (c_d ? w_d : 1 − w_d)`. The output is level-major:
 //! `out[l·F + f]`.
@@ -100,6 +100,11 @@ impl HashGrid {
         Self { params, levels, total_entries: offset }
     }
 
+    /// The batch kernels' per-level constants.
+    pub fn fast_levels(&self) -> Vec<FastLevel> {
+        self.levels.iter().map(FastLevel::new).collect()
+    }
+
     /// Number of features F per level.
     pub fn features(&self) -> usize {
         self.params.n_features_per_level as usize
@@ -125,18 +130,19 @@ impl HashGrid {
     pub fn corners(&self, level: &GridLevel, p: [f32; 3]) -> Corners {
         let mut cell = [0u32; 3];
         let mut frac = [0f32; 3];
-        for d in 0..3 {
-            let pos = p[d] * level.scale + 0.5;
-            let fl = pos.floor();
-            cell[d] = fl as u32;
-            frac[d] = pos - fl;
+        for ((c, f), x) in cell.iter_mut().zip(frac.iter_mut()).zip(p) {
+            // pos ≥ 0.5 after the clamp, so truncation is the floor.
+            let pos = clamp01(x) * level.scale + 0.5;
+            let fl = (pos as u32) as f32;
+            *c = fl as u32;
+            *f = pos - fl;
         }
         let mut out = Corners { frac, ..Corners::default() };
         for c in 0..8u32 {
             let v = [cell[0] + (c & 1), cell[1] + ((c >> 1) & 1), cell[2] + ((c >> 2) & 1)];
             let mut w = 1.0;
-            for d in 0..3 {
-                w *= if (c >> d) & 1 == 1 { frac[d] } else { 1.0 - frac[d] };
+            for (d, fd) in frac.iter().enumerate() {
+                w *= if (c >> d) & 1 == 1 { *fd } else { 1.0 - fd };
             }
             out.index[c as usize] = level.offset as u32 + vertex_index(level, v);
             out.weight[c as usize] = w;
@@ -202,6 +208,84 @@ impl HashGrid {
         }
         g
     }
+}
+
+/// One level's constants for the batch kernels: the same definition as [`HashGrid::corners`]
+/// with the per-corner work hoisted (dense offsets `{0, 1, r, r+1, r², …}`, hash products per
+/// axis) so a corner costs a few integer operations.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FastLevel {
+    scale: f32,
+    res: u32,
+    res2: u32,
+    entries: u32,
+    offset: u32,
+    dense: bool,
+}
+
+impl FastLevel {
+    /// Constants of `level`.
+    pub fn new(level: &GridLevel) -> Self {
+        Self {
+            scale: level.scale,
+            res: level.resolution,
+            res2: level.resolution.wrapping_mul(level.resolution),
+            entries: level.entries,
+            offset: level.offset as u32,
+            dense: level.dense,
+        }
+    }
+
+    /// Absolute entry indices and trilinear weights of the 8 vertices around `p`; identical,
+    /// bit for bit, to [`HashGrid::corners`].
+    #[inline(always)]
+    pub fn corners(&self, p: [f32; 3]) -> ([u32; 8], [f32; 8]) {
+        let mut c = [0u32; 3];
+        let mut w1 = [0f32; 3];
+        for d in 0..3 {
+            let pos = clamp01(p[d]) * self.scale + 0.5;
+            let fl = (pos as u32) as f32;
+            c[d] = fl as u32;
+            w1[d] = pos - fl;
+        }
+        let wx = [1.0 - w1[0], w1[0]];
+        let wy = [1.0 - w1[1], w1[1]];
+        let wz = [1.0 - w1[2], w1[2]];
+        let mut w = [0f32; 8];
+        for (k, wk) in w.iter_mut().enumerate() {
+            *wk = wx[k & 1] * wy[(k >> 1) & 1] * wz[k >> 2];
+        }
+        let mut idx = [0u32; 8];
+        if self.dense {
+            let (r, r2) = (self.res, self.res2);
+            let base = c[0].wrapping_add(c[1].wrapping_mul(r)).wrapping_add(c[2].wrapping_mul(r2));
+            let offs = [0, 1, r, r + 1, r2, r2 + 1, r2 + r, r2 + r + 1];
+            if base < self.entries - (r2 + r + 1).min(self.entries) {
+                for k in 0..8 {
+                    idx[k] = self.offset + base + offs[k];
+                }
+            } else {
+                for k in 0..8 {
+                    idx[k] = self.offset + base.wrapping_add(offs[k]) % self.entries;
+                }
+            }
+        } else {
+            let hx = [c[0], c[0].wrapping_add(1)];
+            let hy = [c[1].wrapping_mul(PRIMES[1]), c[1].wrapping_add(1).wrapping_mul(PRIMES[1])];
+            let hz = [c[2].wrapping_mul(PRIMES[2]), c[2].wrapping_add(1).wrapping_mul(PRIMES[2])];
+            let mask = self.entries - 1;
+            for k in 0..8 {
+                idx[k] = self.offset + ((hx[k & 1] ^ hy[(k >> 1) & 1] ^ hz[k >> 2]) & mask);
+            }
+        }
+        (idx, w)
+    }
+}
+
+/// Clamps a coordinate to [0,1] (NaN becomes 0).
+#[inline(always)]
+pub fn clamp01(x: f32) -> f32 {
+    if x > 0.0 { x.min(1.0) } else { 0.0 }
 }
 
 /// `s_l = N_min · b^l − 1`, computed as tiny-cuda-nn does (exp2 of l·log2 b).

@@ -300,6 +300,7 @@ pub fn hash_grid_tensor(grid: &HashGrid, table: Tensor<1>, p: Tensor<2>) -> Tens
     let f = grid.features();
     let [n, _] = p.dims();
     let table = table.reshape([grid.total_entries, f]);
+    let p = p.clamp(0.0, 1.0);
     let mut levels = Vec::with_capacity(grid.levels.len());
     for level in &grid.levels {
         let pos = p.clone().mul_scalar(level.scale).add_scalar(0.5);
