@@ -288,7 +288,7 @@ impl NrcFusedOps for Flex {
         let mlp = flex_f32(&state.mlp);
         let last_i32 = flex_last(&state.grid_last);
         let last: &[u32] = bytemuck::cast_slice(&last_i32);
-        let mut g = vec![0f32; layout.grid_params];
+        let mut g = cpu::huge::huge_vec(layout.grid_params, 0f32);
         if let Some((hg, _)) = layout.encoding.grid() {
             let f = hg.features();
             let rec = cpu::optim::RECORD * f;

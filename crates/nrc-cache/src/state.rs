@@ -73,7 +73,7 @@ impl TensorState {
     /// stores the table as records with a gradient scratch (the fused path).
     pub fn from_host(h: HostState, entries: usize, step: u32, packed: Option<usize>, device: &Device) -> Self {
         let grid_len = h.grid.len();
-        let last = vec![step as i32; entries];
+        let last = crate::cpu::huge::huge_vec(entries, step as i32);
         let (grid, grid_m, grid_v, grid_ema) = match packed {
             Some(f) => (crate::cpu::optim::pack_records(f, &h.grid, &h.grid_m, &h.grid_v, &h.grid_ema), Vec::new(), Vec::new(), Vec::new()),
             None => (h.grid, h.grid_m, h.grid_v, h.grid_ema),
@@ -84,7 +84,7 @@ impl TensorState {
             grid_m: vec_tensor(grid_m, device),
             grid_v: vec_tensor(grid_v, device),
             grid_ema: vec_tensor(grid_ema, device),
-            grid_grad: vec_tensor(vec![0.0; if packed.is_some() { grid_len } else { 0 }], device),
+            grid_grad: vec_tensor(crate::cpu::huge::huge_vec(if packed.is_some() { grid_len } else { 0 }, 0.0), device),
             grid_last: Tensor::from_data(TensorData::new(last, [entries]), TensorCreationOptions::new(device.clone()).with_dtype(DType::I32)),
             mlp: vec_tensor(h.mlp, device),
             mlp_m: vec_tensor(h.mlp_m, device),

@@ -19,15 +19,15 @@ pub fn prefetch<T>(p: *const T) {
     let _ = p;
 }
 
-/// Per-sample vertex indices and weights of one level, reused between the two passes of
-/// [`encode_tile`] and [`scatter_level`].
-pub type CornerScratch = Vec<([u32; 8], [f32; 8])>;
+/// Samples whose table lines are requested ahead of the one being interpolated: enough
+/// misses in flight to cover memory latency, few enough that the requests are not dropped.
+const AHEAD: usize = 64;
 
 /// Encodes the hash grid of `m` samples into columns `col..col + L·F` of `out` (row stride
 /// `stride`), level by level. Entry `e`'s features are `table[e·table_stride..][..F]` (the
-/// plain table has `table_stride = F`, the training records `4F`). For each level, a first pass computes every sample's vertices
-/// and prefetches their table lines, so the misses overlap; the second pass gathers and
-/// interpolates from cache.
+/// plain table has `table_stride = F`, the training records `4F`). Software-pipelined: while
+/// sample `i` is interpolated, the vertices of sample `i + AHEAD` are computed and their table
+/// lines prefetched, so the cache misses of the fine levels overlap.
 pub fn encode_tile(
     grid: &HashGrid,
     levels: &[FastLevel],
@@ -38,40 +38,43 @@ pub fn encode_tile(
     out: &mut [f32],
     stride: usize,
     col: usize,
-    scratch: &mut CornerScratch,
 ) {
     let f = grid.features();
-    scratch.resize(m, ([0; 8], [0.0; 8]));
+    let mut ring = [([0u32; 8], [0f32; 8]); AHEAD];
+    let ahead = AHEAD.min(m);
     for (l, level) in levels.iter().enumerate() {
-        for (i, c) in scratch.iter_mut().enumerate().take(m) {
-            *c = level.corners(position(i));
+        let fetch = |i: usize| {
+            let c = level.corners(position(i));
             for &e in &c.0 {
                 prefetch(table.as_ptr().wrapping_add(e as usize * table_stride));
             }
+            c
+        };
+        for (i, r) in ring.iter_mut().enumerate().take(ahead) {
+            *r = fetch(i);
         }
         let o = col + l * f;
-        match f {
-            2 => {
-                for (i, (idx, w)) in scratch.iter().enumerate().take(m) {
-                    let (mut a, mut b) = (0f32, 0f32);
-                    for k in 0..8 {
-                        let e = idx[k] as usize * table_stride;
-                        a += w[k] * table[e];
-                        b += w[k] * table[e + 1];
-                    }
-                    out[i * stride + o] = a;
-                    out[i * stride + o + 1] = b;
-                }
+        for i in 0..m {
+            let (idx, w) = ring[i % AHEAD];
+            if i + AHEAD < m {
+                ring[i % AHEAD] = fetch(i + AHEAD);
             }
-            _ => {
-                for (i, (idx, w)) in scratch.iter().enumerate().take(m) {
-                    let dst = &mut out[i * stride + o..i * stride + o + f];
-                    dst.fill(0.0);
-                    for k in 0..8 {
-                        let e = idx[k] as usize * table_stride;
-                        for (j, d) in dst.iter_mut().enumerate() {
-                            *d += w[k] * table[e + j];
-                        }
+            let dst = &mut out[i * stride + o..i * stride + o + f];
+            if f == 2 {
+                let (mut a, mut b) = (0f32, 0f32);
+                for k in 0..8 {
+                    let e = idx[k] as usize * table_stride;
+                    a += w[k] * table[e];
+                    b += w[k] * table[e + 1];
+                }
+                dst[0] = a;
+                dst[1] = b;
+            } else {
+                dst.fill(0.0);
+                for k in 0..8 {
+                    let e = idx[k] as usize * table_stride;
+                    for (j, d) in dst.iter_mut().enumerate() {
+                        *d += w[k] * table[e + j];
                     }
                 }
             }
@@ -94,9 +97,9 @@ pub fn split_levels<'a, T>(grid: &HashGrid, f: usize, mut data: &'a mut [T]) -> 
 pub fn forward(grid: &HashGrid, table: &[f32], positions: &[f32], out: &mut [f32]) {
     let d = grid.output_dims();
     let levels = grid.fast_levels();
-    out.par_chunks_mut(d * 256).zip(positions.par_chunks(3 * 256)).for_each_init(CornerScratch::new, |scratch, (o, p)| {
+    out.par_chunks_mut(d * 256).zip(positions.par_chunks(3 * 256)).for_each(|(o, p)| {
         let m = p.len() / 3;
-        encode_tile(grid, &levels, table, grid.features(), m, |i| [p[3 * i], p[3 * i + 1], p[3 * i + 2]], o, d, 0, scratch);
+        encode_tile(grid, &levels, table, grid.features(), m, |i| [p[3 * i], p[3 * i + 1], p[3 * i + 2]], o, d, 0);
     });
 }
 
@@ -121,8 +124,9 @@ pub fn backward_positions(grid: &HashGrid, table: &[f32], positions: &[f32], dou
 }
 
 /// Scatters level `l`'s gradient of `n` samples into that level's table gradient `grad`
-/// (level-local entries), marking referenced entries in `touched` when given. Works in chunks:
-/// vertices of a chunk are computed and their gradient lines prefetched, then accumulated.
+/// (level-local entries), marking referenced entries in `touched` when given. Pipelined like
+/// [`encode_tile`]: the gradient lines of sample `i + AHEAD` are prefetched while sample `i`
+/// is accumulated.
 #[inline]
 pub fn scatter_level<'p, 'd>(
     grid: &HashGrid,
@@ -133,34 +137,35 @@ pub fn scatter_level<'p, 'd>(
     grad: &mut [f32],
     mut touched: Option<&mut [u64]>,
 ) {
-    const CHUNK: usize = 256;
     let f = grid.features();
     let fast = FastLevel::new(&grid.levels[l]);
     let offset = grid.levels[l].offset as u32;
-    let mut corners = [([0u32; 8], [0f32; 8]); CHUNK];
-    let mut start = 0;
-    while start < n {
-        let m = CHUNK.min(n - start);
-        for (i, c) in corners.iter_mut().enumerate().take(m) {
-            let (mut idx, w) = fast.corners(position(start + i));
-            for e in idx.iter_mut() {
-                *e -= offset;
-                prefetch(grad.as_ptr().wrapping_add(*e as usize * f));
-            }
-            *c = (idx, w);
+    let fetch = |i: usize, grad: &[f32]| {
+        let (mut idx, w) = fast.corners(position(i));
+        for e in idx.iter_mut() {
+            *e -= offset;
+            prefetch(grad.as_ptr().wrapping_add(*e as usize * f));
         }
-        for (i, (idx, w)) in corners.iter().enumerate().take(m) {
-            let d = dout(start + i);
-            for k in 0..8 {
-                let e = idx[k] as usize;
-                for j in 0..f {
-                    grad[e * f + j] += w[k] * d[j];
-                }
-                if let Some(t) = touched.as_deref_mut() {
-                    t[e / 64] |= 1u64 << (e % 64);
-                }
+        (idx, w)
+    };
+    let mut ring = [([0u32; 8], [0f32; 8]); AHEAD];
+    for (i, r) in ring.iter_mut().enumerate().take(AHEAD.min(n)) {
+        *r = fetch(i, grad);
+    }
+    for i in 0..n {
+        let (idx, w) = ring[i % AHEAD];
+        if i + AHEAD < n {
+            ring[i % AHEAD] = fetch(i + AHEAD, grad);
+        }
+        let d = dout(i);
+        for k in 0..8 {
+            let e = idx[k] as usize;
+            for j in 0..f {
+                grad[e * f + j] += w[k] * d[j];
+            }
+            if let Some(t) = touched.as_deref_mut() {
+                t[e / 64] |= 1u64 << (e % 64);
             }
         }
-        start += m;
     }
 }

@@ -36,7 +36,7 @@ pub fn network_outputs(layout: &ModelLayout, prepared: &PreparedMlp, grid: &[f32
             }
             if let Some((hg, part)) = layout.encoding.grid() {
                 let at = part.in_offset;
-                encode_tile(hg, &fast, grid, hg.features(), m, |i| [r[i * QUERY_ROW + at], r[i * QUERY_ROW + at + 1], r[i * QUERY_ROW + at + 2]], &mut s.x, k_in, part.out_offset, &mut s.corners);
+                encode_tile(hg, &fast, grid, hg.features(), m, |i| [r[i * QUERY_ROW + at], r[i * QUERY_ROW + at + 1], r[i * QUERY_ROW + at + 2]], &mut s.x, k_in, part.out_offset);
             }
             forward_tile(prepared, m, s);
             for i in 0..m {

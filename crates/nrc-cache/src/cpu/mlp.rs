@@ -77,8 +77,6 @@ pub struct TileScratch {
     pub out: Vec<f32>,
     /// Loss gradient with respect to `out` `[TILE][8]`.
     pub dout: Vec<f32>,
-    /// Hash-grid vertex scratch of the encoder.
-    pub corners: super::grid::CornerScratch,
     dh: [Vec<f32>; 2],
 }
 
@@ -90,7 +88,6 @@ impl TileScratch {
             h: vec![vec![0.0; TILE * WIDTH]; hidden],
             out: vec![0.0; TILE * OUT_PAD],
             dout: vec![0.0; TILE * OUT_PAD],
-            corners: Vec::with_capacity(TILE),
             dh: [vec![0.0; TILE * WIDTH], vec![0.0; TILE * WIDTH]],
         }
     }

@@ -4,6 +4,7 @@
 
 pub mod gemm;
 pub mod grid;
+pub mod huge;
 pub mod infer;
 pub mod mlp;
 pub mod optim;

@@ -105,7 +105,7 @@ pub const RECORD: usize = 4;
 /// Packs separate arrays into records `[w | m | v | ema]` of `f` features each.
 pub fn pack_records(f: usize, w: &[f32], m: &[f32], v: &[f32], ema: &[f32]) -> Vec<f32> {
     let entries = w.len() / f.max(1);
-    let mut out = vec![0f32; w.len() * RECORD];
+    let mut out = super::huge::huge_vec(w.len() * RECORD, 0f32);
     for e in 0..entries {
         let r = &mut out[e * RECORD * f..(e + 1) * RECORD * f];
         r[..f].copy_from_slice(&w[e * f..(e + 1) * f]);

@@ -87,7 +87,7 @@ fn forward_backward(layout: &ModelLayout, grid_w: &[f32], grid_stride: usize, ml
                 }
                 if let Some((hg, part)) = layout.encoding.grid() {
                     let at = part.in_offset;
-                    encode_tile(hg, &fast, grid_w, grid_stride, m, |i| [rows_t[i * TRAIN_ROW + at], rows_t[i * TRAIN_ROW + at + 1], rows_t[i * TRAIN_ROW + at + 2]], &mut s.x, k_in, part.out_offset, &mut s.corners);
+                    encode_tile(hg, &fast, grid_w, grid_stride, m, |i| [rows_t[i * TRAIN_ROW + at], rows_t[i * TRAIN_ROW + at + 1], rows_t[i * TRAIN_ROW + at + 2]], &mut s.x, k_in, part.out_offset);
                 }
                 add_phase(0, t_encode);
                 let t_mlp = Instant::now();
