@@ -123,11 +123,49 @@ pub fn mlp_macs_per_sample(layout: &ModelLayout) -> (usize, usize) {
     (fwd, fwd + bwd_x)
 }
 
+/// The machine's memory limits as the cache meets them: streaming copy bandwidth (read +
+/// write) and independent random 64-byte reads per second over a 256 MiB buffer, all threads.
+pub fn memory_limits() -> (f64, f64) {
+    use rayon::prelude::*;
+    let n = 64 << 20;
+    let a = vec![1.0f32; n];
+    let mut b = vec![0.0f32; n];
+    let mut copy = 0f64;
+    let mut random = 0f64;
+    for _ in 0..2 {
+        let t = Instant::now();
+        b.par_chunks_mut(1 << 16).zip(a.par_chunks(1 << 16)).for_each(|(x, y)| x.copy_from_slice(y));
+        copy = copy.max((2 * n * 4) as f64 / t.elapsed().as_secs_f64());
+        let lines = n / 16;
+        let threads = rayon::current_num_threads();
+        let per = 2_000_000;
+        let t = Instant::now();
+        let s: f32 = (0..threads)
+            .into_par_iter()
+            .map(|k| {
+                let mut x = 12345u64 + k as u64;
+                let mut s = 0.0;
+                for _ in 0..per {
+                    x = x.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+                    s += a[((x >> 33) as usize % lines) * 16];
+                }
+                s
+            })
+            .sum();
+        std::hint::black_box(s);
+        random = random.max((threads * per) as f64 / t.elapsed().as_secs_f64());
+    }
+    std::hint::black_box(&b);
+    (copy, random)
+}
+
 /// Runs the benchmark, printing a table as it goes; returns the figures.
 pub fn run(options: &BenchOptions) -> Vec<BenchFigure> {
     let presets = [("hashgrid", CacheConfig::hash_grid_preset()), ("trianglewave", CacheConfig::triangle_wave_preset())];
     let mut figures = Vec::new();
     println!("nrc-cache benchmark (threads: {}, AVX2+FMA kernels: {})", rayon::current_num_threads(), crate::cpu::gemm::has_avx2_fma());
+    let (copy, random) = memory_limits();
+    println!("memory: streaming copy {:.1} GB/s (read + write), random 64-byte reads {:.0} M/s", copy / 1e9, random / 1e6);
     for &device in &options.devices {
         if device == CacheDevice::Wgpu {
             match crate::gpu::wgpu_device() {
