@@ -34,7 +34,9 @@ fn main() {
                 };
             }
             other => {
-                eprintln!("unknown argument {other:?} (expected --quick, --no-compare, --device cpu|wgpu|all)");
+                eprintln!(
+                    "unknown argument {other:?} (expected --quick, --no-compare, --device cpu|wgpu|all)"
+                );
                 std::process::exit(2);
             }
         }

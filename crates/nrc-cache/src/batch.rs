@@ -3,7 +3,9 @@
 //! A training row is `[raw inputs (14) | reflectance factor (3) | target (3) | weight (1)]`,
 //! an inference row `[raw inputs (14) | reflectance factor (3)]`.
 
-use crate::record::{CacheQuery, RAW_INPUT_DIMS, TrainingBatch, query_is_finite, raw_inputs, reflectance_factor};
+use crate::record::{
+    CacheQuery, RAW_INPUT_DIMS, TrainingBatch, query_is_finite, raw_inputs, reflectance_factor,
+};
 
 /// Floats per training row.
 pub const TRAIN_ROW: usize = RAW_INPUT_DIMS + 7;
@@ -31,17 +33,29 @@ pub struct PackedBatch {
 }
 
 /// Packs a training batch, dropping and counting bad samples.
-pub fn pack_training(batch: &TrainingBatch, max_target: f32) -> Result<PackedBatch, crate::CacheError> {
+pub fn pack_training(
+    batch: &TrainingBatch,
+    max_target: f32,
+) -> Result<PackedBatch, crate::CacheError> {
     let n = batch.queries.len();
     if batch.targets.len() != n {
-        return Err(crate::CacheError::Input(format!("training batch has {n} queries but {} targets", batch.targets.len())));
+        return Err(crate::CacheError::Input(format!(
+            "training batch has {n} queries but {} targets",
+            batch.targets.len()
+        )));
     }
     if let Some(w) = &batch.weights
         && w.len() != n
     {
-        return Err(crate::CacheError::Input(format!("training batch has {n} queries but {} weights", w.len())));
+        return Err(crate::CacheError::Input(format!(
+            "training batch has {n} queries but {} weights",
+            w.len()
+        )));
     }
-    let mut out = PackedBatch { rows: Vec::with_capacity(n * TRAIN_ROW), ..PackedBatch::default() };
+    let mut out = PackedBatch {
+        rows: Vec::with_capacity(n * TRAIN_ROW),
+        ..PackedBatch::default()
+    };
     for i in 0..n {
         let q = &batch.queries[i];
         let t = batch.targets[i];

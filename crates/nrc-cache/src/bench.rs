@@ -10,7 +10,9 @@ use rand_pcg::Pcg64Mcg;
 
 use crate::cpu::train::PHASE_NANOS;
 use crate::model::ModelLayout;
-use crate::{CacheConfig, CacheDevice, CacheQuery, ComputePath, RadianceCache, SceneBox, TrainingBatch};
+use crate::{
+    CacheConfig, CacheDevice, CacheQuery, ComputePath, RadianceCache, SceneBox, TrainingBatch,
+};
 
 /// What to measure.
 #[derive(Clone, Debug)]
@@ -27,7 +29,12 @@ pub struct BenchOptions {
 
 impl Default for BenchOptions {
     fn default() -> Self {
-        Self { devices: vec![CacheDevice::Cpu, CacheDevice::Wgpu], batches: vec![1 << 14, 1 << 16], min_time: Duration::from_secs(2), compare_paths: true }
+        Self {
+            devices: vec![CacheDevice::Cpu, CacheDevice::Wgpu],
+            batches: vec![1 << 14, 1 << 16],
+            min_time: Duration::from_secs(2),
+            compare_paths: true,
+        }
     }
 }
 
@@ -54,15 +61,40 @@ pub fn synthetic_batch(n: usize, seed: u64) -> TrainingBatch {
     let queries: Vec<CacheQuery> = (0..n)
         .map(|_| CacheQuery {
             position: [r.random(), r.random(), r.random()],
-            direction: [r.random_range(-1.0..1.0), r.random_range(-1.0..1.0), r.random_range(-1.0..1.0)],
-            normal: [r.random_range(-1.0..1.0), r.random_range(-1.0..1.0), r.random_range(-1.0..1.0)],
+            direction: [
+                r.random_range(-1.0..1.0),
+                r.random_range(-1.0..1.0),
+                r.random_range(-1.0..1.0),
+            ],
+            normal: [
+                r.random_range(-1.0..1.0),
+                r.random_range(-1.0..1.0),
+                r.random_range(-1.0..1.0),
+            ],
             roughness: r.random_range(0.0..1.0),
-            diffuse: [r.random_range(0.0..0.9), r.random_range(0.0..0.9), r.random_range(0.0..0.9)],
+            diffuse: [
+                r.random_range(0.0..0.9),
+                r.random_range(0.0..0.9),
+                r.random_range(0.0..0.9),
+            ],
             specular: [0.04; 3],
         })
         .collect();
-    let targets = queries.iter().map(|q| [0.5 + q.position[0], 0.5 + q.position[1] * q.position[2], 1.0 - 0.5 * q.position[2]]).collect();
-    TrainingBatch { queries, targets, weights: None }
+    let targets = queries
+        .iter()
+        .map(|q| {
+            [
+                0.5 + q.position[0],
+                0.5 + q.position[1] * q.position[2],
+                1.0 - 0.5 * q.position[2],
+            ]
+        })
+        .collect();
+    TrainingBatch {
+        queries,
+        targets,
+        weights: None,
+    }
 }
 
 /// CPU time (user + system) this process has used, from `/proc/self/stat` (Linux; 10 ms
@@ -102,7 +134,10 @@ fn rate(min_time: Duration, work: usize, mut f: impl FnMut()) -> Rate {
         (Some(a), Some(b)) if b > a => Some(units / (b - a) * rayon::current_num_threads() as f64),
         _ => None,
     };
-    Rate { per_s: units / wall, per_cpu_s }
+    Rate {
+        per_s: units / wall,
+        per_cpu_s,
+    }
 }
 
 fn show(r: Rate) -> String {
@@ -117,9 +152,31 @@ fn show(r: Rate) -> String {
 pub fn mlp_macs_per_sample(layout: &ModelLayout) -> (usize, usize) {
     let pad8 = |n: usize| n.div_ceil(8) * 8;
     let last = layout.layers.len() - 1;
-    let fwd: usize = layout.layers.iter().enumerate().map(|(l, s)| s.inputs * if l == last { pad8(s.outputs) } else { s.outputs }).sum();
-    let grid_cols = layout.encoding.grid().map_or(0, |(g, _)| pad8(g.output_dims()));
-    let bwd_x: usize = layout.layers.iter().enumerate().skip(1).map(|(l, s)| s.outputs.max(if l == last { 3 } else { 0 }) * s.inputs).sum::<usize>() + 64 * grid_cols;
+    let fwd: usize = layout
+        .layers
+        .iter()
+        .enumerate()
+        .map(|(l, s)| {
+            s.inputs
+                * if l == last {
+                    pad8(s.outputs)
+                } else {
+                    s.outputs
+                }
+        })
+        .sum();
+    let grid_cols = layout
+        .encoding
+        .grid()
+        .map_or(0, |(g, _)| pad8(g.output_dims()));
+    let bwd_x: usize = layout
+        .layers
+        .iter()
+        .enumerate()
+        .skip(1)
+        .map(|(l, s)| s.outputs.max(if l == last { 3 } else { 0 }) * s.inputs)
+        .sum::<usize>()
+        + 64 * grid_cols;
     (fwd, fwd + bwd_x)
 }
 
@@ -134,7 +191,9 @@ pub fn memory_limits() -> (f64, f64) {
     let mut random = 0f64;
     for _ in 0..2 {
         let t = Instant::now();
-        b.par_chunks_mut(1 << 16).zip(a.par_chunks(1 << 16)).for_each(|(x, y)| x.copy_from_slice(y));
+        b.par_chunks_mut(1 << 16)
+            .zip(a.par_chunks(1 << 16))
+            .for_each(|(x, y)| x.copy_from_slice(y));
         copy = copy.max((2 * n * 4) as f64 / t.elapsed().as_secs_f64());
         let lines = n / 16;
         let threads = rayon::current_num_threads();
@@ -146,7 +205,9 @@ pub fn memory_limits() -> (f64, f64) {
                 let mut x = 12345u64 + k as u64;
                 let mut s = 0.0;
                 for _ in 0..per {
-                    x = x.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+                    x = x
+                        .wrapping_mul(6364136223846793005)
+                        .wrapping_add(1442695040888963407);
                     s += a[((x >> 33) as usize % lines) * 16];
                 }
                 s
@@ -161,16 +222,30 @@ pub fn memory_limits() -> (f64, f64) {
 
 /// Runs the benchmark, printing a table as it goes; returns the figures.
 pub fn run(options: &BenchOptions) -> Vec<BenchFigure> {
-    let presets = [("hashgrid", CacheConfig::hash_grid_preset()), ("trianglewave", CacheConfig::triangle_wave_preset())];
+    let presets = [
+        ("hashgrid", CacheConfig::hash_grid_preset()),
+        ("trianglewave", CacheConfig::triangle_wave_preset()),
+    ];
     let mut figures = Vec::new();
-    println!("nrc-cache benchmark (threads: {}, AVX2+FMA kernels: {})", rayon::current_num_threads(), crate::cpu::gemm::has_avx2_fma());
+    println!(
+        "nrc-cache benchmark (threads: {}, AVX2+FMA kernels: {})",
+        rayon::current_num_threads(),
+        crate::cpu::gemm::has_avx2_fma()
+    );
     let (copy, random) = memory_limits();
-    println!("memory: streaming copy {:.1} GB/s (read + write), random 64-byte reads {:.0} M/s", copy / 1e9, random / 1e6);
+    println!(
+        "memory: streaming copy {:.1} GB/s (read + write), random 64-byte reads {:.0} M/s",
+        copy / 1e9,
+        random / 1e6
+    );
     for &device in &options.devices {
         if device == CacheDevice::Wgpu {
             match crate::gpu::wgpu_device() {
                 Ok(_) => {
-                    let names: Vec<String> = crate::gpu::adapters().iter().map(|a| format!("{} ({:?}, {:?})", a.name, a.device_type, a.backend)).collect();
+                    let names: Vec<String> = crate::gpu::adapters()
+                        .iter()
+                        .map(|a| format!("{} ({:?}, {:?})", a.name, a.device_type, a.backend))
+                        .collect();
                     println!("wgpu adapters: {}", names.join("; "));
                 }
                 Err(e) => {
@@ -182,9 +257,18 @@ pub fn run(options: &BenchOptions) -> Vec<BenchFigure> {
         for (name, config) in &presets {
             let layout = ModelLayout::new(config);
             let (fwd, train_macs) = mlp_macs_per_sample(&layout);
-            println!("\n== {name} on {device}: {} parameters, MLP {fwd} MACs/sample forward, {} training", layout.param_count(), fwd + train_macs);
+            println!(
+                "\n== {name} on {device}: {} parameters, MLP {fwd} MACs/sample forward, {} training",
+                layout.param_count(),
+                fwd + train_macs
+            );
             for &batch_size in &options.batches {
-                let mut cache = match RadianceCache::with_path(config.clone(), SceneBox::default(), device, device.default_path()) {
+                let mut cache = match RadianceCache::with_path(
+                    config.clone(),
+                    SceneBox::default(),
+                    device,
+                    device.default_path(),
+                ) {
                     Ok(c) => c,
                     Err(e) => {
                         println!("  skipped: {e}");
@@ -215,7 +299,10 @@ pub fn run(options: &BenchOptions) -> Vec<BenchFigure> {
                     materialise.as_secs_f64() * 1e3
                 );
                 if device == CacheDevice::Cpu {
-                    let phases: Vec<f64> = PHASE_NANOS.iter().map(|p| p.load(std::sync::atomic::Ordering::Relaxed) as f64 * 1e-9).collect();
+                    let phases: Vec<f64> = PHASE_NANOS
+                        .iter()
+                        .map(|p| p.load(std::sync::atomic::Ordering::Relaxed) as f64 * 1e-9)
+                        .collect();
                     let samples = train.per_s * wall;
                     let per_sample = |t: f64| t / samples * 1e9;
                     println!(
@@ -230,7 +317,14 @@ pub fn run(options: &BenchOptions) -> Vec<BenchFigure> {
                         per_sample(phases[4]),
                     );
                 }
-                figures.push(BenchFigure { preset: name.to_string(), device, path: device.default_path(), batch: batch_size, train_per_s: Some(train.per_s), infer_per_s: Some(infer.per_s) });
+                figures.push(BenchFigure {
+                    preset: name.to_string(),
+                    device,
+                    path: device.default_path(),
+                    batch: batch_size,
+                    train_per_s: Some(train.per_s),
+                    infer_per_s: Some(infer.per_s),
+                });
             }
             if options.compare_paths {
                 figures.extend(compare(name, config, device, options));
@@ -241,15 +335,32 @@ pub fn run(options: &BenchOptions) -> Vec<BenchFigure> {
 }
 
 /// The same step and inference along the other paths (batch 2^14), and the MLP alone.
-fn compare(name: &str, config: &CacheConfig, device: CacheDevice, options: &BenchOptions) -> Vec<BenchFigure> {
+fn compare(
+    name: &str,
+    config: &CacheConfig,
+    device: CacheDevice,
+    options: &BenchOptions,
+) -> Vec<BenchFigure> {
     let mut out = Vec::new();
     let n = 1 << 14;
     let batch = synthetic_batch(n, 2);
     let short = options.min_time / 2;
-    let paths: &[ComputePath] = if device == CacheDevice::Cpu { &[ComputePath::Fused, ComputePath::CustomOps, ComputePath::Unfused] } else { &[ComputePath::CustomOps, ComputePath::Unfused] };
+    let paths: &[ComputePath] = if device == CacheDevice::Cpu {
+        &[
+            ComputePath::Fused,
+            ComputePath::CustomOps,
+            ComputePath::Unfused,
+        ]
+    } else {
+        &[ComputePath::CustomOps, ComputePath::Unfused]
+    };
     let mut base: Option<(Rate, Rate)> = None;
     for &path in paths {
-        let Ok(mut cache) = RadianceCache::with_path(config.clone(), SceneBox::default(), device, path) else { continue };
+        let Ok(mut cache) =
+            RadianceCache::with_path(config.clone(), SceneBox::default(), device, path)
+        else {
+            continue;
+        };
         let train = rate(short, n, || {
             cache.train(&batch, 1).expect("training");
         });
@@ -261,8 +372,21 @@ fn compare(name: &str, config: &CacheConfig, device: CacheDevice, options: &Benc
             (Some(x), Some(y)) => x / y,
             _ => a.per_s / b.per_s,
         };
-        println!("  path {path:<10} batch {n}: train {} samples/s, infer {} queries/s  (first path / this: {:.1}× train, {:.1}× infer)", show(train), show(infer), ratio(bt, train), ratio(bi, infer));
-        out.push(BenchFigure { preset: name.to_string(), device, path, batch: n, train_per_s: Some(train.per_s), infer_per_s: Some(infer.per_s) });
+        println!(
+            "  path {path:<10} batch {n}: train {} samples/s, infer {} queries/s  (first path / this: {:.1}× train, {:.1}× infer)",
+            show(train),
+            show(infer),
+            ratio(bt, train),
+            ratio(bi, infer)
+        );
+        out.push(BenchFigure {
+            preset: name.to_string(),
+            device,
+            path,
+            batch: n,
+            train_per_s: Some(train.per_s),
+            infer_per_s: Some(infer.per_s),
+        });
     }
     if let Ok(d) = device.burn_device() {
         mlp_alone(config, &d, n, short);
@@ -280,7 +404,10 @@ fn mlp_alone(config: &CacheConfig, device: &Device, n: usize, min_time: Duration
     let x: Vec<f32> = (0..n * k).map(|_| r.random_range(0.0..1.0)).collect();
     let ad = device.clone().autodiff();
     let layers = std::sync::Arc::new(layout.layers.clone());
-    let flex = matches!(device.clone().inner().as_dispatch(), burn::backend::DispatchDevice::Flex(_));
+    let flex = matches!(
+        device.clone().inner().as_dispatch(),
+        burn::backend::DispatchDevice::Flex(_)
+    );
     let mut results = Vec::new();
     for fused in [true, false] {
         if fused && !flex {
@@ -290,12 +417,24 @@ fn mlp_alone(config: &CacheConfig, device: &Device, n: usize, min_time: Duration
         let xt = Tensor::<2>::from_data(TensorData::new(x.clone(), [n, k]), &ad);
         let per_s = rate(min_time, n, || {
             let w = w.clone().require_grad();
-            let o = if fused { crate::ops::mlp(w.clone(), xt.clone(), &layers) } else { crate::tensor_path::mlp_tensor(w.clone(), xt.clone(), &layers) };
+            let o = if fused {
+                crate::ops::mlp(w.clone(), xt.clone(), &layers)
+            } else {
+                crate::tensor_path::mlp_tensor(w.clone(), xt.clone(), &layers)
+            };
             let grads = o.sum().backward();
             std::hint::black_box(w.grad(&grads).expect("gradient").into_data());
         });
         results.push(per_s.per_cpu_s.unwrap_or(per_s.per_s));
-        println!("  MLP alone, forward + backward, {}: {} samples/s", if fused { "fused op" } else { "burn matmul + relu" }, show(per_s));
+        println!(
+            "  MLP alone, forward + backward, {}: {} samples/s",
+            if fused {
+                "fused op"
+            } else {
+                "burn matmul + relu"
+            },
+            show(per_s)
+        );
     }
     if results.len() == 2 {
         println!("  MLP fused / unfused: {:.1}×", results[0] / results[1]);

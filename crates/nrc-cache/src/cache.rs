@@ -79,13 +79,26 @@ impl RadianceCache {
 
     /// A cache sized for a scene (see [`CacheConfig::sized_for_scene`]): the finest resolution
     /// and table size follow from the box and the smallest feature to resolve.
-    pub fn for_scene_extent(config: &CacheConfig, scene_box: SceneBox, min_feature_size: f32, device: CacheDevice) -> Result<(Self, Sizing), CacheError> {
+    pub fn for_scene_extent(
+        config: &CacheConfig,
+        scene_box: SceneBox,
+        min_feature_size: f32,
+        device: CacheDevice,
+    ) -> Result<(Self, Sizing), CacheError> {
         let (config, sizing) = config.sized_for_scene(&scene_box, min_feature_size)?;
-        Ok((Self::with_path(config, scene_box, device, device.default_path())?, sizing))
+        Ok((
+            Self::with_path(config, scene_box, device, device.default_path())?,
+            sizing,
+        ))
     }
 
     /// A freshly initialised cache computing along `path`.
-    pub fn with_path(config: CacheConfig, scene_box: SceneBox, device: CacheDevice, path: ComputePath) -> Result<Self, CacheError> {
+    pub fn with_path(
+        config: CacheConfig,
+        scene_box: SceneBox,
+        device: CacheDevice,
+        path: ComputePath,
+    ) -> Result<Self, CacheError> {
         config.validate()?;
         let layout = ModelLayout::new(&config);
         let (grid, mlp) = layout.init_params(config.seed);
@@ -102,16 +115,37 @@ impl RadianceCache {
         Self::from_host(config, scene_box, device, path, host, 0)
     }
 
-    pub(crate) fn from_host(config: CacheConfig, scene_box: SceneBox, device: CacheDevice, path: ComputePath, host: HostState, step: u32) -> Result<Self, CacheError> {
+    pub(crate) fn from_host(
+        config: CacheConfig,
+        scene_box: SceneBox,
+        device: CacheDevice,
+        path: ComputePath,
+        host: HostState,
+        step: u32,
+    ) -> Result<Self, CacheError> {
         if path == ComputePath::Fused && device != CacheDevice::Cpu {
             return Err(CacheError::Device("the fused training step exists on the CPU (Flex) only; use the custom-ops path on wgpu".into()));
         }
         let layout = Arc::new(ModelLayout::new(&config));
         let burn_device = device.burn_device()?;
         let (adam, ema) = config.optimizer.resolve();
-        let packed = (path == ComputePath::Fused).then(|| layout.encoding.grid().map(|(g, _)| g.features())).flatten();
+        let packed = (path == ComputePath::Fused)
+            .then(|| layout.encoding.grid().map(|(g, _)| g.features()))
+            .flatten();
         let state = TensorState::from_host(host, layout.grid_entries(), step, packed, &burn_device);
-        Ok(Self { config, layout, scene_box, device, burn_device, path, adam, ema, step, state: Some(state), inference: Mutex::new(None) })
+        Ok(Self {
+            config,
+            layout,
+            scene_box,
+            device,
+            burn_device,
+            path,
+            adam,
+            ema,
+            step,
+            state: Some(state),
+            inference: Mutex::new(None),
+        })
     }
 
     /// The configuration.
@@ -177,12 +211,25 @@ impl RadianceCache {
                     g.finest_resolution(),
                     g.levels.iter().filter(|l| l.dense).count()
                 ),
-                crate::encoding::EncodingKind::OneBlob { bins, wrap } => format!("OneBlob({}×{bins}{})", p.in_dims, if *wrap { ", wrapped" } else { "" }),
-                crate::encoding::EncodingKind::TriangleWave { frequencies } => format!("TriangleWave({}×{frequencies})", p.in_dims),
-                crate::encoding::EncodingKind::Identity { .. } => format!("Identity({})", p.in_dims),
+                crate::encoding::EncodingKind::OneBlob { bins, wrap } => format!(
+                    "OneBlob({}×{bins}{})",
+                    p.in_dims,
+                    if *wrap { ", wrapped" } else { "" }
+                ),
+                crate::encoding::EncodingKind::TriangleWave { frequencies } => {
+                    format!("TriangleWave({}×{frequencies})", p.in_dims)
+                }
+                crate::encoding::EncodingKind::Identity { .. } => {
+                    format!("Identity({})", p.in_dims)
+                }
             })
             .collect();
-        s.push_str(&format!("encoding: {} → {} inputs ({} padded)\n", parts.join(" + "), enc.unpadded_dims, enc.padded_dims));
+        s.push_str(&format!(
+            "encoding: {} → {} inputs ({} padded)\n",
+            parts.join(" + "),
+            enc.unpadded_dims,
+            enc.padded_dims
+        ));
         s.push_str(&format!(
             "network: {} hidden layers × 64, ReLU, no biases, output {:?} × (diffuse + specular)\n",
             self.layout.layers.len() - 1,
@@ -204,7 +251,10 @@ impl RadianceCache {
             self.adam.l2_reg,
             self.ema.map_or("off".into(), |a| format!("α {a}"))
         ));
-        s.push_str(&format!("device: {} ({} path), step {}", self.device, self.path, self.step));
+        s.push_str(&format!(
+            "device: {} ({} path), step {}",
+            self.device, self.path, self.step
+        ));
         s
     }
 
@@ -226,8 +276,14 @@ impl RadianceCache {
         // Drop cached inference weights first: they may share storage with the weights, which
         // would make the in-place update copy them.
         *self.inference.lock().expect("inference lock") = None;
-        let rows = Tensor::<2>::from_data(TensorData::new(packed.rows, [packed.len, TRAIN_ROW]), &self.burn_device);
-        crate::cpu::train::PHASE_NANOS[4].fetch_add(t_pack.elapsed().as_nanos() as u64, std::sync::atomic::Ordering::Relaxed);
+        let rows = Tensor::<2>::from_data(
+            TensorData::new(packed.rows, [packed.len, TRAIN_ROW]),
+            &self.burn_device,
+        );
+        crate::cpu::train::PHASE_NANOS[4].fetch_add(
+            t_pack.elapsed().as_nanos() as u64,
+            std::sync::atomic::Ordering::Relaxed,
+        );
         let state = self.state.take().expect("state present between calls");
         let state_packed = state.packed;
         let losses: Vec<f64> = match self.path {
@@ -236,11 +292,18 @@ impl RadianceCache {
                     layout: self.layout.clone(),
                     adam: self.adam,
                     ema: self.ema,
-                    loss: LossSettings { activation: self.layout.output_activation, epsilon: self.config.loss.epsilon },
+                    loss: LossSettings {
+                        activation: self.layout.output_activation,
+                        epsilon: self.config.loss.epsilon,
+                    },
                     first_step: self.step,
                     steps,
                 };
-                let out = <Dispatch as NrcFusedOps>::fused_train_steps(state.into_dispatch(), rows.into_dispatch(), spec);
+                let out = <Dispatch as NrcFusedOps>::fused_train_steps(
+                    state.into_dispatch(),
+                    rows.into_dispatch(),
+                    spec,
+                );
                 self.state = Some(TensorState::from_dispatch(out.state, state_packed));
                 out.losses
             }
@@ -248,11 +311,23 @@ impl RadianceCache {
                 let mut state = state;
                 let mut losses = Vec::with_capacity(steps as usize);
                 for k in 1..=steps {
-                    losses.push(crate::tensor_path::train_step_tensor(&self.layout, self.path, &mut state, &rows, self.adam, self.ema, self.config.loss.epsilon, self.step + k));
+                    losses.push(crate::tensor_path::train_step_tensor(
+                        &self.layout,
+                        self.path,
+                        &mut state,
+                        &rows,
+                        self.adam,
+                        self.ema,
+                        self.config.loss.epsilon,
+                        self.step + k,
+                    ));
                 }
                 self.state = Some(state);
                 let all = Tensor::cat(losses, 0);
-                all.into_data().convert::<f64>().try_to_vec::<f64>().expect("losses")
+                all.into_data()
+                    .convert::<f64>()
+                    .try_to_vec::<f64>()
+                    .expect("losses")
             }
         };
         self.step += steps;
@@ -268,18 +343,33 @@ impl RadianceCache {
         if queries.is_empty() {
             return Vec::new();
         }
-        let rows = Tensor::<2>::from_data(TensorData::new(pack_queries(queries), [queries.len(), QUERY_ROW]), &self.burn_device);
+        let rows = Tensor::<2>::from_data(
+            TensorData::new(pack_queries(queries), [queries.len(), QUERY_ROW]),
+            &self.burn_device,
+        );
         let (grid, mlp) = self.inference_weights();
         let out = match self.path {
-            ComputePath::Fused => Tensor::<2>::from_dispatch(<Dispatch as NrcFusedOps>::fused_infer(
-                grid.into_dispatch(),
-                mlp.into_dispatch(),
-                rows.into_dispatch(),
-                self.layout.clone(),
-            )),
-            _ => crate::tensor_path::infer_tensor(&self.layout, self.path, (self.layout.grid_params > 0).then_some(grid), mlp, rows),
+            ComputePath::Fused => {
+                Tensor::<2>::from_dispatch(<Dispatch as NrcFusedOps>::fused_infer(
+                    grid.into_dispatch(),
+                    mlp.into_dispatch(),
+                    rows.into_dispatch(),
+                    self.layout.clone(),
+                ))
+            }
+            _ => crate::tensor_path::infer_tensor(
+                &self.layout,
+                self.path,
+                (self.layout.grid_params > 0).then_some(grid),
+                mlp,
+                rows,
+            ),
         };
-        let flat: Vec<f32> = out.into_data().convert::<f32>().try_to_vec::<f32>().expect("f32 output");
+        let flat: Vec<f32> = out
+            .into_data()
+            .convert::<f32>()
+            .try_to_vec::<f32>()
+            .expect("f32 output");
         flat.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect()
     }
 
@@ -294,7 +384,12 @@ impl RadianceCache {
             (ComputePath::Fused, ema) => {
                 // The op takes the state by value; the clones share storage and the kernel only
                 // reads it.
-                let w = <Dispatch as NrcFusedOps>::inference_weights(state.clone().into_dispatch(), self.layout.clone(), ema, self.step);
+                let w = <Dispatch as NrcFusedOps>::inference_weights(
+                    state.clone().into_dispatch(),
+                    self.layout.clone(),
+                    ema,
+                    self.step,
+                );
                 (Tensor::from_dispatch(w.grid), Tensor::from_dispatch(w.mlp))
             }
             (_, None) => (state.grid.clone(), state.mlp.clone()),
@@ -303,11 +398,18 @@ impl RadianceCache {
                     (state.grid.clone(), state.mlp.clone())
                 } else {
                     let inv = 1.0 / (1.0 - alpha.powi(self.step.min(i32::MAX as u32) as i32));
-                    (state.grid_ema.clone().mul_scalar(inv), state.mlp_ema.clone().mul_scalar(inv))
+                    (
+                        state.grid_ema.clone().mul_scalar(inv),
+                        state.mlp_ema.clone().mul_scalar(inv),
+                    )
                 }
             }
         };
-        *guard = Some(InferenceWeights { step: self.step, grid: grid.clone(), mlp: mlp.clone() });
+        *guard = Some(InferenceWeights {
+            step: self.step,
+            grid: grid.clone(),
+            mlp: mlp.clone(),
+        });
         (grid, mlp)
     }
 
@@ -316,7 +418,12 @@ impl RadianceCache {
         if let (ComputePath::Fused, Some(alpha)) = (self.path, self.ema) {
             let state = self.state.take().expect("state present");
             let packed = state.packed;
-            let s = <Dispatch as NrcFusedOps>::catch_up_ema(state.into_dispatch(), self.layout.clone(), alpha, self.step);
+            let s = <Dispatch as NrcFusedOps>::catch_up_ema(
+                state.into_dispatch(),
+                self.layout.clone(),
+                alpha,
+                self.step,
+            );
             self.state = Some(TensorState::from_dispatch(s, packed));
         }
         self.state.as_ref().expect("state present").to_host()
@@ -347,8 +454,12 @@ impl RadianceCache {
         let s = self.state.as_mut().expect("state present");
         s.grid = match s.packed {
             Some(f) => {
-                let [_, m, v, e] = crate::cpu::optim::unpack_records(f, &tensor_vec(s.grid.clone()));
-                vec_tensor(crate::cpu::optim::pack_records(f, &grid, &m, &v, &e), &self.burn_device)
+                let [_, m, v, e] =
+                    crate::cpu::optim::unpack_records(f, &tensor_vec(s.grid.clone()));
+                vec_tensor(
+                    crate::cpu::optim::pack_records(f, &grid, &m, &v, &e),
+                    &self.burn_device,
+                )
             }
             None => vec_tensor(grid, &self.burn_device),
         };
@@ -366,15 +477,33 @@ impl RadianceCache {
     /// Loads a snapshot onto `device` (its default path).
     pub fn load(path: &Path, device: CacheDevice) -> Result<Self, CacheError> {
         let s = snapshot::read(path)?;
-        Self::from_host(s.config, s.scene_box, device, device.default_path(), s.state, s.step)
+        Self::from_host(
+            s.config,
+            s.scene_box,
+            device,
+            device.default_path(),
+            s.state,
+            s.step,
+        )
     }
 
     /// Loads a snapshot and checks that it was made with `expected` (otherwise an error naming
     /// the first differing section).
-    pub fn load_matching(path: &Path, expected: &CacheConfig, device: CacheDevice) -> Result<Self, CacheError> {
+    pub fn load_matching(
+        path: &Path,
+        expected: &CacheConfig,
+        device: CacheDevice,
+    ) -> Result<Self, CacheError> {
         let s = snapshot::read(path)?;
         snapshot::check_config(path, &s.config, expected)?;
-        Self::from_host(s.config, s.scene_box, device, device.default_path(), s.state, s.step)
+        Self::from_host(
+            s.config,
+            s.scene_box,
+            device,
+            device.default_path(),
+            s.state,
+            s.step,
+        )
     }
 
     /// Changes the compute path (the state moves over; the fused path requires the CPU).
@@ -383,7 +512,14 @@ impl RadianceCache {
             return Ok(());
         }
         let host = self.host_state();
-        *self = Self::from_host(self.config.clone(), self.scene_box, self.device, path, host, self.step)?;
+        *self = Self::from_host(
+            self.config.clone(),
+            self.scene_box,
+            self.device,
+            path,
+            host,
+            self.step,
+        )?;
         Ok(())
     }
 }

@@ -105,10 +105,18 @@ impl NestedEncoding {
     /// Raw input dimensions this encoding consumes.
     pub fn n_dims_to_encode(&self) -> u32 {
         match self {
-            Self::HashGrid { n_dims_to_encode, .. }
-            | Self::OneBlob { n_dims_to_encode, .. }
-            | Self::TriangleWave { n_dims_to_encode, .. }
-            | Self::Identity { n_dims_to_encode, .. } => *n_dims_to_encode,
+            Self::HashGrid {
+                n_dims_to_encode, ..
+            }
+            | Self::OneBlob {
+                n_dims_to_encode, ..
+            }
+            | Self::TriangleWave {
+                n_dims_to_encode, ..
+            }
+            | Self::Identity {
+                n_dims_to_encode, ..
+            } => *n_dims_to_encode,
         }
     }
 }
@@ -240,7 +248,13 @@ impl OptimizerConfig {
     pub fn resolve(&self) -> (AdamParams, Option<f32>) {
         match self {
             Self::EMA { decay, nested } => (nested.resolve().0, Some(*decay)),
-            Self::Adam { learning_rate, beta1, beta2, epsilon, l2_reg } => (
+            Self::Adam {
+                learning_rate,
+                beta1,
+                beta2,
+                epsilon,
+                l2_reg,
+            } => (
                 AdamParams {
                     learning_rate: *learning_rate,
                     beta1: *beta1,
@@ -265,7 +279,10 @@ pub struct SceneBox {
 
 impl Default for SceneBox {
     fn default() -> Self {
-        Self { min: [0.0; 3], max: [1.0; 3] }
+        Self {
+            min: [0.0; 3],
+            max: [1.0; 3],
+        }
     }
 }
 
@@ -279,7 +296,11 @@ impl SceneBox {
     pub fn normalize(&self, p: [f32; 3]) -> [f32; 3] {
         std::array::from_fn(|k| {
             let e = self.max[k] - self.min[k];
-            if e > 0.0 { ((p[k] - self.min[k]) / e).clamp(0.0, 1.0) } else { 0.5 }
+            if e > 0.0 {
+                ((p[k] - self.min[k]) / e).clamp(0.0, 1.0)
+            } else {
+                0.5
+            }
         })
     }
 }
@@ -306,7 +327,8 @@ impl CacheConfig {
     pub fn from_json_str(json: &str) -> Result<Self, CacheError> {
         let de = &mut serde_json::Deserializer::from_str(json);
         let config: Self = serde_path_to_error::deserialize(de).map_err(|e| {
-            let (field, message) = crate::config_serde::split_error(&e.path().to_string(), &e.inner().to_string());
+            let (field, message) =
+                crate::config_serde::split_error(&e.path().to_string(), &e.inner().to_string());
             CacheError::Config { field, message }
         })?;
         config.validate()?;
@@ -315,8 +337,10 @@ impl CacheConfig {
 
     /// Reads, parses and validates a JSON file.
     pub fn from_file(path: &Path) -> Result<Self, CacheError> {
-        let text = std::fs::read_to_string(path)
-            .map_err(|e| CacheError::Io { path: path.display().to_string(), message: e.to_string() })?;
+        let text = std::fs::read_to_string(path).map_err(|e| CacheError::Io {
+            path: path.display().to_string(),
+            message: e.to_string(),
+        })?;
         Self::from_json_str(&text)
     }
 
@@ -327,12 +351,14 @@ impl CacheConfig {
 
     /// The `models/nrc-hashgrid.json` preset: hash grid 16×2, log2T 19, base 16, 3 hidden layers.
     pub fn hash_grid_preset() -> Self {
-        Self::from_json_str(include_str!("../../../models/nrc-hashgrid.json")).expect("preset is valid")
+        Self::from_json_str(include_str!("../../../models/nrc-hashgrid.json"))
+            .expect("preset is valid")
     }
 
     /// The `models/nrc-trianglewave.json` preset: 12 triangle-wave octaves + one-blob, 5 hidden layers.
     pub fn triangle_wave_preset() -> Self {
-        Self::from_json_str(include_str!("../../../models/nrc-trianglewave.json")).expect("preset is valid")
+        Self::from_json_str(include_str!("../../../models/nrc-trianglewave.json"))
+            .expect("preset is valid")
     }
 
     /// Checks every field's range; the error names the field.
@@ -340,13 +366,25 @@ impl CacheConfig {
         let err = |field: String, message: String| Err(CacheError::Config { field, message });
         let e = &self.encoding;
         if e.otype != "Composite" {
-            return err("encoding.otype".into(), format!("must be \"Composite\" (the cache encodes {RAW_INPUT_DIMS} raw inputs), got {:?}", e.otype));
+            return err(
+                "encoding.otype".into(),
+                format!(
+                    "must be \"Composite\" (the cache encodes {RAW_INPUT_DIMS} raw inputs), got {:?}",
+                    e.otype
+                ),
+            );
         }
         if e.nested.is_empty() {
-            return err("encoding.nested".into(), "must hold at least one encoding".into());
+            return err(
+                "encoding.nested".into(),
+                "must hold at least one encoding".into(),
+            );
         }
         if !(1..=64).contains(&e.pad_to_multiple) {
-            return err("encoding.pad_to_multiple".into(), format!("must be in 1..=64, got {}", e.pad_to_multiple));
+            return err(
+                "encoding.pad_to_multiple".into(),
+                format!("must be in 1..=64, got {}", e.pad_to_multiple),
+            );
         }
         let mut dims = 0u32;
         let mut grids = 0;
@@ -354,36 +392,75 @@ impl CacheConfig {
             let f = |name: &str| format!("encoding.nested[{i}].{name}");
             let nd = n.n_dims_to_encode();
             if nd == 0 || nd > RAW_INPUT_DIMS as u32 {
-                return err(f("n_dims_to_encode"), format!("must be in 1..={RAW_INPUT_DIMS}, got {nd}"));
+                return err(
+                    f("n_dims_to_encode"),
+                    format!("must be in 1..={RAW_INPUT_DIMS}, got {nd}"),
+                );
             }
             dims += nd;
             match n {
-                NestedEncoding::HashGrid { n_dims_to_encode, n_levels, n_features_per_level, log2_hashmap_size, base_resolution, per_level_scale } => {
+                NestedEncoding::HashGrid {
+                    n_dims_to_encode,
+                    n_levels,
+                    n_features_per_level,
+                    log2_hashmap_size,
+                    base_resolution,
+                    per_level_scale,
+                } => {
                     grids += 1;
                     if grids > 1 {
-                        return err(f("otype"), "at most one HashGrid encoding is supported".into());
+                        return err(
+                            f("otype"),
+                            "at most one HashGrid encoding is supported".into(),
+                        );
                     }
                     if *n_dims_to_encode != 3 {
-                        return err(f("n_dims_to_encode"), format!("a HashGrid encodes exactly 3 dimensions (the position), got {n_dims_to_encode}"));
+                        return err(
+                            f("n_dims_to_encode"),
+                            format!(
+                                "a HashGrid encodes exactly 3 dimensions (the position), got {n_dims_to_encode}"
+                            ),
+                        );
                     }
                     if !(1..=32).contains(n_levels) {
                         return err(f("n_levels"), format!("must be in 1..=32, got {n_levels}"));
                     }
                     if ![1, 2, 4, 8].contains(n_features_per_level) {
-                        return err(f("n_features_per_level"), format!("must be 1, 2, 4 or 8, got {n_features_per_level}"));
+                        return err(
+                            f("n_features_per_level"),
+                            format!("must be 1, 2, 4 or 8, got {n_features_per_level}"),
+                        );
                     }
                     if !(10..=24).contains(log2_hashmap_size) {
-                        return err(f("log2_hashmap_size"), format!("must be in 10..=24, got {log2_hashmap_size}"));
+                        return err(
+                            f("log2_hashmap_size"),
+                            format!("must be in 10..=24, got {log2_hashmap_size}"),
+                        );
                     }
-                    if !(base_resolution.is_finite() && *base_resolution >= 2.0 && *base_resolution <= 4096.0) {
-                        return err(f("base_resolution"), format!("must be in [2, 4096], got {base_resolution}"));
+                    if !(base_resolution.is_finite()
+                        && *base_resolution >= 2.0
+                        && *base_resolution <= 4096.0)
+                    {
+                        return err(
+                            f("base_resolution"),
+                            format!("must be in [2, 4096], got {base_resolution}"),
+                        );
                     }
-                    if !(per_level_scale.is_finite() && *per_level_scale >= 1.0 && *per_level_scale <= 4.0) {
-                        return err(f("per_level_scale"), format!("must be in [1, 4], got {per_level_scale}"));
+                    if !(per_level_scale.is_finite()
+                        && *per_level_scale >= 1.0
+                        && *per_level_scale <= 4.0)
+                    {
+                        return err(
+                            f("per_level_scale"),
+                            format!("must be in [1, 4], got {per_level_scale}"),
+                        );
                     }
                     let finest = base_resolution * per_level_scale.powi(*n_levels as i32 - 1);
                     if finest > 1_048_576.0 {
-                        return err(f("per_level_scale"), format!("finest resolution {finest:.0} exceeds 2^20"));
+                        return err(
+                            f("per_level_scale"),
+                            format!("finest resolution {finest:.0} exceeds 2^20"),
+                        );
                     }
                 }
                 NestedEncoding::OneBlob { n_bins, .. } => {
@@ -393,7 +470,10 @@ impl CacheConfig {
                 }
                 NestedEncoding::TriangleWave { n_frequencies, .. } => {
                     if !(1..=24).contains(n_frequencies) {
-                        return err(f("n_frequencies"), format!("must be in 1..=24, got {n_frequencies}"));
+                        return err(
+                            f("n_frequencies"),
+                            format!("must be in 1..=24, got {n_frequencies}"),
+                        );
                     }
                 }
                 NestedEncoding::Identity { scale, offset, .. } => {
@@ -409,34 +489,60 @@ impl CacheConfig {
         if dims != RAW_INPUT_DIMS as u32 {
             return err(
                 "encoding.nested".into(),
-                format!("the nested encodings consume {dims} dimensions; the cache provides {RAW_INPUT_DIMS} (position 3, direction 2, normal 2, roughness 1, diffuse 3, specular 3)"),
+                format!(
+                    "the nested encodings consume {dims} dimensions; the cache provides {RAW_INPUT_DIMS} (position 3, direction 2, normal 2, roughness 1, diffuse 3, specular 3)"
+                ),
             );
         }
         let n = &self.network;
         if n.otype != "FullyFusedMLP" {
-            return err("network.otype".into(), format!("must be \"FullyFusedMLP\", got {:?}", n.otype));
+            return err(
+                "network.otype".into(),
+                format!("must be \"FullyFusedMLP\", got {:?}", n.otype),
+            );
         }
         if n.n_neurons != 64 {
-            return err("network.n_neurons".into(), format!("only 64 neurons are supported, got {}", n.n_neurons));
+            return err(
+                "network.n_neurons".into(),
+                format!("only 64 neurons are supported, got {}", n.n_neurons),
+            );
         }
         if !(1..=16).contains(&n.n_hidden_layers) {
-            return err("network.n_hidden_layers".into(), format!("must be in 1..=16, got {}", n.n_hidden_layers));
+            return err(
+                "network.n_hidden_layers".into(),
+                format!("must be in 1..=16, got {}", n.n_hidden_layers),
+            );
         }
         if n.activation != "ReLU" {
-            return err("network.activation".into(), format!("must be \"ReLU\", got {:?}", n.activation));
+            return err(
+                "network.activation".into(),
+                format!("must be \"ReLU\", got {:?}", n.activation),
+            );
         }
         if n.n_output_dims != 3 {
-            return err("network.n_output_dims".into(), format!("must be 3 (RGB), got {}", n.n_output_dims));
+            return err(
+                "network.n_output_dims".into(),
+                format!("must be 3 (RGB), got {}", n.n_output_dims),
+            );
         }
         let l = &self.loss;
         if l.otype != "RelativeL2Luminance" {
-            return err("loss.otype".into(), format!("must be \"RelativeL2Luminance\", got {:?}", l.otype));
+            return err(
+                "loss.otype".into(),
+                format!("must be \"RelativeL2Luminance\", got {:?}", l.otype),
+            );
         }
         if !(l.epsilon.is_finite() && l.epsilon > 0.0) {
-            return err("loss.epsilon".into(), format!("must be finite and > 0, got {}", l.epsilon));
+            return err(
+                "loss.epsilon".into(),
+                format!("must be finite and > 0, got {}", l.epsilon),
+            );
         }
         if !(l.max_target.is_finite() && l.max_target > 0.0) {
-            return err("loss.max_target".into(), format!("must be finite and > 0, got {}", l.max_target));
+            return err(
+                "loss.max_target".into(),
+                format!("must be finite and > 0, got {}", l.max_target),
+            );
         }
         validate_optimizer(&self.optimizer, "optimizer", true)
     }
@@ -444,15 +550,20 @@ impl CacheConfig {
     /// The hash-grid parameters, if the encoding has a hash grid.
     pub fn hash_grid(&self) -> Option<HashGridParams> {
         self.encoding.nested.iter().find_map(|n| match n {
-            NestedEncoding::HashGrid { n_levels, n_features_per_level, log2_hashmap_size, base_resolution, per_level_scale, .. } => {
-                Some(HashGridParams {
-                    n_levels: *n_levels,
-                    n_features_per_level: *n_features_per_level,
-                    log2_hashmap_size: *log2_hashmap_size,
-                    base_resolution: *base_resolution,
-                    per_level_scale: *per_level_scale,
-                })
-            }
+            NestedEncoding::HashGrid {
+                n_levels,
+                n_features_per_level,
+                log2_hashmap_size,
+                base_resolution,
+                per_level_scale,
+                ..
+            } => Some(HashGridParams {
+                n_levels: *n_levels,
+                n_features_per_level: *n_features_per_level,
+                log2_hashmap_size: *log2_hashmap_size,
+                base_resolution: *base_resolution,
+                per_level_scale: *per_level_scale,
+            }),
             _ => None,
         })
     }
@@ -468,13 +579,23 @@ impl CacheConfig {
     ///   `log2_hashmap_size`, which acts as the memory budget.
     /// * Triangle wave: octaves so that the finest period is about `min_feature_size`
     ///   (`n = ceil(log2 N_max) + 1`, at most the configured count).
-    pub fn sized_for_scene(&self, scene: &SceneBox, min_feature_size: f32) -> Result<(Self, Sizing), CacheError> {
+    pub fn sized_for_scene(
+        &self,
+        scene: &SceneBox,
+        min_feature_size: f32,
+    ) -> Result<(Self, Sizing), CacheError> {
         let ext = scene.extent();
         if !ext.iter().all(|e| e.is_finite() && *e >= 0.0) || ext.iter().all(|e| *e <= 0.0) {
-            return Err(CacheError::Config { field: "scene_box".into(), message: format!("invalid extent {ext:?}") });
+            return Err(CacheError::Config {
+                field: "scene_box".into(),
+                message: format!("invalid extent {ext:?}"),
+            });
         }
         if !(min_feature_size.is_finite() && min_feature_size > 0.0) {
-            return Err(CacheError::Config { field: "min_feature_size".into(), message: format!("must be finite and > 0, got {min_feature_size}") });
+            return Err(CacheError::Config {
+                field: "min_feature_size".into(),
+                message: format!("must be finite and > 0, got {min_feature_size}"),
+            });
         }
         let longest = ext.iter().cloned().fold(0.0f32, f32::max);
         let n_max = (longest / min_feature_size).ceil().clamp(2.0, 1_048_576.0);
@@ -489,11 +610,26 @@ impl CacheConfig {
         };
         for n in out.encoding.nested.iter_mut() {
             match n {
-                NestedEncoding::HashGrid { n_levels, log2_hashmap_size, base_resolution, per_level_scale, .. } => {
+                NestedEncoding::HashGrid {
+                    n_levels,
+                    log2_hashmap_size,
+                    base_resolution,
+                    per_level_scale,
+                    ..
+                } => {
                     let n_max = n_max.max(*base_resolution);
-                    *per_level_scale = if *n_levels > 1 { (n_max / *base_resolution).powf(1.0 / (*n_levels - 1) as f32) } else { 1.0 };
-                    let cells: [f64; 3] = std::array::from_fn(|k| (f64::from(ext[k] / longest) * f64::from(n_max)).ceil().max(1.0));
-                    let surface = 2.0 * (cells[0] * cells[1] + cells[1] * cells[2] + cells[2] * cells[0]);
+                    *per_level_scale = if *n_levels > 1 {
+                        (n_max / *base_resolution).powf(1.0 / (*n_levels - 1) as f32)
+                    } else {
+                        1.0
+                    };
+                    let cells: [f64; 3] = std::array::from_fn(|k| {
+                        (f64::from(ext[k] / longest) * f64::from(n_max))
+                            .ceil()
+                            .max(1.0)
+                    });
+                    let surface =
+                        2.0 * (cells[0] * cells[1] + cells[1] * cells[2] + cells[2] * cells[0]);
                     let log2 = (surface.log2().ceil() as u32).clamp(14, *log2_hashmap_size);
                     *log2_hashmap_size = log2;
                     sizing.per_level_scale = Some(*per_level_scale);
@@ -521,7 +657,12 @@ impl CacheConfig {
 }
 
 fn validate_optimizer(o: &OptimizerConfig, field: &str, top: bool) -> Result<(), CacheError> {
-    let err = |name: &str, message: String| Err(CacheError::Config { field: format!("{field}.{name}"), message });
+    let err = |name: &str, message: String| {
+        Err(CacheError::Config {
+            field: format!("{field}.{name}"),
+            message,
+        })
+    };
     match o {
         OptimizerConfig::EMA { decay, nested } => {
             if !top {
@@ -532,9 +673,18 @@ fn validate_optimizer(o: &OptimizerConfig, field: &str, top: bool) -> Result<(),
             }
             validate_optimizer(nested, &format!("{field}.nested"), false)
         }
-        OptimizerConfig::Adam { learning_rate, beta1, beta2, epsilon, l2_reg } => {
+        OptimizerConfig::Adam {
+            learning_rate,
+            beta1,
+            beta2,
+            epsilon,
+            l2_reg,
+        } => {
             if !(learning_rate.is_finite() && *learning_rate > 0.0) {
-                return err("learning_rate", format!("must be finite and > 0, got {learning_rate}"));
+                return err(
+                    "learning_rate",
+                    format!("must be finite and > 0, got {learning_rate}"),
+                );
             }
             if !(beta1.is_finite() && (0.0..1.0).contains(beta1)) {
                 return err("beta1", format!("must be in [0, 1), got {beta1}"));

@@ -39,7 +39,11 @@ fn parse_inner(message: &str) -> (&str, &str) {
 fn fields<T: DeserializeOwned, E: serde::de::Error>(value: Value) -> Result<T, E> {
     serde_path_to_error::deserialize(value).map_err(|e| {
         let (field, message) = split_error(&e.path().to_string(), &e.inner().to_string());
-        let field = if field == "(document)" { String::new() } else { field };
+        let field = if field == "(document)" {
+            String::new()
+        } else {
+            field
+        };
         E::custom(format!("@{field}@ {message}"))
     })
 }
@@ -109,17 +113,32 @@ impl<'de> Deserialize<'de> for NestedEncoding {
             }
             "OneBlob" => {
                 let f: OneBlobFields = fields(v)?;
-                Self::OneBlob { n_dims_to_encode: f.n_dims_to_encode, n_bins: f.n_bins, wrap: f.wrap }
+                Self::OneBlob {
+                    n_dims_to_encode: f.n_dims_to_encode,
+                    n_bins: f.n_bins,
+                    wrap: f.wrap,
+                }
             }
             "TriangleWave" => {
                 let f: TriangleWaveFields = fields(v)?;
-                Self::TriangleWave { n_dims_to_encode: f.n_dims_to_encode, n_frequencies: f.n_frequencies }
+                Self::TriangleWave {
+                    n_dims_to_encode: f.n_dims_to_encode,
+                    n_frequencies: f.n_frequencies,
+                }
             }
             "Identity" => {
                 let f: IdentityFields = fields(v)?;
-                Self::Identity { n_dims_to_encode: f.n_dims_to_encode, scale: f.scale, offset: f.offset }
+                Self::Identity {
+                    n_dims_to_encode: f.n_dims_to_encode,
+                    scale: f.scale,
+                    offset: f.offset,
+                }
             }
-            other => return Err(D::Error::custom(format!("@otype@ unknown encoding {other:?} (expected HashGrid, OneBlob, TriangleWave or Identity)"))),
+            other => {
+                return Err(D::Error::custom(format!(
+                    "@otype@ unknown encoding {other:?} (expected HashGrid, OneBlob, TriangleWave or Identity)"
+                )));
+            }
         })
     }
 }
@@ -128,7 +147,14 @@ impl Serialize for NestedEncoding {
     fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
         let mut m = s.serialize_map(None)?;
         match self {
-            Self::HashGrid { n_dims_to_encode, n_levels, n_features_per_level, log2_hashmap_size, base_resolution, per_level_scale } => {
+            Self::HashGrid {
+                n_dims_to_encode,
+                n_levels,
+                n_features_per_level,
+                log2_hashmap_size,
+                base_resolution,
+                per_level_scale,
+            } => {
                 m.serialize_entry("otype", "HashGrid")?;
                 m.serialize_entry("n_dims_to_encode", n_dims_to_encode)?;
                 m.serialize_entry("n_levels", n_levels)?;
@@ -137,18 +163,29 @@ impl Serialize for NestedEncoding {
                 m.serialize_entry("base_resolution", base_resolution)?;
                 m.serialize_entry("per_level_scale", per_level_scale)?;
             }
-            Self::OneBlob { n_dims_to_encode, n_bins, wrap } => {
+            Self::OneBlob {
+                n_dims_to_encode,
+                n_bins,
+                wrap,
+            } => {
                 m.serialize_entry("otype", "OneBlob")?;
                 m.serialize_entry("n_dims_to_encode", n_dims_to_encode)?;
                 m.serialize_entry("n_bins", n_bins)?;
                 m.serialize_entry("wrap", wrap)?;
             }
-            Self::TriangleWave { n_dims_to_encode, n_frequencies } => {
+            Self::TriangleWave {
+                n_dims_to_encode,
+                n_frequencies,
+            } => {
                 m.serialize_entry("otype", "TriangleWave")?;
                 m.serialize_entry("n_dims_to_encode", n_dims_to_encode)?;
                 m.serialize_entry("n_frequencies", n_frequencies)?;
             }
-            Self::Identity { n_dims_to_encode, scale, offset } => {
+            Self::Identity {
+                n_dims_to_encode,
+                scale,
+                offset,
+            } => {
                 m.serialize_entry("otype", "Identity")?;
                 m.serialize_entry("n_dims_to_encode", n_dims_to_encode)?;
                 m.serialize_entry("scale", scale)?;
@@ -190,13 +227,26 @@ impl<'de> Deserialize<'de> for OptimizerConfig {
         Ok(match otype.as_str() {
             "EMA" => {
                 let f: EmaFields = fields(v)?;
-                Self::EMA { decay: f.decay, nested: Box::new(f.nested) }
+                Self::EMA {
+                    decay: f.decay,
+                    nested: Box::new(f.nested),
+                }
             }
             "Adam" => {
                 let f: AdamFields = fields(v)?;
-                Self::Adam { learning_rate: f.learning_rate, beta1: f.beta1, beta2: f.beta2, epsilon: f.epsilon, l2_reg: f.l2_reg }
+                Self::Adam {
+                    learning_rate: f.learning_rate,
+                    beta1: f.beta1,
+                    beta2: f.beta2,
+                    epsilon: f.epsilon,
+                    l2_reg: f.l2_reg,
+                }
             }
-            other => return Err(D::Error::custom(format!("@otype@ unknown optimizer {other:?} (expected EMA or Adam)"))),
+            other => {
+                return Err(D::Error::custom(format!(
+                    "@otype@ unknown optimizer {other:?} (expected EMA or Adam)"
+                )));
+            }
         })
     }
 }
@@ -210,7 +260,13 @@ impl Serialize for OptimizerConfig {
                 m.serialize_entry("decay", decay)?;
                 m.serialize_entry("nested", nested)?;
             }
-            Self::Adam { learning_rate, beta1, beta2, epsilon, l2_reg } => {
+            Self::Adam {
+                learning_rate,
+                beta1,
+                beta2,
+                epsilon,
+                l2_reg,
+            } => {
                 m.serialize_entry("otype", "Adam")?;
                 m.serialize_entry("learning_rate", learning_rate)?;
                 m.serialize_entry("beta1", beta1)?;

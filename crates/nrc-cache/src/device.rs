@@ -32,7 +32,9 @@ impl FromStr for CacheDevice {
         match s.to_ascii_lowercase().as_str() {
             "cpu" | "flex" => Ok(Self::Cpu),
             "wgpu" | "gpu" => Ok(Self::Wgpu),
-            other => Err(CacheError::Device(format!("unknown device {other:?} (expected cpu or wgpu)"))),
+            other => Err(CacheError::Device(format!(
+                "unknown device {other:?} (expected cpu or wgpu)"
+            ))),
         }
     }
 }
@@ -42,10 +44,26 @@ impl CacheDevice {
     /// software rasteriser such as lavapipe is slower than Flex). Returns the reason too.
     pub fn auto() -> (Self, String) {
         let adapters = crate::gpu::adapters();
-        match adapters.iter().find(|a| a.device_type != burn::backend::wgpu::wgpu::DeviceType::Cpu) {
-            Some(a) => (Self::Wgpu, format!("hardware GPU adapter {} ({:?})", a.name, a.backend)),
+        match adapters
+            .iter()
+            .find(|a| a.device_type != burn::backend::wgpu::wgpu::DeviceType::Cpu)
+        {
+            Some(a) => (
+                Self::Wgpu,
+                format!("hardware GPU adapter {} ({:?})", a.name, a.backend),
+            ),
             None if adapters.is_empty() => (Self::Cpu, "no wgpu adapter".into()),
-            None => (Self::Cpu, format!("only software wgpu adapters ({})", adapters.iter().map(|a| a.name.as_str()).collect::<Vec<_>>().join(", "))),
+            None => (
+                Self::Cpu,
+                format!(
+                    "only software wgpu adapters ({})",
+                    adapters
+                        .iter()
+                        .map(|a| a.name.as_str())
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                ),
+            ),
         }
     }
 

@@ -26,7 +26,11 @@ pub fn activate(act: OutputActivation, o: f32) -> (f32, f32) {
             (y, 1.0 / (1.0 + (-o).exp()))
         }
         OutputActivation::ReLU => {
-            if o > 0.0 { (o, 1.0) } else { (0.0, 0.0) }
+            if o > 0.0 {
+                (o, 1.0)
+            } else {
+                (0.0, 0.0)
+            }
         }
     }
 }
@@ -34,7 +38,15 @@ pub fn activate(act: OutputActivation, o: f32) -> (f32, f32) {
 /// Loss of one sample and its gradient with respect to the network outputs `o`, scaled by
 /// `scale` (1 / (3 · used samples)). Computed in f64 so extreme targets cannot overflow.
 #[inline(always)]
-pub fn sample_loss(act: OutputActivation, o: [f32; 3], factor: [f32; 3], target: [f32; 3], weight: f32, epsilon: f32, scale: f32) -> (f64, [f32; 3]) {
+pub fn sample_loss(
+    act: OutputActivation,
+    o: [f32; 3],
+    factor: [f32; 3],
+    target: [f32; 3],
+    weight: f32,
+    epsilon: f32,
+    scale: f32,
+) -> (f64, [f32; 3]) {
     let mut y = [0f64; 3];
     let mut dy_do = [0f64; 3];
     for c in 0..3 {
@@ -75,9 +87,14 @@ pub fn predict_tensor(act: OutputActivation, o: Tensor<2>, factor: Tensor<2>) ->
 pub fn loss_tensor(y: Tensor<2>, target: Tensor<2>, weight: Tensor<2>, epsilon: f32) -> Tensor<1> {
     let [n, _] = y.dims();
     let device = y.device();
-    let lum_w = Tensor::<2>::from_data(TensorData::new(vec![0.2126f32, 0.7152, 0.0722], [3, 1]), &device);
+    let lum_w = Tensor::<2>::from_data(
+        TensorData::new(vec![0.2126f32, 0.7152, 0.0722], [3, 1]),
+        &device,
+    );
     let lum = y.clone().detach().matmul(lum_w); // [N, 1]
     let denom = (lum.clone() * lum).add_scalar(epsilon);
     let d = y - target;
-    ((d.clone() * d) * weight / denom).sum().div_scalar((3 * n.max(1)) as f32)
+    ((d.clone() * d) * weight / denom)
+        .sum()
+        .div_scalar((3 * n.max(1)) as f32)
 }

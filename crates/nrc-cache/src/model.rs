@@ -74,11 +74,21 @@ impl ModelLayout {
         let mut inputs = encoding.padded_dims;
         for l in 0..=hidden {
             let outputs = if l == hidden { OUTPUTS } else { WIDTH };
-            layers.push(LayerShape { inputs, outputs, offset });
+            layers.push(LayerShape {
+                inputs,
+                outputs,
+                offset,
+            });
             offset += inputs * outputs;
             inputs = outputs;
         }
-        Self { encoding, layers, output_activation: config.network.output_activation, grid_params, total_params: grid_params + offset }
+        Self {
+            encoding,
+            layers,
+            output_activation: config.network.output_activation,
+            grid_params,
+            total_params: grid_params + offset,
+        }
     }
 
     /// Total trainable parameters.
@@ -107,7 +117,9 @@ impl ModelLayout {
     /// Returns (hash table, MLP weights).
     pub fn init_params(&self, seed: u64) -> (Vec<f32>, Vec<f32>) {
         let mut rng = Pcg64Mcg::seed_from_u64(seed);
-        let grid = (0..self.grid_params).map(|_| rng.random_range(-1e-4f32..1e-4)).collect();
+        let grid = (0..self.grid_params)
+            .map(|_| rng.random_range(-1e-4f32..1e-4))
+            .collect();
         let mut mlp = Vec::with_capacity(self.mlp_params());
         for l in &self.layers {
             let a = (6.0 / (l.inputs + l.outputs) as f32).sqrt();

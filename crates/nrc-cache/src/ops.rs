@@ -22,12 +22,16 @@ use burn::backend::autodiff::{
 };
 use burn::backend::flex::FlexTensor;
 use burn::backend::tensor::{FloatTensor, IntTensor};
-use burn::backend::{AutodiffBackend, Backend, Dispatch, ExtensionType, Flex, TensorMetadata, backend_extension};
+use burn::backend::{
+    AutodiffBackend, Backend, Dispatch, ExtensionType, Flex, TensorMetadata, backend_extension,
+};
 use burn::tensor::{DType, Tensor, TensorData};
 use rayon::prelude::*;
 
 use crate::cpu;
-use crate::cpu::mlp::{MlpGrad, OUT_PAD, PreparedMlp, TILE, TileScratch, backward_tile, forward_tile};
+use crate::cpu::mlp::{
+    MlpGrad, OUT_PAD, PreparedMlp, TILE, TileScratch, backward_tile, forward_tile,
+};
 use crate::model::{LayerShape, ModelLayout};
 
 /// Which gradients a backward op must produce.
@@ -45,7 +49,11 @@ pub struct Needs {
 pub trait MlpOps: burn::backend::Backend {
     /// Fused MLP (ReLU hidden layers, no biases, linear output): `weights` is the MLP parameter
     /// group `[W]` (layout of [`LayerShape`]), `input` `[N, in]` → raw outputs `[N, 3]`.
-    fn mlp_forward(weights: FloatTensor<Self>, input: FloatTensor<Self>, layers: Arc<Vec<LayerShape>>) -> FloatTensor<Self>;
+    fn mlp_forward(
+        weights: FloatTensor<Self>,
+        input: FloatTensor<Self>,
+        layers: Arc<Vec<LayerShape>>,
+    ) -> FloatTensor<Self>;
 
     /// Backward of [`MlpOps::mlp_forward`]: `(∂L/∂weights [W], ∂L/∂input [N, in])`, recomputing
     /// each tile's activations in cache instead of storing them.
@@ -127,17 +135,36 @@ pub struct InferenceWeights<B: Backend> {
 #[backend_extension(Flex)]
 pub trait NrcFusedOps: burn::backend::Backend {
     /// Runs `spec.steps` fused training steps on the packed rows `batch` `[N, 21]`.
-    fn fused_train_steps(#[extension_type] state: TrainState<Self>, batch: FloatTensor<Self>, spec: StepSpec) -> TrainOutcome<Self>;
+    fn fused_train_steps(
+        #[extension_type] state: TrainState<Self>,
+        batch: FloatTensor<Self>,
+        spec: StepSpec,
+    ) -> TrainOutcome<Self>;
 
     /// The inference weights at step `step`: bias-corrected EMA (lazy table entries caught up on
     /// the fly) or, with `ema = None`, the weights. Reads the state only.
-    fn inference_weights(#[extension_type] state: TrainState<Self>, layout: Arc<ModelLayout>, ema: Option<f32>, step: u32) -> InferenceWeights<Self>;
+    fn inference_weights(
+        #[extension_type] state: TrainState<Self>,
+        layout: Arc<ModelLayout>,
+        ema: Option<f32>,
+        step: u32,
+    ) -> InferenceWeights<Self>;
 
     /// Brings every table entry's EMA up to `step` (before a snapshot).
-    fn catch_up_ema(#[extension_type] state: TrainState<Self>, layout: Arc<ModelLayout>, ema: f32, step: u32) -> TrainState<Self>;
+    fn catch_up_ema(
+        #[extension_type] state: TrainState<Self>,
+        layout: Arc<ModelLayout>,
+        ema: f32,
+        step: u32,
+    ) -> TrainState<Self>;
 
     /// Fused inference on packed query rows `[N, 17]` → radiance `[N, 3]`.
-    fn fused_infer(grid: FloatTensor<Self>, mlp: FloatTensor<Self>, queries: FloatTensor<Self>, layout: Arc<ModelLayout>) -> FloatTensor<Self>;
+    fn fused_infer(
+        grid: FloatTensor<Self>,
+        mlp: FloatTensor<Self>,
+        queries: FloatTensor<Self>,
+        layout: Arc<ModelLayout>,
+    ) -> FloatTensor<Self>;
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -150,7 +177,13 @@ fn flex_f32(t: &FlexTensor) -> Cow<'_, [f32]> {
     {
         return Cow::Borrowed(s);
     }
-    Cow::Owned(t.clone().into_data().convert::<f32>().try_to_vec::<f32>().expect("f32 data"))
+    Cow::Owned(
+        t.clone()
+            .into_data()
+            .convert::<f32>()
+            .try_to_vec::<f32>()
+            .expect("f32 data"),
+    )
 }
 
 /// A uniquely owned, contiguous f32 Flex tensor whose storage can be mutated in place.
@@ -178,27 +211,39 @@ fn flex_last_mut(t: &mut FlexTensor) -> &mut [u32] {
 }
 
 impl MlpOps for Flex {
-    fn mlp_forward(weights: FlexTensor, input: FlexTensor, layers: Arc<Vec<LayerShape>>) -> FlexTensor {
+    fn mlp_forward(
+        weights: FlexTensor,
+        input: FlexTensor,
+        layers: Arc<Vec<LayerShape>>,
+    ) -> FlexTensor {
         let k = layers[0].inputs;
         let x = flex_f32(&input);
         let n = x.len() / k;
         let prepared = PreparedMlp::new(&layers, &flex_f32(&weights));
         let mut out = vec![0f32; n * 3];
-        out.par_chunks_mut(TILE * 3).zip(x.par_chunks(TILE * k)).for_each_init(
-            || TileScratch::new(k, prepared.hidden()),
-            |s, (o, xt)| {
-                let m = xt.len() / k;
-                s.x[..xt.len()].copy_from_slice(xt);
-                forward_tile(&prepared, m, s);
-                for i in 0..m {
-                    o[i * 3..i * 3 + 3].copy_from_slice(&s.out[i * OUT_PAD..i * OUT_PAD + 3]);
-                }
-            },
-        );
+        out.par_chunks_mut(TILE * 3)
+            .zip(x.par_chunks(TILE * k))
+            .for_each_init(
+                || TileScratch::new(k, prepared.hidden()),
+                |s, (o, xt)| {
+                    let m = xt.len() / k;
+                    s.x[..xt.len()].copy_from_slice(xt);
+                    forward_tile(&prepared, m, s);
+                    for i in 0..m {
+                        o[i * 3..i * 3 + 3].copy_from_slice(&s.out[i * OUT_PAD..i * OUT_PAD + 3]);
+                    }
+                },
+            );
         flex_from(out, &[n, 3])
     }
 
-    fn mlp_backward(weights: FlexTensor, input: FlexTensor, grad_out: FlexTensor, layers: Arc<Vec<LayerShape>>, needs: Needs) -> (FlexTensor, FlexTensor) {
+    fn mlp_backward(
+        weights: FlexTensor,
+        input: FlexTensor,
+        grad_out: FlexTensor,
+        layers: Arc<Vec<LayerShape>>,
+        needs: Needs,
+    ) -> (FlexTensor, FlexTensor) {
         let k = layers[0].inputs;
         let x = flex_f32(&input);
         let dy = flex_f32(&grad_out);
@@ -212,7 +257,12 @@ impl MlpOps for Flex {
             .zip(dy.par_chunks(TILE * 3))
             .zip(dx.par_chunks_mut(dx_chunk))
             .fold(
-                || (MlpGrad::zeros(&prepared), TileScratch::new(k, prepared.hidden())),
+                || {
+                    (
+                        MlpGrad::zeros(&prepared),
+                        TileScratch::new(k, prepared.hidden()),
+                    )
+                },
                 |(mut g, mut s), ((xt, dyt), dxt)| {
                     let m = xt.len() / k;
                     s.x[..xt.len()].copy_from_slice(xt);
@@ -222,7 +272,13 @@ impl MlpOps for Flex {
                         d[..3].copy_from_slice(&dyt[i * 3..i * 3 + 3]);
                         d[3..].fill(0.0);
                     }
-                    backward_tile(&prepared, m, &mut s, &mut g, needs.input.then(|| (0, k, &mut dxt[..m * k])));
+                    backward_tile(
+                        &prepared,
+                        m,
+                        &mut s,
+                        &mut g,
+                        needs.input.then(|| (0, k, &mut dxt[..m * k])),
+                    );
                     (g, s)
                 },
             )
@@ -241,49 +297,121 @@ impl MlpOps for Flex {
         } else {
             flex_from(Vec::new(), &[0])
         };
-        let gx = if needs.input { flex_from(dx, &[n, k]) } else { flex_from(Vec::new(), &[0]) };
+        let gx = if needs.input {
+            flex_from(dx, &[n, k])
+        } else {
+            flex_from(Vec::new(), &[0])
+        };
         (gw, gx)
     }
 }
 
 /// Unpacks a Flex training state into mutable slices (`[records, grad, mlp, mlp_m, mlp_v,
 /// mlp_ema]` and the step table), runs `f`, and packs it again.
-fn with_flex_state<R>(state: TrainState<Flex>, f: impl FnOnce(&mut [&mut [f32]; 6], &mut [u32]) -> R) -> (TrainState<Flex>, R) {
-    let TrainState { grid, grid_m, grid_v, grid_ema, grid_grad, grid_last, mlp, mlp_m, mlp_v, mlp_ema } = state;
+fn with_flex_state<R>(
+    state: TrainState<Flex>,
+    f: impl FnOnce(&mut [&mut [f32]; 6], &mut [u32]) -> R,
+) -> (TrainState<Flex>, R) {
+    let TrainState {
+        grid,
+        grid_m,
+        grid_v,
+        grid_ema,
+        grid_grad,
+        grid_last,
+        mlp,
+        mlp_m,
+        mlp_v,
+        mlp_ema,
+    } = state;
     let mut tensors = [grid, grid_grad, mlp, mlp_m, mlp_v, mlp_ema].map(flex_owned_f32);
     let mut last = grid_last;
     let r = {
         let [a, b, c, d, e, g] = &mut tensors;
-        let mut slices = [flex_mut_f32(a), flex_mut_f32(b), flex_mut_f32(c), flex_mut_f32(d), flex_mut_f32(e), flex_mut_f32(g)];
+        let mut slices = [
+            flex_mut_f32(a),
+            flex_mut_f32(b),
+            flex_mut_f32(c),
+            flex_mut_f32(d),
+            flex_mut_f32(e),
+            flex_mut_f32(g),
+        ];
         f(&mut slices, flex_last_mut(&mut last))
     };
     let [grid, grid_grad, mlp, mlp_m, mlp_v, mlp_ema] = tensors;
-    (TrainState { grid, grid_m, grid_v, grid_ema, grid_grad, grid_last: last, mlp, mlp_m, mlp_v, mlp_ema }, r)
+    (
+        TrainState {
+            grid,
+            grid_m,
+            grid_v,
+            grid_ema,
+            grid_grad,
+            grid_last: last,
+            mlp,
+            mlp_m,
+            mlp_v,
+            mlp_ema,
+        },
+        r,
+    )
 }
 
 /// The step table of a Flex state, read-only.
 fn flex_last(t: &FlexTensor) -> Cow<'_, [i32]> {
-    t.as_slice::<i32>().map(Cow::Borrowed).unwrap_or_else(|| Cow::Owned(t.clone().into_data().convert::<i32>().try_to_vec::<i32>().expect("i32 data")))
+    t.as_slice::<i32>().map(Cow::Borrowed).unwrap_or_else(|| {
+        Cow::Owned(
+            t.clone()
+                .into_data()
+                .convert::<i32>()
+                .try_to_vec::<i32>()
+                .expect("i32 data"),
+        )
+    })
 }
 
 impl NrcFusedOps for Flex {
-    fn fused_train_steps(state: TrainState<Self>, batch: FlexTensor, spec: StepSpec) -> TrainOutcome<Self> {
+    fn fused_train_steps(
+        state: TrainState<Self>,
+        batch: FlexTensor,
+        spec: StepSpec,
+    ) -> TrainOutcome<Self> {
         let rows = flex_f32(&batch);
         let (state, losses) = with_flex_state(state, |s, last| {
             let [records, grid_grad, mlp, mlp_m, mlp_v, mlp_ema] = s;
             let mut losses = Vec::with_capacity(spec.steps as usize);
             for k in 1..=spec.steps {
                 let c = cpu::optim::StepConstants::new(spec.adam, spec.ema, spec.first_step + k);
-                let grid_state = (spec.layout.grid_params > 0).then_some(cpu::train::GridState { records, grad: grid_grad, last: &mut *last });
-                let mlp_state = cpu::train::GroupState { w: mlp, m: mlp_m, v: mlp_v, ema: mlp_ema };
-                losses.push(cpu::train::train_step(&spec.layout, grid_state, mlp_state, &rows, &c, spec.loss));
+                let grid_state = (spec.layout.grid_params > 0).then_some(cpu::train::GridState {
+                    records,
+                    grad: grid_grad,
+                    last: &mut *last,
+                });
+                let mlp_state = cpu::train::GroupState {
+                    w: mlp,
+                    m: mlp_m,
+                    v: mlp_v,
+                    ema: mlp_ema,
+                };
+                losses.push(cpu::train::train_step(
+                    &spec.layout,
+                    grid_state,
+                    mlp_state,
+                    &rows,
+                    &c,
+                    spec.loss,
+                ));
             }
             losses
         });
         TrainOutcome { state, losses }
     }
 
-    fn inference_weights(state: TrainState<Self>, layout: Arc<ModelLayout>, ema: Option<f32>, step: u32) -> InferenceWeights<Self> {
+    fn inference_weights(
+        state: TrainState<Self>,
+        layout: Arc<ModelLayout>,
+        ema: Option<f32>,
+        step: u32,
+    ) -> InferenceWeights<Self> {
         let records = flex_f32(&state.grid);
         let mlp = flex_f32(&state.mlp);
         let last_i32 = flex_last(&state.grid_last);
@@ -296,7 +424,14 @@ impl NrcFusedOps for Flex {
             outs.into_par_iter().enumerate().for_each(|(l, o)| {
                 let level = &hg.levels[l];
                 let (a, b) = (level.offset, level.offset + level.entries as usize);
-                cpu::optim::materialize_grid(ema, step, f, &records[a * rec..b * rec], &last[a..b], o);
+                cpu::optim::materialize_grid(
+                    ema,
+                    step,
+                    f,
+                    &records[a * rec..b * rec],
+                    &last[a..b],
+                    o,
+                );
             });
         }
         let m = match ema {
@@ -308,10 +443,18 @@ impl NrcFusedOps for Flex {
             None => mlp.to_vec(),
         };
         let (gl, ml) = (g.len(), m.len());
-        InferenceWeights { grid: flex_from(g, &[gl]), mlp: flex_from(m, &[ml]) }
+        InferenceWeights {
+            grid: flex_from(g, &[gl]),
+            mlp: flex_from(m, &[ml]),
+        }
     }
 
-    fn catch_up_ema(state: TrainState<Self>, layout: Arc<ModelLayout>, ema: f32, step: u32) -> TrainState<Self> {
+    fn catch_up_ema(
+        state: TrainState<Self>,
+        layout: Arc<ModelLayout>,
+        ema: f32,
+        step: u32,
+    ) -> TrainState<Self> {
         with_flex_state(state, |s, last| {
             if let Some((hg, _)) = layout.encoding.grid() {
                 cpu::optim::catch_up(ema, step, hg.features(), s[0], last);
@@ -320,7 +463,12 @@ impl NrcFusedOps for Flex {
         .0
     }
 
-    fn fused_infer(grid: FlexTensor, mlp: FlexTensor, queries: FlexTensor, layout: Arc<ModelLayout>) -> FlexTensor {
+    fn fused_infer(
+        grid: FlexTensor,
+        mlp: FlexTensor,
+        queries: FlexTensor,
+        layout: Arc<ModelLayout>,
+    ) -> FlexTensor {
         let rows = flex_f32(&queries);
         let n = rows.len() / crate::batch::QUERY_ROW;
         let mut out = vec![0f32; n * 3];
@@ -333,18 +481,30 @@ impl NrcFusedOps for Flex {
 // Autodiff: the backward ops become the nodes' backward steps.
 
 impl<B: MlpOps, C: CheckpointStrategy> MlpOps for Autodiff<B, C> {
-    fn mlp_forward(weights: FloatTensor<Self>, input: FloatTensor<Self>, layers: Arc<Vec<LayerShape>>) -> FloatTensor<Self> {
+    fn mlp_forward(
+        weights: FloatTensor<Self>,
+        input: FloatTensor<Self>,
+        layers: Arc<Vec<LayerShape>>,
+    ) -> FloatTensor<Self> {
         #[derive(Debug)]
         struct MlpBackward;
 
         impl<B: MlpOps> Backward<B, 2> for MlpBackward {
             type State = (FloatTensor<B>, FloatTensor<B>, Arc<Vec<LayerShape>>);
 
-            fn backward(self, ops: Ops<Self::State, 2>, grads: &mut Gradients, _checkpointer: &mut Checkpointer) {
+            fn backward(
+                self,
+                ops: Ops<Self::State, 2>,
+                grads: &mut Gradients,
+                _checkpointer: &mut Checkpointer,
+            ) {
                 let [node_w, node_x] = ops.parents;
                 let grad = grads.consume::<B>(&ops.node);
                 let (w, x, layers) = ops.state;
-                let needs = Needs { params: node_w.is_some(), input: node_x.is_some() };
+                let needs = Needs {
+                    params: node_w.is_some(),
+                    input: node_x.is_some(),
+                };
                 let (gw, gx) = B::mlp_backward(w, x, grad, layers, needs);
                 if let Some(node) = node_w {
                     grads.register::<B>(node.id, gw);
@@ -355,14 +515,22 @@ impl<B: MlpOps, C: CheckpointStrategy> MlpOps for Autodiff<B, C> {
             }
         }
 
-        match MlpBackward.prepare::<C>([weights.node(), input.node()]).compute_bound().stateful() {
+        match MlpBackward
+            .prepare::<C>([weights.node(), input.node()])
+            .compute_bound()
+            .stateful()
+        {
             OpsKind::Tracked(prep) => {
                 let w = weights.primitive().clone();
                 let x = input.primitive().clone();
                 let out = B::mlp_forward(w.clone(), x.clone(), layers.clone());
                 prep.finish((w, x, layers), out)
             }
-            OpsKind::UnTracked(prep) => prep.finish(B::mlp_forward(weights.into_primitive(), input.into_primitive(), layers)),
+            OpsKind::UnTracked(prep) => prep.finish(B::mlp_forward(
+                weights.into_primitive(),
+                input.into_primitive(),
+                layers,
+            )),
         }
     }
 
@@ -373,8 +541,17 @@ impl<B: MlpOps, C: CheckpointStrategy> MlpOps for Autodiff<B, C> {
         layers: Arc<Vec<LayerShape>>,
         needs: Needs,
     ) -> (FloatTensor<Self>, FloatTensor<Self>) {
-        let (gw, gx) = B::mlp_backward(weights.into_primitive(), input.into_primitive(), grad_out.into_primitive(), layers, needs);
-        (<Self as AutodiffBackend>::from_inner(gw), <Self as AutodiffBackend>::from_inner(gx))
+        let (gw, gx) = B::mlp_backward(
+            weights.into_primitive(),
+            input.into_primitive(),
+            grad_out.into_primitive(),
+            layers,
+            needs,
+        );
+        (
+            <Self as AutodiffBackend>::from_inner(gw),
+            <Self as AutodiffBackend>::from_inner(gx),
+        )
     }
 }
 
@@ -384,5 +561,9 @@ impl<B: MlpOps, C: CheckpointStrategy> MlpOps for Autodiff<B, C> {
 /// The fused MLP on tensors: raw network outputs `[N, 3]` of `input` `[N, in]` with the MLP
 /// parameter group `weights` `[W]`; differentiable in both on an autodiff device.
 pub fn mlp(weights: Tensor<1>, input: Tensor<2>, layers: &Arc<Vec<LayerShape>>) -> Tensor<2> {
-    Tensor::from_dispatch(<Dispatch as MlpOps>::mlp_forward(weights.into_dispatch(), input.into_dispatch(), layers.clone()))
+    Tensor::from_dispatch(<Dispatch as MlpOps>::mlp_forward(
+        weights.into_dispatch(),
+        input.into_dispatch(),
+        layers.clone(),
+    ))
 }

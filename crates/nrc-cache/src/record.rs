@@ -49,7 +49,11 @@ pub const RAW_INPUT_DIMS: usize = 14;
 pub fn raw_inputs(q: &CacheQuery) -> [f32; RAW_INPUT_DIMS] {
     let mut out = [0.0; RAW_INPUT_DIMS];
     for (o, p) in out.iter_mut().zip(q.position) {
-        *o = if p.is_finite() { p.clamp(0.0, 1.0) } else { 0.0 };
+        *o = if p.is_finite() {
+            p.clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
     }
     let (t, p) = spherical(q.direction);
     out[3] = t;
@@ -57,7 +61,11 @@ pub fn raw_inputs(q: &CacheQuery) -> [f32; RAW_INPUT_DIMS] {
     let (t, p) = spherical(q.normal);
     out[5] = t;
     out[6] = p;
-    let r = if q.roughness.is_finite() { q.roughness.max(0.0) } else { 0.0 };
+    let r = if q.roughness.is_finite() {
+        q.roughness.max(0.0)
+    } else {
+        0.0
+    };
     out[7] = 1.0 - (-r).exp();
     for k in 0..3 {
         out[8 + k] = finite_or_zero(q.diffuse[k]);
@@ -74,7 +82,13 @@ pub fn reflectance_factor(q: &CacheQuery) -> [f32; 3] {
 
 /// Whether every field of a query is finite (training drops queries that are not).
 pub fn query_is_finite(q: &CacheQuery) -> bool {
-    q.position.iter().chain(&q.direction).chain(&q.normal).chain(&q.diffuse).chain(&q.specular).all(|v| v.is_finite())
+    q.position
+        .iter()
+        .chain(&q.direction)
+        .chain(&q.normal)
+        .chain(&q.diffuse)
+        .chain(&q.specular)
+        .all(|v| v.is_finite())
         && q.roughness.is_finite()
 }
 

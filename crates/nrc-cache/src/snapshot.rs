@@ -35,7 +35,16 @@ pub const MAGIC: &str = "nrc-cache-snapshot";
 /// Current format version.
 pub const VERSION: u32 = 1;
 const METADATA_KEY: &str = "nrc_cache";
-const NAMES: [&str; 8] = ["grid", "grid_adam_m", "grid_adam_v", "grid_ema", "mlp", "mlp_adam_m", "mlp_adam_v", "mlp_ema"];
+const NAMES: [&str; 8] = [
+    "grid",
+    "grid_adam_m",
+    "grid_adam_v",
+    "grid_ema",
+    "mlp",
+    "mlp_adam_m",
+    "mlp_adam_v",
+    "mlp_ema",
+];
 
 #[derive(Serialize, Deserialize)]
 struct Metadata {
@@ -62,7 +71,16 @@ pub struct Snapshot {
 }
 
 fn arrays(s: &HostState) -> [&[f32]; 8] {
-    [&s.grid, &s.grid_m, &s.grid_v, &s.grid_ema, &s.mlp, &s.mlp_m, &s.mlp_v, &s.mlp_ema]
+    [
+        &s.grid,
+        &s.grid_m,
+        &s.grid_v,
+        &s.grid_ema,
+        &s.mlp,
+        &s.mlp_m,
+        &s.mlp_v,
+        &s.mlp_ema,
+    ]
 }
 
 /// FNV-1a over 64-bit words.
@@ -86,16 +104,31 @@ fn checksum(parts: &[&[u8]]) -> String {
 }
 
 fn io_err(path: &Path, e: impl std::fmt::Display) -> CacheError {
-    CacheError::Io { path: path.display().to_string(), message: e.to_string() }
+    CacheError::Io {
+        path: path.display().to_string(),
+        message: e.to_string(),
+    }
 }
 
 fn bad(path: &Path, message: impl Into<String>) -> CacheError {
-    CacheError::Snapshot { path: path.display().to_string(), message: message.into() }
+    CacheError::Snapshot {
+        path: path.display().to_string(),
+        message: message.into(),
+    }
 }
 
 /// Writes a snapshot atomically (temporary file in the same directory, then rename).
-pub fn write(path: &Path, config: &CacheConfig, scene_box: &SceneBox, step: u32, state: &HostState) -> Result<(), CacheError> {
-    let bytes: Vec<&[u8]> = arrays(state).iter().map(|a| bytemuck::cast_slice::<f32, u8>(a)).collect();
+pub fn write(
+    path: &Path,
+    config: &CacheConfig,
+    scene_box: &SceneBox,
+    step: u32,
+    state: &HostState,
+) -> Result<(), CacheError> {
+    let bytes: Vec<&[u8]> = arrays(state)
+        .iter()
+        .map(|a| bytemuck::cast_slice::<f32, u8>(a))
+        .collect();
     let meta = Metadata {
         magic: MAGIC.into(),
         version: VERSION,
@@ -107,15 +140,29 @@ pub fn write(path: &Path, config: &CacheConfig, scene_box: &SceneBox, step: u32,
     };
     let mut views = Vec::with_capacity(8);
     for (name, (b, a)) in NAMES.iter().zip(bytes.iter().zip(arrays(state))) {
-        let view = TensorView::new(Dtype::F32, vec![a.len()], b).map_err(|e| bad(path, format!("cannot encode tensor {name}: {e}")))?;
+        let view = TensorView::new(Dtype::F32, vec![a.len()], b)
+            .map_err(|e| bad(path, format!("cannot encode tensor {name}: {e}")))?;
         views.push((name.to_string(), view));
     }
-    let metadata = std::collections::HashMap::from([(METADATA_KEY.to_string(), serde_json::to_string(&meta).expect("metadata serialises"))]);
-    let data = safetensors::tensor::serialize(views, Some(metadata)).map_err(|e| bad(path, format!("cannot encode: {e}")))?;
+    let metadata = std::collections::HashMap::from([(
+        METADATA_KEY.to_string(),
+        serde_json::to_string(&meta).expect("metadata serialises"),
+    )]);
+    let data = safetensors::tensor::serialize(views, Some(metadata))
+        .map_err(|e| bad(path, format!("cannot encode: {e}")))?;
 
-    let dir = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
-    let name = path.file_name().ok_or_else(|| io_err(path, "not a file path"))?;
-    let tmp = dir.join(format!(".{}.tmp-{}", name.to_string_lossy(), std::process::id()));
+    let dir = path
+        .parent()
+        .filter(|p| !p.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
+    let name = path
+        .file_name()
+        .ok_or_else(|| io_err(path, "not a file path"))?;
+    let tmp = dir.join(format!(
+        ".{}.tmp-{}",
+        name.to_string_lossy(),
+        std::process::id()
+    ));
     let result = (|| {
         let mut f = std::fs::File::create(&tmp)?;
         f.write_all(&data)?;
@@ -133,64 +180,158 @@ pub fn write(path: &Path, config: &CacheConfig, scene_box: &SceneBox, step: u32,
 /// that say what is wrong.
 pub fn read(path: &Path) -> Result<Snapshot, CacheError> {
     let data = std::fs::read(path).map_err(|e| io_err(path, e))?;
-    let (_, header) = SafeTensors::read_metadata(&data).map_err(|e| bad(path, format!("not a safetensors file or truncated header ({e})")))?;
+    let (_, header) = SafeTensors::read_metadata(&data).map_err(|e| {
+        bad(
+            path,
+            format!("not a safetensors file or truncated header ({e})"),
+        )
+    })?;
     let json = header
         .metadata()
         .as_ref()
         .and_then(|m| m.get(METADATA_KEY))
         .ok_or_else(|| bad(path, format!("not an nrc-cache snapshot: the safetensors metadata has no {METADATA_KEY:?} entry")))?;
-    let meta: Metadata = serde_json::from_str(json).map_err(|e| bad(path, format!("malformed metadata: {e}")))?;
+    let meta: Metadata =
+        serde_json::from_str(json).map_err(|e| bad(path, format!("malformed metadata: {e}")))?;
     if meta.magic != MAGIC {
-        return Err(bad(path, format!("not an nrc-cache snapshot (magic {:?})", meta.magic)));
+        return Err(bad(
+            path,
+            format!("not an nrc-cache snapshot (magic {:?})", meta.magic),
+        ));
     }
     if meta.version != VERSION {
-        return Err(bad(path, format!("format version {} is not supported (this build reads version {VERSION})", meta.version)));
+        return Err(bad(
+            path,
+            format!(
+                "format version {} is not supported (this build reads version {VERSION})",
+                meta.version
+            ),
+        ));
     }
-    let tensors = SafeTensors::deserialize(&data).map_err(|e| bad(path, format!("truncated or corrupted tensor data ({e})")))?;
-    let config: CacheConfig = serde_json::from_value(meta.config.clone()).map_err(|e| bad(path, format!("stored configuration is malformed: {e}")))?;
-    config.validate().map_err(|e| bad(path, format!("stored configuration is invalid: {e}")))?;
+    let tensors = SafeTensors::deserialize(&data)
+        .map_err(|e| bad(path, format!("truncated or corrupted tensor data ({e})")))?;
+    let config: CacheConfig = serde_json::from_value(meta.config.clone())
+        .map_err(|e| bad(path, format!("stored configuration is malformed: {e}")))?;
+    config
+        .validate()
+        .map_err(|e| bad(path, format!("stored configuration is invalid: {e}")))?;
     let layout = ModelLayout::new(&config);
     let mut values: Vec<Vec<f32>> = Vec::with_capacity(8);
     let mut raw: Vec<Vec<u8>> = Vec::with_capacity(8);
     for (i, name) in NAMES.iter().enumerate() {
-        let t = tensors.tensor(name).map_err(|_| bad(path, format!("tensor {name:?} is missing")))?;
+        let t = tensors
+            .tensor(name)
+            .map_err(|_| bad(path, format!("tensor {name:?} is missing")))?;
         if t.dtype() != Dtype::F32 {
-            return Err(bad(path, format!("tensor {name:?} has dtype {:?}, expected F32", t.dtype())));
+            return Err(bad(
+                path,
+                format!("tensor {name:?} has dtype {:?}, expected F32", t.dtype()),
+            ));
         }
-        let expected = if i < 4 { layout.grid_params } else { layout.mlp_params() };
+        let expected = if i < 4 {
+            layout.grid_params
+        } else {
+            layout.mlp_params()
+        };
         if t.shape() != [expected] {
-            return Err(bad(path, format!("tensor {name:?} has shape {:?}, but the stored configuration needs [{expected}]", t.shape())));
+            return Err(bad(
+                path,
+                format!(
+                    "tensor {name:?} has shape {:?}, but the stored configuration needs [{expected}]",
+                    t.shape()
+                ),
+            ));
         }
-        let v: Vec<f32> = t.data().chunks_exact(4).map(|c| f32::from_le_bytes(c.try_into().expect("4 bytes"))).collect();
+        let v: Vec<f32> = t
+            .data()
+            .chunks_exact(4)
+            .map(|c| f32::from_le_bytes(c.try_into().expect("4 bytes")))
+            .collect();
         raw.push(t.data().to_vec());
         values.push(v);
     }
     let parts: Vec<&[u8]> = raw.iter().map(Vec::as_slice).collect();
     let sum = checksum(&parts);
     if sum != meta.checksum {
-        return Err(bad(path, format!("checksum mismatch (stored {}, computed {sum}): the tensor data is corrupted", meta.checksum)));
+        return Err(bad(
+            path,
+            format!(
+                "checksum mismatch (stored {}, computed {sum}): the tensor data is corrupted",
+                meta.checksum
+            ),
+        ));
     }
     if meta.param_count != layout.param_count() {
-        return Err(bad(path, format!("parameter count {} does not match the configuration's {}", meta.param_count, layout.param_count())));
+        return Err(bad(
+            path,
+            format!(
+                "parameter count {} does not match the configuration's {}",
+                meta.param_count,
+                layout.param_count()
+            ),
+        ));
     }
     let mut it = values.into_iter();
     let mut next = || it.next().expect("eight tensors");
-    let state = HostState { grid: next(), grid_m: next(), grid_v: next(), grid_ema: next(), mlp: next(), mlp_m: next(), mlp_v: next(), mlp_ema: next() };
-    Ok(Snapshot { config, scene_box: meta.scene_box, step: meta.step, state })
+    let state = HostState {
+        grid: next(),
+        grid_m: next(),
+        grid_v: next(),
+        grid_ema: next(),
+        mlp: next(),
+        mlp_m: next(),
+        mlp_v: next(),
+        mlp_ema: next(),
+    };
+    Ok(Snapshot {
+        config,
+        scene_box: meta.scene_box,
+        step: meta.step,
+        state,
+    })
 }
 
 /// Error unless the snapshot's configuration equals `expected`, naming the first differing section.
-pub fn check_config(path: &Path, stored: &CacheConfig, expected: &CacheConfig) -> Result<(), CacheError> {
+pub fn check_config(
+    path: &Path,
+    stored: &CacheConfig,
+    expected: &CacheConfig,
+) -> Result<(), CacheError> {
     let sections = [
-        ("encoding", serde_json::to_value(&stored.encoding), serde_json::to_value(&expected.encoding)),
-        ("network", serde_json::to_value(&stored.network), serde_json::to_value(&expected.network)),
-        ("loss", serde_json::to_value(&stored.loss), serde_json::to_value(&expected.loss)),
-        ("optimizer", serde_json::to_value(&stored.optimizer), serde_json::to_value(&expected.optimizer)),
-        ("seed", serde_json::to_value(stored.seed), serde_json::to_value(expected.seed)),
+        (
+            "encoding",
+            serde_json::to_value(&stored.encoding),
+            serde_json::to_value(&expected.encoding),
+        ),
+        (
+            "network",
+            serde_json::to_value(&stored.network),
+            serde_json::to_value(&expected.network),
+        ),
+        (
+            "loss",
+            serde_json::to_value(&stored.loss),
+            serde_json::to_value(&expected.loss),
+        ),
+        (
+            "optimizer",
+            serde_json::to_value(&stored.optimizer),
+            serde_json::to_value(&expected.optimizer),
+        ),
+        (
+            "seed",
+            serde_json::to_value(stored.seed),
+            serde_json::to_value(expected.seed),
+        ),
     ];
     for (name, a, b) in sections {
         if a.ok() != b.ok() {
-            return Err(bad(path, format!("made with a different configuration: the {name:?} section differs from the expected one")));
+            return Err(bad(
+                path,
+                format!(
+                    "made with a different configuration: the {name:?} section differs from the expected one"
+                ),
+            ));
         }
     }
     Ok(())

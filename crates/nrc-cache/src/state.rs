@@ -65,17 +65,31 @@ pub fn vec_tensor(values: Vec<f32>, device: &Device) -> Tensor<1> {
 
 /// A float vector's values on the host.
 pub fn tensor_vec(t: Tensor<1>) -> Vec<f32> {
-    t.into_data().convert::<f32>().try_to_vec::<f32>().expect("f32 tensor")
+    t.into_data()
+        .convert::<f32>()
+        .try_to_vec::<f32>()
+        .expect("f32 tensor")
 }
 
 impl TensorState {
     /// Uploads a host state; every table entry's EMA is current at `step`. `packed = Some(F)`
     /// stores the table as records with a gradient scratch (the fused path).
-    pub fn from_host(h: HostState, entries: usize, step: u32, packed: Option<usize>, device: &Device) -> Self {
+    pub fn from_host(
+        h: HostState,
+        entries: usize,
+        step: u32,
+        packed: Option<usize>,
+        device: &Device,
+    ) -> Self {
         let grid_len = h.grid.len();
         let last = crate::cpu::huge::huge_vec(entries, step as i32);
         let (grid, grid_m, grid_v, grid_ema) = match packed {
-            Some(f) => (crate::cpu::optim::pack_records(f, &h.grid, &h.grid_m, &h.grid_v, &h.grid_ema), Vec::new(), Vec::new(), Vec::new()),
+            Some(f) => (
+                crate::cpu::optim::pack_records(f, &h.grid, &h.grid_m, &h.grid_v, &h.grid_ema),
+                Vec::new(),
+                Vec::new(),
+                Vec::new(),
+            ),
             None => (h.grid, h.grid_m, h.grid_v, h.grid_ema),
         };
         Self {
@@ -84,8 +98,14 @@ impl TensorState {
             grid_m: vec_tensor(grid_m, device),
             grid_v: vec_tensor(grid_v, device),
             grid_ema: vec_tensor(grid_ema, device),
-            grid_grad: vec_tensor(crate::cpu::huge::huge_vec(if packed.is_some() { grid_len } else { 0 }, 0.0), device),
-            grid_last: Tensor::from_data(TensorData::new(last, [entries]), TensorCreationOptions::new(device.clone()).with_dtype(DType::I32)),
+            grid_grad: vec_tensor(
+                crate::cpu::huge::huge_vec(if packed.is_some() { grid_len } else { 0 }, 0.0),
+                device,
+            ),
+            grid_last: Tensor::from_data(
+                TensorData::new(last, [entries]),
+                TensorCreationOptions::new(device.clone()).with_dtype(DType::I32),
+            ),
             mlp: vec_tensor(h.mlp, device),
             mlp_m: vec_tensor(h.mlp_m, device),
             mlp_v: vec_tensor(h.mlp_v, device),
@@ -97,10 +117,16 @@ impl TensorState {
     pub fn to_host(&self) -> HostState {
         let (grid, grid_m, grid_v, grid_ema) = match self.packed {
             Some(f) => {
-                let [w, m, v, e] = crate::cpu::optim::unpack_records(f, &tensor_vec(self.grid.clone()));
+                let [w, m, v, e] =
+                    crate::cpu::optim::unpack_records(f, &tensor_vec(self.grid.clone()));
                 (w, m, v, e)
             }
-            None => (tensor_vec(self.grid.clone()), tensor_vec(self.grid_m.clone()), tensor_vec(self.grid_v.clone()), tensor_vec(self.grid_ema.clone())),
+            None => (
+                tensor_vec(self.grid.clone()),
+                tensor_vec(self.grid_m.clone()),
+                tensor_vec(self.grid_v.clone()),
+                tensor_vec(self.grid_ema.clone()),
+            ),
         };
         HostState {
             grid,

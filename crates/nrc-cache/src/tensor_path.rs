@@ -24,7 +24,10 @@ pub fn mlp_tensor(weights: Tensor<1>, x: Tensor<2>, layers: &[LayerShape]) -> Te
     let last = layers.len() - 1;
     let mut h = x;
     for (l, s) in layers.iter().enumerate() {
-        let m = weights.clone().narrow(0, s.offset, s.len()).reshape([s.inputs, s.outputs]);
+        let m = weights
+            .clone()
+            .narrow(0, s.offset, s.len())
+            .reshape([s.inputs, s.outputs]);
         h = h.matmul(m);
         if l < last {
             h = relu(h);
@@ -34,7 +37,13 @@ pub fn mlp_tensor(weights: Tensor<1>, x: Tensor<2>, layers: &[LayerShape]) -> Te
 }
 
 /// Raw network outputs `[N, 3]` for raw inputs `[N, 14]`.
-pub fn network_tensor(layout: &ModelLayout, path: ComputePath, grid: Option<Tensor<1>>, mlp: Tensor<1>, raw: Tensor<2>) -> Tensor<2> {
+pub fn network_tensor(
+    layout: &ModelLayout,
+    path: ComputePath,
+    grid: Option<Tensor<1>>,
+    mlp: Tensor<1>,
+    raw: Tensor<2>,
+) -> Tensor<2> {
     let x = match path {
         ComputePath::Unfused => layout.encoding.encode_tensor_reference(grid, raw),
         _ => layout.encoding.encode_tensor(grid, raw),
@@ -48,11 +57,20 @@ pub fn network_tensor(layout: &ModelLayout, path: ComputePath, grid: Option<Tens
 
 /// Whether the tensor's backend implements the fused MLP op (Flex only so far).
 fn has_mlp_op(t: &Tensor<1>) -> bool {
-    matches!(t.device().inner().as_dispatch(), burn::backend::DispatchDevice::Flex(_))
+    matches!(
+        t.device().inner().as_dispatch(),
+        burn::backend::DispatchDevice::Flex(_)
+    )
 }
 
 /// Radiance `[N, 3]` of packed query rows `[N, 17]`.
-pub fn infer_tensor(layout: &ModelLayout, path: ComputePath, grid: Option<Tensor<1>>, mlp: Tensor<1>, rows: Tensor<2>) -> Tensor<2> {
+pub fn infer_tensor(
+    layout: &ModelLayout,
+    path: ComputePath,
+    grid: Option<Tensor<1>>,
+    mlp: Tensor<1>,
+    rows: Tensor<2>,
+) -> Tensor<2> {
     let raw = rows.clone().narrow(1, 0, RAW_INPUT_DIMS);
     let factor = rows.narrow(1, FACTOR_AT, 3);
     let o = network_tensor(layout, path, grid, mlp, raw);
@@ -88,15 +106,35 @@ pub fn train_step_tensor(
     let bc2 = 1.0 - adam.beta2.powi(t);
     if let Some(g) = grid.as_ref().and_then(|g| g.grad(&grads)) {
         let referenced = g.clone().not_equal_elem(0.0);
-        adam_tensor(&mut state.grid, &mut state.grid_m, &mut state.grid_v, g, Some(referenced), adam, bc1, bc2);
+        adam_tensor(
+            &mut state.grid,
+            &mut state.grid_m,
+            &mut state.grid_v,
+            g,
+            Some(referenced),
+            adam,
+            bc1,
+            bc2,
+        );
         if let Some(alpha) = ema {
-            state.grid_ema = state.grid_ema.clone().mul_scalar(alpha) + state.grid.clone().mul_scalar(1.0 - alpha);
+            state.grid_ema = state.grid_ema.clone().mul_scalar(alpha)
+                + state.grid.clone().mul_scalar(1.0 - alpha);
         }
     }
     if let Some(g) = mlp.grad(&grads) {
-        adam_tensor(&mut state.mlp, &mut state.mlp_m, &mut state.mlp_v, g, None, adam, bc1, bc2);
+        adam_tensor(
+            &mut state.mlp,
+            &mut state.mlp_m,
+            &mut state.mlp_v,
+            g,
+            None,
+            adam,
+            bc1,
+            bc2,
+        );
         if let Some(alpha) = ema {
-            state.mlp_ema = state.mlp_ema.clone().mul_scalar(alpha) + state.mlp.clone().mul_scalar(1.0 - alpha);
+            state.mlp_ema =
+                state.mlp_ema.clone().mul_scalar(alpha) + state.mlp.clone().mul_scalar(1.0 - alpha);
         }
     }
     loss.without_autodiff()
@@ -104,12 +142,26 @@ pub fn train_step_tensor(
 
 /// Adam as tensor ops; with `mask`, only masked entries change (sparse semantics).
 /// Non-finite gradients count as zero.
-fn adam_tensor(w: &mut Tensor<1>, m: &mut Tensor<1>, v: &mut Tensor<1>, g: Tensor<1>, mask: Option<Tensor<1, Bool>>, a: AdamParams, bc1: f32, bc2: f32) {
+fn adam_tensor(
+    w: &mut Tensor<1>,
+    m: &mut Tensor<1>,
+    v: &mut Tensor<1>,
+    g: Tensor<1>,
+    mask: Option<Tensor<1, Bool>>,
+    a: AdamParams,
+    bc1: f32,
+    bc2: f32,
+) {
     let g = g.clone().mask_fill(g.is_finite().bool_not(), 0.0);
-    let g = if a.l2_reg > 0.0 { g + w.clone().mul_scalar(a.l2_reg) } else { g };
+    let g = if a.l2_reg > 0.0 {
+        g + w.clone().mul_scalar(a.l2_reg)
+    } else {
+        g
+    };
     let m_new = m.clone().mul_scalar(a.beta1) + g.clone().mul_scalar(1.0 - a.beta1);
     let v_new = v.clone().mul_scalar(a.beta2) + (g.clone() * g).mul_scalar(1.0 - a.beta2);
-    let update = m_new.clone().div_scalar(bc1) / v_new.clone().div_scalar(bc2).sqrt().add_scalar(a.epsilon);
+    let update =
+        m_new.clone().div_scalar(bc1) / v_new.clone().div_scalar(bc2).sqrt().add_scalar(a.epsilon);
     let update = update.clone().mask_fill(update.is_finite().bool_not(), 0.0);
     let w_new = w.clone() - update.mul_scalar(a.learning_rate);
     match mask {

@@ -19,12 +19,31 @@ fn field_of(result: Result<CacheConfig, CacheError>) -> (String, String) {
 fn presets_parse_and_have_the_documented_shape() {
     let h = CacheConfig::hash_grid_preset();
     let g = h.hash_grid().expect("hash grid preset has a grid");
-    assert_eq!((g.n_levels, g.n_features_per_level, g.log2_hashmap_size, g.base_resolution), (16, 2, 19, 16.0));
+    assert_eq!(
+        (
+            g.n_levels,
+            g.n_features_per_level,
+            g.log2_hashmap_size,
+            g.base_resolution
+        ),
+        (16, 2, 19, 16.0)
+    );
     assert_eq!(h.network.n_hidden_layers, 3);
     let t = CacheConfig::triangle_wave_preset();
     assert!(t.hash_grid().is_none());
-    assert!(t.encoding.nested.iter().any(|n| matches!(n, NestedEncoding::TriangleWave { n_frequencies: 12, .. })));
-    assert!(t.encoding.nested.iter().any(|n| matches!(n, NestedEncoding::OneBlob { wrap: true, .. })));
+    assert!(t.encoding.nested.iter().any(|n| matches!(
+        n,
+        NestedEncoding::TriangleWave {
+            n_frequencies: 12,
+            ..
+        }
+    )));
+    assert!(
+        t.encoding
+            .nested
+            .iter()
+            .any(|n| matches!(n, NestedEncoding::OneBlob { wrap: true, .. }))
+    );
     assert_eq!(t.network.n_hidden_layers, 5);
     // Round trip through JSON.
     assert_eq!(CacheConfig::from_json_str(&h.to_json()).unwrap(), h);
@@ -36,19 +55,44 @@ fn presets_parse_and_have_the_documented_shape() {
 #[test]
 fn out_of_range_values_name_the_field() {
     let cases: [(&str, serde_json::Value, &str); 9] = [
-        ("/encoding/nested/0/n_levels", 0.into(), "encoding.nested[0].n_levels"),
-        ("/encoding/nested/0/log2_hashmap_size", 30.into(), "encoding.nested[0].log2_hashmap_size"),
-        ("/encoding/nested/0/n_features_per_level", 3.into(), "encoding.nested[0].n_features_per_level"),
-        ("/encoding/nested/1/n_bins", 0.into(), "encoding.nested[1].n_bins"),
+        (
+            "/encoding/nested/0/n_levels",
+            0.into(),
+            "encoding.nested[0].n_levels",
+        ),
+        (
+            "/encoding/nested/0/log2_hashmap_size",
+            30.into(),
+            "encoding.nested[0].log2_hashmap_size",
+        ),
+        (
+            "/encoding/nested/0/n_features_per_level",
+            3.into(),
+            "encoding.nested[0].n_features_per_level",
+        ),
+        (
+            "/encoding/nested/1/n_bins",
+            0.into(),
+            "encoding.nested[1].n_bins",
+        ),
         ("/network/n_neurons", 128.into(), "network.n_neurons"),
-        ("/network/n_hidden_layers", 0.into(), "network.n_hidden_layers"),
+        (
+            "/network/n_hidden_layers",
+            0.into(),
+            "network.n_hidden_layers",
+        ),
         ("/loss/epsilon", (-1.0).into(), "loss.epsilon"),
         ("/optimizer/decay", 1.5.into(), "optimizer.decay"),
-        ("/optimizer/nested/learning_rate", 0.0.into(), "optimizer.nested.learning_rate"),
+        (
+            "/optimizer/nested/learning_rate",
+            0.0.into(),
+            "optimizer.nested.learning_rate",
+        ),
     ];
     for (pointer, value, field) in cases {
         let mut v = preset_json();
-        *v.pointer_mut(pointer).unwrap_or_else(|| panic!("{pointer}")) = value;
+        *v.pointer_mut(pointer)
+            .unwrap_or_else(|| panic!("{pointer}")) = value;
         let (f, m) = field_of(CacheConfig::from_json_str(&v.to_string()));
         assert_eq!(f, field, "{pointer}: {m}");
         assert!(!m.is_empty());
@@ -91,7 +135,8 @@ fn the_encodings_must_consume_the_fourteen_raw_inputs() {
     assert!(m.contains("14"), "{m}");
 
     let mut v = preset_json();
-    *v.pointer_mut("/encoding/nested/0/n_dims_to_encode").unwrap() = 2.into();
+    *v.pointer_mut("/encoding/nested/0/n_dims_to_encode")
+        .unwrap() = 2.into();
     let (f, _) = field_of(CacheConfig::from_json_str(&v.to_string()));
     assert_eq!(f, "encoding.nested[0].n_dims_to_encode");
 }
@@ -100,25 +145,46 @@ fn the_encodings_must_consume_the_fourteen_raw_inputs() {
 fn sizing_follows_the_scene_extent() {
     let base = CacheConfig::hash_grid_preset();
     // A 10 × 4 × 2 m scene, 1 cm features: finest resolution 1000 cells along x.
-    let scene = SceneBox { min: [0.0, 0.0, 0.0], max: [10.0, 4.0, 2.0] };
+    let scene = SceneBox {
+        min: [0.0, 0.0, 0.0],
+        max: [10.0, 4.0, 2.0],
+    };
     let (c, s) = base.sized_for_scene(&scene, 0.01).unwrap();
     assert_eq!(s.finest_resolution, 1000);
     let g = c.grid_layout().unwrap();
     let finest = g.levels.last().unwrap();
-    assert!((finest.scale + 1.0 - 1000.0).abs() < 1.0, "finest scale {}", finest.scale);
+    assert!(
+        (finest.scale + 1.0 - 1000.0).abs() < 1.0,
+        "finest scale {}",
+        finest.scale
+    );
     // Surface cells 2·(1000·400 + 400·200 + 200·1000) = 1.36e6 → 2^21, capped by the preset's 2^19.
     assert_eq!(s.log2_hashmap_size, Some(19));
     // A small scene gets a small table.
-    let (c2, s2) = base.sized_for_scene(&SceneBox { min: [0.0; 3], max: [1.0; 3] }, 0.02).unwrap();
+    let (c2, s2) = base
+        .sized_for_scene(
+            &SceneBox {
+                min: [0.0; 3],
+                max: [1.0; 3],
+            },
+            0.02,
+        )
+        .unwrap();
     assert_eq!(s2.finest_resolution, 50);
     assert_eq!(s2.log2_hashmap_size, Some(14)); // 2·3·50² = 15000 cells → 2^14
     assert!(s2.param_count < s.param_count);
     assert_eq!(s2.param_count, ModelLayout::new(&c2).param_count());
     assert!(s2.memory_bytes >= s2.param_count * 20);
     // Triangle-wave octaves follow the finest feature too.
-    let (_, st) = CacheConfig::triangle_wave_preset().sized_for_scene(&scene, 0.01).unwrap();
+    let (_, st) = CacheConfig::triangle_wave_preset()
+        .sized_for_scene(&scene, 0.01)
+        .unwrap();
     assert_eq!(st.n_frequencies, Some(11)); // ceil(log2 1000) + 1
     // Bad input is an error naming it.
-    assert!(matches!(base.sized_for_scene(&scene, 0.0), Err(CacheError::Config { field, .. }) if field == "min_feature_size"));
-    assert!(matches!(base.sized_for_scene(&SceneBox { min: [0.0; 3], max: [f32::NAN; 3] }, 0.1), Err(CacheError::Config { field, .. }) if field == "scene_box"));
+    assert!(
+        matches!(base.sized_for_scene(&scene, 0.0), Err(CacheError::Config { field, .. }) if field == "min_feature_size")
+    );
+    assert!(
+        matches!(base.sized_for_scene(&SceneBox { min: [0.0; 3], max: [f32::NAN; 3] }, 0.1), Err(CacheError::Config { field, .. }) if field == "scene_box")
+    );
 }

@@ -2,9 +2,14 @@
 //! `ê_t = Σ_{i≤t} (1 − α) α^(t−i) w_i / (1 − α^t)` of the weights after each step.
 
 use nrc_cache::config::{AdamParams, NestedEncoding};
-use nrc_cache::cpu::optim::{StepConstants, catch_up, dense_step, materialize_dense, materialize_grid, pack_records, sparse_step, unpack_records};
+use nrc_cache::cpu::optim::{
+    StepConstants, catch_up, dense_step, materialize_dense, materialize_grid, pack_records,
+    sparse_step, unpack_records,
+};
 use nrc_cache::state::tensor_vec;
-use nrc_cache::{CacheConfig, CacheDevice, CacheQuery, ComputePath, RadianceCache, SceneBox, TrainingBatch};
+use nrc_cache::{
+    CacheConfig, CacheDevice, CacheQuery, ComputePath, RadianceCache, SceneBox, TrainingBatch,
+};
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64Mcg;
 
@@ -13,12 +18,25 @@ fn closed_form(alpha: f64, history: &[Vec<f32>]) -> Vec<f64> {
     let t = history.len() as i32;
     let norm = 1.0 - alpha.powi(t);
     (0..history[0].len())
-        .map(|j| history.iter().enumerate().map(|(i, w)| (1.0 - alpha) * alpha.powi(t - 1 - i as i32) * f64::from(w[j])).sum::<f64>() / norm)
+        .map(|j| {
+            history
+                .iter()
+                .enumerate()
+                .map(|(i, w)| (1.0 - alpha) * alpha.powi(t - 1 - i as i32) * f64::from(w[j]))
+                .sum::<f64>()
+                / norm
+        })
         .collect()
 }
 
 fn adam() -> AdamParams {
-    AdamParams { learning_rate: 1e-2, beta1: 0.9, beta2: 0.99, epsilon: 1e-15, l2_reg: 0.0 }
+    AdamParams {
+        learning_rate: 1e-2,
+        beta1: 0.9,
+        beta2: 0.99,
+        epsilon: 1e-15,
+        l2_reg: 0.0,
+    }
 }
 
 #[test]
@@ -26,7 +44,9 @@ fn lazy_sparse_and_dense_ema_match_the_closed_form_on_a_toy_sequence() {
     let alpha = 0.9f32; // a short memory makes early steps matter
     let (entries, f) = (40, 2);
     let mut r = Pcg64Mcg::seed_from_u64(1);
-    let w0: Vec<f32> = (0..entries * f).map(|_| r.random_range(-1.0..1.0)).collect();
+    let w0: Vec<f32> = (0..entries * f)
+        .map(|_| r.random_range(-1.0..1.0))
+        .collect();
     let zeros = vec![0f32; w0.len()];
     let mut records = pack_records(f, &w0, &zeros, &zeros, &zeros);
     let mut grad = zeros.clone();
@@ -47,7 +67,10 @@ fn lazy_sparse_and_dense_ema_match_the_closed_form_on_a_toy_sequence() {
             }
         }
         sparse_step(&c, f, &mut touched, &mut records, &mut grad, &mut last);
-        assert!(grad.iter().all(|g| *g == 0.0), "the step consumes the gradient");
+        assert!(
+            grad.iter().all(|g| *g == 0.0),
+            "the step consumes the gradient"
+        );
         history.push(unpack_records(f, &records)[0].clone());
         // Dense on the side.
         let g: Vec<f32> = (0..dw.len()).map(|_| r.random_range(-1.0..1.0)).collect();
@@ -58,13 +81,19 @@ fn lazy_sparse_and_dense_ema_match_the_closed_form_on_a_toy_sequence() {
         let mut got = vec![0f32; w0.len()];
         materialize_grid(Some(alpha), step, f, &records, &last, &mut got);
         for (j, (a, b)) in got.iter().zip(&expect).enumerate() {
-            assert!((f64::from(*a) - b).abs() < 1e-5 * (1.0 + b.abs()), "step {step} entry {j}: {a} vs closed form {b}");
+            assert!(
+                (f64::from(*a) - b).abs() < 1e-5 * (1.0 + b.abs()),
+                "step {step} entry {j}: {a} vs closed form {b}"
+            );
         }
         let expect = closed_form(f64::from(alpha), &dense_history);
         let mut got = vec![0f32; dw.len()];
         materialize_dense(alpha, step, &dw, &de, &mut got);
         for (a, b) in got.iter().zip(&expect) {
-            assert!((f64::from(*a) - b).abs() < 1e-5 * (1.0 + b.abs()), "dense step {step}: {a} vs {b}");
+            assert!(
+                (f64::from(*a) - b).abs() < 1e-5 * (1.0 + b.abs()),
+                "dense step {step}: {a} vs {b}"
+            );
         }
     }
     // Untouched entries never moved, and their average is exactly their weight.
@@ -85,10 +114,24 @@ fn lazy_sparse_and_dense_ema_match_the_closed_form_on_a_toy_sequence() {
 fn batch(n: usize, seed: u64) -> TrainingBatch {
     let mut r = Pcg64Mcg::seed_from_u64(seed);
     let queries: Vec<CacheQuery> = (0..n)
-        .map(|_| CacheQuery { position: [r.random(), r.random(), r.random()], direction: [0.0, 0.0, 1.0], normal: [0.0, 1.0, 0.0], roughness: 0.5, diffuse: [0.5; 3], specular: [0.0; 3] })
+        .map(|_| CacheQuery {
+            position: [r.random(), r.random(), r.random()],
+            direction: [0.0, 0.0, 1.0],
+            normal: [0.0, 1.0, 0.0],
+            roughness: 0.5,
+            diffuse: [0.5; 3],
+            specular: [0.0; 3],
+        })
         .collect();
-    let targets = queries.iter().map(|q| [q.position[0], 0.5, q.position[2]]).collect();
-    TrainingBatch { queries, targets, weights: None }
+    let targets = queries
+        .iter()
+        .map(|q| [q.position[0], 0.5, q.position[2]])
+        .collect();
+    TrainingBatch {
+        queries,
+        targets,
+        weights: None,
+    }
 }
 
 /// The cache's inference weights are the closed-form average of its weight history, on the
@@ -96,14 +139,19 @@ fn batch(n: usize, seed: u64) -> TrainingBatch {
 #[test]
 fn cache_inference_weights_are_the_closed_form_average() {
     let mut config = CacheConfig::hash_grid_preset();
-    if let Some(NestedEncoding::HashGrid { log2_hashmap_size, .. }) = config.encoding.nested.first_mut() {
+    if let Some(NestedEncoding::HashGrid {
+        log2_hashmap_size, ..
+    }) = config.encoding.nested.first_mut()
+    {
         *log2_hashmap_size = 12;
     }
     if let nrc_cache::config::OptimizerConfig::EMA { decay, .. } = &mut config.optimizer {
         *decay = 0.8;
     }
     for path in [ComputePath::Fused, ComputePath::Unfused] {
-        let mut cache = RadianceCache::with_path(config.clone(), SceneBox::default(), CacheDevice::Cpu, path).unwrap();
+        let mut cache =
+            RadianceCache::with_path(config.clone(), SceneBox::default(), CacheDevice::Cpu, path)
+                .unwrap();
         let (mut grid_hist, mut mlp_hist) = (Vec::new(), Vec::new());
         for step in 0..12 {
             // Small batches leave most fine-level entries unreferenced in most steps.
@@ -113,10 +161,16 @@ fn cache_inference_weights_are_the_closed_form_average() {
             mlp_hist.push(m);
         }
         let (g, m) = cache.inference_weights();
-        for (got, hist, what) in [(tensor_vec(g), &grid_hist, "table"), (tensor_vec(m), &mlp_hist, "mlp")] {
+        for (got, hist, what) in [
+            (tensor_vec(g), &grid_hist, "table"),
+            (tensor_vec(m), &mlp_hist, "mlp"),
+        ] {
             let expect = closed_form(0.8, hist);
             for (j, (a, b)) in got.iter().zip(&expect).enumerate() {
-                assert!((f64::from(*a) - b).abs() < 1e-5 * (1.0 + b.abs()), "{path} {what} {j}: {a} vs {b}");
+                assert!(
+                    (f64::from(*a) - b).abs() < 1e-5 * (1.0 + b.abs()),
+                    "{path} {what} {j}: {a} vs {b}"
+                );
             }
         }
     }

@@ -8,7 +8,9 @@ use nrc_cache::CacheConfig;
 use nrc_cache::batch::{TRAIN_ROW, pack_training};
 use nrc_cache::config::{CompositeConfig, NestedEncoding, OutputActivation};
 use nrc_cache::cpu::gemm::{Rows, Store, Strided, gemm, gemm_portable};
-use nrc_cache::cpu::mlp::{MlpGrad, OUT_PAD, PreparedMlp, TileScratch, backward_tile, forward_tile};
+use nrc_cache::cpu::mlp::{
+    MlpGrad, OUT_PAD, PreparedMlp, TileScratch, backward_tile, forward_tile,
+};
 use nrc_cache::cpu::train::{LossSettings, gradients};
 use nrc_cache::encoding::InputEncoding;
 use nrc_cache::encoding::hash_grid::{HashGrid, HashGridParams};
@@ -25,21 +27,53 @@ fn rng(seed: u64) -> Pcg64Mcg {
 
 /// A small grid with both dense and hashed levels.
 fn small_grid() -> HashGrid {
-    HashGrid::new(HashGridParams { n_levels: 6, n_features_per_level: 2, log2_hashmap_size: 12, base_resolution: 4.0, per_level_scale: 2.0 })
+    HashGrid::new(HashGridParams {
+        n_levels: 6,
+        n_features_per_level: 2,
+        log2_hashmap_size: 12,
+        base_resolution: 4.0,
+        per_level_scale: 2.0,
+    })
 }
 
 fn composite(nested: Vec<NestedEncoding>) -> InputEncoding {
-    InputEncoding::new(&CompositeConfig { otype: "Composite".into(), nested, pad_to_multiple: 16 })
+    InputEncoding::new(&CompositeConfig {
+        otype: "Composite".into(),
+        nested,
+        pad_to_multiple: 16,
+    })
 }
 
 /// Every encoding kind over the 14 raw inputs.
 fn all_encodings() -> InputEncoding {
     composite(vec![
-        NestedEncoding::HashGrid { n_dims_to_encode: 3, n_levels: 6, n_features_per_level: 2, log2_hashmap_size: 12, base_resolution: 4.0, per_level_scale: 2.0 },
-        NestedEncoding::OneBlob { n_dims_to_encode: 2, n_bins: 4, wrap: false },
-        NestedEncoding::OneBlob { n_dims_to_encode: 2, n_bins: 6, wrap: true },
-        NestedEncoding::TriangleWave { n_dims_to_encode: 1, n_frequencies: 5 },
-        NestedEncoding::Identity { n_dims_to_encode: 6, scale: 1.5, offset: -0.25 },
+        NestedEncoding::HashGrid {
+            n_dims_to_encode: 3,
+            n_levels: 6,
+            n_features_per_level: 2,
+            log2_hashmap_size: 12,
+            base_resolution: 4.0,
+            per_level_scale: 2.0,
+        },
+        NestedEncoding::OneBlob {
+            n_dims_to_encode: 2,
+            n_bins: 4,
+            wrap: false,
+        },
+        NestedEncoding::OneBlob {
+            n_dims_to_encode: 2,
+            n_bins: 6,
+            wrap: true,
+        },
+        NestedEncoding::TriangleWave {
+            n_dims_to_encode: 1,
+            n_frequencies: 5,
+        },
+        NestedEncoding::Identity {
+            n_dims_to_encode: 6,
+            scale: 1.5,
+            offset: -0.25,
+        },
     ])
 }
 
@@ -83,27 +117,41 @@ fn encodings_input_gradients_match_finite_differences() {
     let g = enc.grid().unwrap().0.clone();
     let mut r = rng(1);
     // Table values of order 1 so the interpolation's slope dominates rounding.
-    let table: Vec<f32> = (0..g.param_count()).map(|_| r.random_range(-1.0..1.0)).collect();
+    let table: Vec<f32> = (0..g.param_count())
+        .map(|_| r.random_range(-1.0..1.0))
+        .collect();
     let h = 1e-4f32;
     let mut checked = 0;
     while checked < 40 {
-        let raw: Vec<f32> = (0..RAW_INPUT_DIMS).map(|_| r.random_range(0.05f32..0.95)).collect();
-        if !away_from_boundaries(&g, [raw[0], raw[1], raw[2]], 0.05) || !away_from_kinks(raw[7], 5, 1e-3) {
+        let raw: Vec<f32> = (0..RAW_INPUT_DIMS)
+            .map(|_| r.random_range(0.05f32..0.95))
+            .collect();
+        if !away_from_boundaries(&g, [raw[0], raw[1], raw[2]], 0.05)
+            || !away_from_kinks(raw[7], 5, 1e-3)
+        {
             continue;
         }
-        let dout: Vec<f32> = (0..enc.padded_dims).map(|_| r.random_range(-1.0..1.0)).collect();
+        let dout: Vec<f32> = (0..enc.padded_dims)
+            .map(|_| r.random_range(-1.0..1.0))
+            .collect();
         let analytic = enc.backward_input_one(&table, &raw, &dout);
         let loss = |x: &[f32]| -> f64 {
             let mut out = vec![0f32; enc.padded_dims];
             enc.forward_one(&table, x, &mut out);
-            out.iter().zip(&dout).map(|(a, b)| f64::from(*a) * f64::from(*b)).sum()
+            out.iter()
+                .zip(&dout)
+                .map(|(a, b)| f64::from(*a) * f64::from(*b))
+                .sum()
         };
         // Bound of the f32 rounding noise of the difference quotient: each output is rounded
         // to ~1.2e-7 relative after a handful of operations.
         let magnitude: f64 = {
             let mut out = vec![0f32; enc.padded_dims];
             enc.forward_one(&table, &raw, &mut out);
-            out.iter().zip(&dout).map(|(a, b)| f64::from(a.abs()) * f64::from(b.abs())).sum()
+            out.iter()
+                .zip(&dout)
+                .map(|(a, b)| f64::from(a.abs()) * f64::from(b.abs()))
+                .sum()
         };
         let noise = 8.0 * 1.2e-7 * magnitude / f64::from(2.0 * h);
         for d in 0..RAW_INPUT_DIMS {
@@ -114,7 +162,10 @@ fn encodings_input_gradients_match_finite_differences() {
             let fd = (loss(&xp) - loss(&xm)) / f64::from(xp[d] - xm[d]);
             let a = f64::from(analytic[d]);
             let tol = 1e-3 * (1.0 + a.abs().max(fd.abs())) + noise;
-            assert!((fd - a).abs() <= tol, "dim {d}: analytic {a} vs finite difference {fd} at {raw:?}");
+            assert!(
+                (fd - a).abs() <= tol,
+                "dim {d}: analytic {a} vs finite difference {fd} at {raw:?}"
+            );
         }
         checked += 1;
     }
@@ -124,9 +175,20 @@ fn encodings_input_gradients_match_finite_differences() {
 fn hash_grid_table_gradient_matches_finite_differences() {
     let g = small_grid();
     let mut r = rng(2);
-    let table: Vec<f32> = (0..g.param_count()).map(|_| r.random_range(-1.0..1.0)).collect();
-    let points: Vec<[f32; 3]> = (0..8).map(|_| [r.random(), r.random(), r.random()]).collect();
-    let douts: Vec<Vec<f32>> = points.iter().map(|_| (0..g.output_dims()).map(|_| r.random_range(-1.0..1.0)).collect()).collect();
+    let table: Vec<f32> = (0..g.param_count())
+        .map(|_| r.random_range(-1.0..1.0))
+        .collect();
+    let points: Vec<[f32; 3]> = (0..8)
+        .map(|_| [r.random(), r.random(), r.random()])
+        .collect();
+    let douts: Vec<Vec<f32>> = points
+        .iter()
+        .map(|_| {
+            (0..g.output_dims())
+                .map(|_| r.random_range(-1.0..1.0))
+                .collect()
+        })
+        .collect();
     let mut grad = vec![0f32; g.param_count()];
     for (p, d) in points.iter().zip(&douts) {
         g.backward_params_one(*p, d, &mut grad);
@@ -136,14 +198,21 @@ fn hash_grid_table_gradient_matches_finite_differences() {
         let mut out = vec![0f32; g.output_dims()];
         for (p, d) in points.iter().zip(&douts) {
             g.forward_one(t, *p, &mut out);
-            s += out.iter().zip(d).map(|(a, b)| f64::from(*a) * f64::from(*b)).sum::<f64>();
+            s += out
+                .iter()
+                .zip(d)
+                .map(|(a, b)| f64::from(*a) * f64::from(*b))
+                .sum::<f64>();
         }
         s
     };
     // Every parameter with a non-zero gradient, and as many untouched ones.
     let touched: Vec<usize> = (0..grad.len()).filter(|&i| grad[i] != 0.0).collect();
     assert!(touched.len() > 100, "the points reference many entries");
-    let untouched: Vec<usize> = (0..grad.len()).filter(|&i| grad[i] == 0.0).take(touched.len()).collect();
+    let untouched: Vec<usize> = (0..grad.len())
+        .filter(|&i| grad[i] == 0.0)
+        .take(touched.len())
+        .collect();
     for &i in touched.iter().chain(&untouched) {
         let h = 1e-2f32;
         let mut tp = table.clone();
@@ -151,7 +220,11 @@ fn hash_grid_table_gradient_matches_finite_differences() {
         tp[i] += h;
         tm[i] -= h;
         let fd = (loss(&tp) - loss(&tm)) / f64::from(tp[i] - tm[i]);
-        assert!((fd - f64::from(grad[i])).abs() <= 1e-4 * (1.0 + fd.abs()), "param {i}: analytic {} vs {fd}", grad[i]);
+        assert!(
+            (fd - f64::from(grad[i])).abs() <= 1e-4 * (1.0 + fd.abs()),
+            "param {i}: analytic {} vs {fd}",
+            grad[i]
+        );
     }
 }
 
@@ -179,7 +252,11 @@ fn layers(inputs: usize, hidden: usize) -> Vec<LayerShape> {
     let mut i = inputs;
     for l in 0..=hidden {
         let o = if l == hidden { 3 } else { WIDTH };
-        out.push(LayerShape { inputs: i, outputs: o, offset: off });
+        out.push(LayerShape {
+            inputs: i,
+            outputs: o,
+            offset: off,
+        });
         off += i * o;
         i = o;
     }
@@ -201,10 +278,16 @@ fn fused_mlp_tile_matches_f64_reference_and_finite_differences() {
     forward_tile(&prepared, m, &mut s);
     let w64: Vec<f64> = w.iter().map(|v| f64::from(*v)).collect();
     for i in 0..m {
-        let x64: Vec<f64> = x[i * 32..(i + 1) * 32].iter().map(|v| f64::from(*v)).collect();
+        let x64: Vec<f64> = x[i * 32..(i + 1) * 32]
+            .iter()
+            .map(|v| f64::from(*v))
+            .collect();
         let y = mlp_f64(&ls, &w64, &x64);
         for (c, yc) in y.iter().enumerate() {
-            assert!((f64::from(s.out[i * OUT_PAD + c]) - yc).abs() < 1e-4 * (1.0 + yc.abs()), "forward sample {i}");
+            assert!(
+                (f64::from(s.out[i * OUT_PAD + c]) - yc).abs() < 1e-4 * (1.0 + yc.abs()),
+                "forward sample {i}"
+            );
         }
     }
     for i in 0..m {
@@ -218,7 +301,15 @@ fn fused_mlp_tile_matches_f64_reference_and_finite_differences() {
     grad.write_flat(&ls, &mut gw);
     // L = Σ_i ⟨dy_i, mlp(x_i)⟩ in f64, central differences with h = 1e-6.
     let loss = |w: &[f64], x: &[f64]| -> f64 {
-        (0..m).map(|i| mlp_f64(&ls, w, &x[i * 32..(i + 1) * 32]).iter().zip(&dy[i * 3..i * 3 + 3]).map(|(a, b)| a * f64::from(*b)).sum::<f64>()).sum()
+        (0..m)
+            .map(|i| {
+                mlp_f64(&ls, w, &x[i * 32..(i + 1) * 32])
+                    .iter()
+                    .zip(&dy[i * 3..i * 3 + 3])
+                    .map(|(a, b)| a * f64::from(*b))
+                    .sum::<f64>()
+            })
+            .sum()
     };
     let x64: Vec<f64> = x.iter().map(|v| f64::from(*v)).collect();
     let h = 1e-6;
@@ -228,7 +319,11 @@ fn fused_mlp_tile_matches_f64_reference_and_finite_differences() {
         wp[i] += h;
         wm[i] -= h;
         let fd = (loss(&wp, &x64) - loss(&wm, &x64)) / (2.0 * h);
-        assert!((fd - f64::from(gw[i])).abs() < 2e-4 * (1.0 + fd.abs()), "weight {i}: analytic {} vs {fd}", gw[i]);
+        assert!(
+            (fd - f64::from(gw[i])).abs() < 2e-4 * (1.0 + fd.abs()),
+            "weight {i}: analytic {} vs {fd}",
+            gw[i]
+        );
     }
     for _ in 0..100 {
         let i = r.random_range(0..m * 32);
@@ -236,14 +331,25 @@ fn fused_mlp_tile_matches_f64_reference_and_finite_differences() {
         xp[i] += h;
         xm[i] -= h;
         let fd = (loss(&w64, &xp) - loss(&w64, &xm)) / (2.0 * h);
-        assert!((fd - f64::from(dx[i])).abs() < 2e-4 * (1.0 + fd.abs()), "input {i}: analytic {} vs {fd}", dx[i]);
+        assert!(
+            (fd - f64::from(dx[i])).abs() < 2e-4 * (1.0 + fd.abs()),
+            "input {i}: analytic {} vs {fd}",
+            dx[i]
+        );
     }
 }
 
 #[test]
 fn avx2_gemm_matches_portable_loops() {
     let mut r = rng(4);
-    for &(m, n, k) in &[(1, 8, 1), (6, 16, 64), (7, 24, 5), (37, 64, 64), (64, 8, 128), (13, 64, 3)] {
+    for &(m, n, k) in &[
+        (1, 8, 1),
+        (6, 16, 64),
+        (7, 24, 5),
+        (37, 64, 64),
+        (64, 8, 128),
+        (13, 64, 3),
+    ] {
         let a: Vec<f32> = (0..m * k + 7).map(|_| r.random_range(-1.0..1.0)).collect();
         let b: Vec<f32> = (0..k * n).map(|_| r.random_range(-1.0..1.0)).collect();
         for store in [Store::Overwrite, Store::Relu, Store::Accumulate] {
@@ -252,10 +358,49 @@ fn avx2_gemm_matches_portable_loops() {
                 let c0: Vec<f32> = (0..m * n).map(|_| r.random_range(-1.0..1.0)).collect();
                 let mut c1 = c0.clone();
                 let mut c2 = c0.clone();
-                gemm(m, n, k, Strided { data: &a, row_stride: rs, col_stride: cs }, Rows { data: &b, stride: n }, Rows { data: &mut c1, stride: n }, store);
-                gemm_portable(m, n, k, Strided { data: &a, row_stride: rs, col_stride: cs }, Rows { data: &b, stride: n }, Rows { data: &mut c2, stride: n }, store);
+                gemm(
+                    m,
+                    n,
+                    k,
+                    Strided {
+                        data: &a,
+                        row_stride: rs,
+                        col_stride: cs,
+                    },
+                    Rows {
+                        data: &b,
+                        stride: n,
+                    },
+                    Rows {
+                        data: &mut c1,
+                        stride: n,
+                    },
+                    store,
+                );
+                gemm_portable(
+                    m,
+                    n,
+                    k,
+                    Strided {
+                        data: &a,
+                        row_stride: rs,
+                        col_stride: cs,
+                    },
+                    Rows {
+                        data: &b,
+                        stride: n,
+                    },
+                    Rows {
+                        data: &mut c2,
+                        stride: n,
+                    },
+                    store,
+                );
                 for (x, y) in c1.iter().zip(&c2) {
-                    assert!((x - y).abs() < 1e-4 * (1.0 + y.abs()), "{m}×{n}×{k} {store:?}: {x} vs {y}");
+                    assert!(
+                        (x - y).abs() < 1e-4 * (1.0 + y.abs()),
+                        "{m}×{n}×{k} {store:?}: {x} vs {y}"
+                    );
                 }
             }
         }
@@ -281,7 +426,10 @@ fn values<const D: usize>(t: Tensor<D>) -> Vec<f32> {
 fn assert_close(a: &[f32], b: &[f32], tol: f32, what: &str) {
     assert_eq!(a.len(), b.len(), "{what}: lengths");
     for (i, (x, y)) in a.iter().zip(b).enumerate() {
-        assert!((x - y).abs() <= tol * (1.0 + x.abs().max(y.abs())), "{what}[{i}]: {x} vs {y}");
+        assert!(
+            (x - y).abs() <= tol * (1.0 + x.abs().max(y.abs())),
+            "{what}[{i}]: {x} vs {y}"
+        );
     }
 }
 
@@ -293,28 +441,48 @@ fn tensor_encodings_match_cpu_kernels_forward_and_backward() {
     let g = enc.grid().unwrap().0.clone();
     let mut r = rng(5);
     let n = 50;
-    let table: Vec<f32> = (0..g.param_count()).map(|_| r.random_range(-1.0..1.0)).collect();
-    let raw: Vec<f32> = (0..n * RAW_INPUT_DIMS).map(|_| r.random_range(0.02f32..0.98)).collect();
-    let dout: Vec<f32> = (0..n * enc.padded_dims).map(|_| r.random_range(-1.0..1.0)).collect();
+    let table: Vec<f32> = (0..g.param_count())
+        .map(|_| r.random_range(-1.0..1.0))
+        .collect();
+    let raw: Vec<f32> = (0..n * RAW_INPUT_DIMS)
+        .map(|_| r.random_range(0.02f32..0.98))
+        .collect();
+    let dout: Vec<f32> = (0..n * enc.padded_dims)
+        .map(|_| r.random_range(-1.0..1.0))
+        .collect();
     let mut cpu_out = vec![0f32; n * enc.padded_dims];
     let mut cpu_gtable = vec![0f32; table.len()];
     let mut cpu_gin = vec![0f32; n * RAW_INPUT_DIMS];
     for i in 0..n {
         let x = &raw[i * RAW_INPUT_DIMS..(i + 1) * RAW_INPUT_DIMS];
         let d = &dout[i * enc.padded_dims..(i + 1) * enc.padded_dims];
-        enc.forward_one(&table, x, &mut cpu_out[i * enc.padded_dims..(i + 1) * enc.padded_dims]);
+        enc.forward_one(
+            &table,
+            x,
+            &mut cpu_out[i * enc.padded_dims..(i + 1) * enc.padded_dims],
+        );
         g.backward_params_one([x[0], x[1], x[2]], &d[..g.output_dims()], &mut cpu_gtable);
-        cpu_gin[i * RAW_INPUT_DIMS..(i + 1) * RAW_INPUT_DIMS].copy_from_slice(&enc.backward_input_one(&table, x, d));
+        cpu_gin[i * RAW_INPUT_DIMS..(i + 1) * RAW_INPUT_DIMS]
+            .copy_from_slice(&enc.backward_input_one(&table, x, d));
     }
     let dev = flex_ad();
     for reference in [true, false] {
         let t = tensor1(&table, &dev).require_grad();
         let x = tensor2(&raw, n, RAW_INPUT_DIMS, &dev).require_grad();
-        let out = if reference { enc.encode_tensor_reference(Some(t.clone()), x.clone()) } else { enc.encode_tensor(Some(t.clone()), x.clone()) };
+        let out = if reference {
+            enc.encode_tensor_reference(Some(t.clone()), x.clone())
+        } else {
+            enc.encode_tensor(Some(t.clone()), x.clone())
+        };
         assert_close(&values(out.clone()), &cpu_out, 1e-5, "forward");
         let l = (out * tensor2(&dout, n, enc.padded_dims, &dev)).sum();
         let grads = l.backward();
-        assert_close(&values(t.grad(&grads).unwrap()), &cpu_gtable, 1e-4, "table gradient");
+        assert_close(
+            &values(t.grad(&grads).unwrap()),
+            &cpu_gtable,
+            1e-4,
+            "table gradient",
+        );
         let gin = values(x.grad(&grads).unwrap());
         // The custom op does not differentiate positions (they are never trained); the
         // reference does. All other inputs are differentiated by both.
@@ -322,7 +490,10 @@ fn tensor_encodings_match_cpu_kernels_forward_and_backward() {
             let from = if reference { 0 } else { 3 };
             for d in from..RAW_INPUT_DIMS {
                 let (a, b) = (gin[i * RAW_INPUT_DIMS + d], cpu_gin[i * RAW_INPUT_DIMS + d]);
-                assert!((a - b).abs() <= 2e-3 * (1.0 + a.abs().max(b.abs())), "input gradient sample {i} dim {d} (reference {reference}): {a} vs {b}");
+                assert!(
+                    (a - b).abs() <= 2e-3 * (1.0 + a.abs().max(b.abs())),
+                    "input gradient sample {i} dim {d} (reference {reference}): {a} vs {b}"
+                );
             }
         }
     }
@@ -342,10 +513,18 @@ fn mlp_op_matches_matmul_autodiff() {
     for fused in [true, false] {
         let wt = tensor1(&w, &dev).require_grad();
         let xt = tensor2(&x, n, 64, &dev).require_grad();
-        let out = if fused { nrc_cache::ops::mlp(wt.clone(), xt.clone(), &ls) } else { mlp_tensor(wt.clone(), xt.clone(), &ls) };
+        let out = if fused {
+            nrc_cache::ops::mlp(wt.clone(), xt.clone(), &ls)
+        } else {
+            mlp_tensor(wt.clone(), xt.clone(), &ls)
+        };
         let l = (out.clone() * tensor2(&dy, n, 3, &dev)).sum();
         let grads = l.backward();
-        results.push((values(out), values(wt.grad(&grads).unwrap()), values(xt.grad(&grads).unwrap())));
+        results.push((
+            values(out),
+            values(wt.grad(&grads).unwrap()),
+            values(xt.grad(&grads).unwrap()),
+        ));
     }
     assert_close(&results[0].0, &results[1].0, 1e-4, "outputs");
     assert_close(&results[0].1, &results[1].1, 1e-3, "weight gradients");
@@ -354,23 +533,50 @@ fn mlp_op_matches_matmul_autodiff() {
 
 fn random_batch(n: usize, seed: u64) -> TrainingBatch {
     let mut r = rng(seed);
-    let mut v3 = |lo: f32, hi: f32| [r.random_range(lo..hi), r.random_range(lo..hi), r.random_range(lo..hi)];
+    let mut v3 = |lo: f32, hi: f32| {
+        [
+            r.random_range(lo..hi),
+            r.random_range(lo..hi),
+            r.random_range(lo..hi),
+        ]
+    };
     let queries: Vec<CacheQuery> = (0..n)
-        .map(|_| CacheQuery { position: v3(0.0, 1.0), direction: v3(-1.0, 1.0), normal: v3(-1.0, 1.0), roughness: v3(0.0, 2.0)[0], diffuse: v3(0.0, 0.8), specular: v3(0.0, 0.2) })
+        .map(|_| CacheQuery {
+            position: v3(0.0, 1.0),
+            direction: v3(-1.0, 1.0),
+            normal: v3(-1.0, 1.0),
+            roughness: v3(0.0, 2.0)[0],
+            diffuse: v3(0.0, 0.8),
+            specular: v3(0.0, 0.2),
+        })
         .collect();
     let targets = (0..n).map(|_| v3(0.0, 3.0)).collect();
-    TrainingBatch { queries, targets, weights: Some((0..n).map(|i| 0.5 + (i % 3) as f32 * 0.25).collect()) }
+    TrainingBatch {
+        queries,
+        targets,
+        weights: Some((0..n).map(|i| 0.5 + (i % 3) as f32 * 0.25).collect()),
+    }
 }
 
 /// The fused step's loss and gradients equal burn autodiff's over the tensor path (same
 /// output mapping, loss, reflectance factor), for both presets and every output activation.
 #[test]
 fn fused_step_gradients_match_autodiff() {
-    for (name, base) in [("hashgrid", CacheConfig::hash_grid_preset()), ("trianglewave", CacheConfig::triangle_wave_preset())] {
-        for act in [OutputActivation::Exponential, OutputActivation::Softplus, OutputActivation::ReLU] {
+    for (name, base) in [
+        ("hashgrid", CacheConfig::hash_grid_preset()),
+        ("trianglewave", CacheConfig::triangle_wave_preset()),
+    ] {
+        for act in [
+            OutputActivation::Exponential,
+            OutputActivation::Softplus,
+            OutputActivation::ReLU,
+        ] {
             let mut config = base.clone();
             config.network.output_activation = act;
-            if let Some(NestedEncoding::HashGrid { log2_hashmap_size, .. }) = config.encoding.nested.first_mut() {
+            if let Some(NestedEncoding::HashGrid {
+                log2_hashmap_size, ..
+            }) = config.encoding.nested.first_mut()
+            {
                 *log2_hashmap_size = 14;
             }
             let layout = ModelLayout::new(&config);
@@ -379,25 +585,50 @@ fn fused_step_gradients_match_autodiff() {
             let mut r = rng(8);
             grid.iter_mut().for_each(|v| *v = r.random_range(-0.5..0.5));
             let packed = pack_training(&random_batch(700, 9), 1e8).unwrap();
-            let loss = LossSettings { activation: act, epsilon: 0.01 };
+            let loss = LossSettings {
+                activation: act,
+                epsilon: 0.01,
+            };
             let (l_cpu, g_grid, g_mlp) = gradients(&layout, &grid, &mlp, &packed.rows, loss);
 
             let dev = flex_ad();
             let gt = tensor1(&grid, &dev).require_grad();
             let mt = tensor1(&mlp, &dev).require_grad();
             let rows = tensor2(&packed.rows, packed.len, TRAIN_ROW, &dev);
-            let o = nrc_cache::tensor_path::network_tensor(&layout, nrc_cache::ComputePath::Unfused, (layout.grid_params > 0).then(|| gt.clone()), mt.clone(), rows.clone().narrow(1, 0, RAW_INPUT_DIMS));
+            let o = nrc_cache::tensor_path::network_tensor(
+                &layout,
+                nrc_cache::ComputePath::Unfused,
+                (layout.grid_params > 0).then(|| gt.clone()),
+                mt.clone(),
+                rows.clone().narrow(1, 0, RAW_INPUT_DIMS),
+            );
             let y = predict_tensor(act, o, rows.clone().narrow(1, 14, 3));
-            let l = loss_tensor(y, rows.clone().narrow(1, 17, 3), rows.narrow(1, 20, 1), 0.01);
+            let l = loss_tensor(
+                y,
+                rows.clone().narrow(1, 17, 3),
+                rows.narrow(1, 20, 1),
+                0.01,
+            );
             let l_value = values(l.clone())[0];
             let grads = l.backward();
-            assert!((f64::from(l_value) - l_cpu).abs() < 1e-4 * (1.0 + l_cpu.abs()), "{name} {act:?}: loss {l_value} vs {l_cpu}");
-            assert_close(&g_mlp, &values(mt.grad(&grads).unwrap()), 2e-3, &format!("{name} {act:?} MLP gradient"));
+            assert!(
+                (f64::from(l_value) - l_cpu).abs() < 1e-4 * (1.0 + l_cpu.abs()),
+                "{name} {act:?}: loss {l_value} vs {l_cpu}"
+            );
+            assert_close(
+                &g_mlp,
+                &values(mt.grad(&grads).unwrap()),
+                2e-3,
+                &format!("{name} {act:?} MLP gradient"),
+            );
             if layout.grid_params > 0 {
                 let scale = g_grid.iter().fold(0f32, |a, b| a.max(b.abs()));
                 let tg = values(gt.grad(&grads).unwrap());
                 for (i, (a, b)) in g_grid.iter().zip(&tg).enumerate() {
-                    assert!((a - b).abs() <= 2e-3 * scale, "{name} {act:?} table gradient {i}: {a} vs {b}");
+                    assert!(
+                        (a - b).abs() <= 2e-3 * scale,
+                        "{name} {act:?} table gradient {i}: {a} vs {b}"
+                    );
                 }
             }
         }

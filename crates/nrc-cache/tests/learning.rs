@@ -1,7 +1,9 @@
 //! Learning: on an analytic radiance field with smooth parts and a sharp feature, the cache
 //! reaches a stated relative error within a stated number of steps, on both presets.
 
-use nrc_cache::{CacheConfig, CacheDevice, CacheQuery, ComputePath, RadianceCache, SceneBox, TrainingBatch};
+use nrc_cache::{
+    CacheConfig, CacheDevice, CacheQuery, ComputePath, RadianceCache, SceneBox, TrainingBatch,
+};
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64Mcg;
 
@@ -24,7 +26,11 @@ fn queries(n: usize, r: &mut Pcg64Mcg) -> Vec<CacheQuery> {
     (0..n)
         .map(|_| CacheQuery {
             position: [r.random(), r.random(), r.random()],
-            direction: [r.random_range(-1.0..1.0), r.random_range(-1.0..1.0), r.random_range(-1.0..1.0)],
+            direction: [
+                r.random_range(-1.0..1.0),
+                r.random_range(-1.0..1.0),
+                r.random_range(-1.0..1.0),
+            ],
             normal: [0.0, 0.0, 1.0],
             roughness: 0.5,
             diffuse: [0.5; 3],
@@ -56,13 +62,23 @@ fn errors(cache: &RadianceCache, test: &[CacheQuery]) -> (f64, f64) {
 
 /// Trains with fresh batches of 4096 samples per step; returns the errors after `steps`.
 fn learn(config: CacheConfig, path: ComputePath, steps: u32) -> (f64, f64) {
-    let mut cache = RadianceCache::with_path(config, SceneBox::default(), CacheDevice::Cpu, path).unwrap();
+    let mut cache =
+        RadianceCache::with_path(config, SceneBox::default(), CacheDevice::Cpu, path).unwrap();
     let mut r = Pcg64Mcg::seed_from_u64(42);
     let test = queries(20_000, &mut Pcg64Mcg::seed_from_u64(7));
     for _ in 0..steps {
         let q = queries(4096, &mut r);
         let targets = q.iter().map(radiance).collect();
-        cache.train(&TrainingBatch { queries: q, targets, weights: None }, 1).unwrap();
+        cache
+            .train(
+                &TrainingBatch {
+                    queries: q,
+                    targets,
+                    weights: None,
+                },
+                1,
+            )
+            .unwrap();
     }
     errors(&cache, &test)
 }
@@ -70,7 +86,9 @@ fn learn(config: CacheConfig, path: ComputePath, steps: u32) -> (f64, f64) {
 #[test]
 fn hash_grid_preset_learns_the_field() {
     let (overall, patch) = learn(CacheConfig::hash_grid_preset(), ComputePath::Fused, 300);
-    println!("hash grid, 300 steps: relative L2 error {overall:.4}, inside the sharp patch {patch:.4}");
+    println!(
+        "hash grid, 300 steps: relative L2 error {overall:.4}, inside the sharp patch {patch:.4}"
+    );
     // Measured 0.082 / 0.057; a constant prediction scores 0.65.
     assert!(overall < 0.10, "relative L2 error {overall}");
     assert!(patch < 0.08, "patch error {patch}");
@@ -79,7 +97,9 @@ fn hash_grid_preset_learns_the_field() {
 #[test]
 fn triangle_wave_preset_learns_the_field() {
     let (overall, patch) = learn(CacheConfig::triangle_wave_preset(), ComputePath::Fused, 300);
-    println!("triangle wave, 300 steps: relative L2 error {overall:.4}, inside the sharp patch {patch:.4}");
+    println!(
+        "triangle wave, 300 steps: relative L2 error {overall:.4}, inside the sharp patch {patch:.4}"
+    );
     // Measured 0.149 / 0.103.
     assert!(overall < 0.18, "relative L2 error {overall}");
     assert!(patch < 0.14, "patch error {patch}");
@@ -89,7 +109,10 @@ fn triangle_wave_preset_learns_the_field() {
 fn tensor_path_learns_too() {
     // The autodiff path (custom ops) learns the same field; fewer steps keep the test short.
     let mut config = CacheConfig::hash_grid_preset();
-    if let Some(nrc_cache::config::NestedEncoding::HashGrid { log2_hashmap_size, .. }) = config.encoding.nested.first_mut() {
+    if let Some(nrc_cache::config::NestedEncoding::HashGrid {
+        log2_hashmap_size, ..
+    }) = config.encoding.nested.first_mut()
+    {
         *log2_hashmap_size = 16;
     }
     let (overall, _) = learn(config, ComputePath::CustomOps, 60);

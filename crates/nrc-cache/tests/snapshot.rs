@@ -2,13 +2,19 @@
 //! rejected with messages saying so.
 
 use nrc_cache::config::NestedEncoding;
-use nrc_cache::{CacheConfig, CacheDevice, CacheError, CacheQuery, ComputePath, RadianceCache, SceneBox, TrainingBatch};
+use nrc_cache::{
+    CacheConfig, CacheDevice, CacheError, CacheQuery, ComputePath, RadianceCache, SceneBox,
+    TrainingBatch,
+};
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64Mcg;
 
 fn config() -> CacheConfig {
     let mut c = CacheConfig::hash_grid_preset();
-    if let Some(NestedEncoding::HashGrid { log2_hashmap_size, .. }) = c.encoding.nested.first_mut() {
+    if let Some(NestedEncoding::HashGrid {
+        log2_hashmap_size, ..
+    }) = c.encoding.nested.first_mut()
+    {
         *log2_hashmap_size = 14;
     }
     c
@@ -19,19 +25,33 @@ fn batch(n: usize, seed: u64) -> TrainingBatch {
     let queries: Vec<CacheQuery> = (0..n)
         .map(|_| CacheQuery {
             position: [r.random(), r.random(), r.random()],
-            direction: [r.random_range(-1.0..1.0), r.random_range(-1.0..1.0), r.random_range(-1.0..1.0)],
+            direction: [
+                r.random_range(-1.0..1.0),
+                r.random_range(-1.0..1.0),
+                r.random_range(-1.0..1.0),
+            ],
             normal: [0.0, 0.0, 1.0],
             roughness: 0.3,
             diffuse: [0.6, 0.5, 0.4],
             specular: [0.04; 3],
         })
         .collect();
-    let targets = queries.iter().map(|q| [q.position[0] + 0.1, q.position[1] + 0.1, 0.5]).collect();
-    TrainingBatch { queries, targets, weights: None }
+    let targets = queries
+        .iter()
+        .map(|q| [q.position[0] + 0.1, q.position[1] + 0.1, 0.5])
+        .collect();
+    TrainingBatch {
+        queries,
+        targets,
+        weights: None,
+    }
 }
 
 fn trained(path: ComputePath) -> RadianceCache {
-    let scene = SceneBox { min: [-1.0, -2.0, -3.0], max: [4.0, 5.0, 6.0] };
+    let scene = SceneBox {
+        min: [-1.0, -2.0, -3.0],
+        max: [4.0, 5.0, 6.0],
+    };
     let mut cache = RadianceCache::with_path(config(), scene, CacheDevice::Cpu, path).unwrap();
     for i in 0..3 {
         cache.train(&batch(1024, i), 4).unwrap();
@@ -61,7 +81,11 @@ fn round_trip_is_bit_identical_and_training_continues_identically() {
         let probe = batch(500, 99).queries;
         let (ya, yb) = (a.infer(&probe), b.infer(&probe));
         for (x, y) in ya.iter().zip(&yb) {
-            assert_eq!(x.map(f32::to_bits), y.map(f32::to_bits), "{path}: reloaded cache answers differently");
+            assert_eq!(
+                x.map(f32::to_bits),
+                y.map(f32::to_bits),
+                "{path}: reloaded cache answers differently"
+            );
         }
         assert_eq!(a.host_state(), b.host_state());
         // Both continue identically (Adam moments and step count were saved too).
@@ -86,7 +110,10 @@ fn damaged_foreign_and_mismatched_files_are_rejected() {
         let f = dir.path().join(format!("truncated-{keep}.nrc"));
         std::fs::write(&f, &bytes[..keep]).unwrap();
         let m = message(RadianceCache::load(&f, CacheDevice::Cpu).unwrap_err());
-        assert!(m.contains("truncated") || m.contains("not a safetensors"), "{keep}: {m}");
+        assert!(
+            m.contains("truncated") || m.contains("not a safetensors"),
+            "{keep}: {m}"
+        );
     }
 
     // Corrupted: one flipped bit in the tensor data.
@@ -103,7 +130,12 @@ fn damaged_foreign_and_mismatched_files_are_rejected() {
     std::fs::write(&f, "hello, this is not a snapshot at all").unwrap();
     message(RadianceCache::load(&f, CacheDevice::Cpu).unwrap_err());
     let data = [1f32, 2.0, 3.0];
-    let view = safetensors::tensor::TensorView::new(safetensors::Dtype::F32, vec![3], bytemuck::cast_slice(&data)).unwrap();
+    let view = safetensors::tensor::TensorView::new(
+        safetensors::Dtype::F32,
+        vec![3],
+        bytemuck::cast_slice(&data),
+    )
+    .unwrap();
     let other = safetensors::tensor::serialize(vec![("weights", view)], None).unwrap();
     let f = dir.path().join("other.safetensors");
     std::fs::write(&f, other).unwrap();
@@ -113,7 +145,8 @@ fn damaged_foreign_and_mismatched_files_are_rejected() {
     // Mismatched: loading against a different configuration names the section.
     let mut other_config = config();
     other_config.network.n_hidden_layers = 2;
-    let m = message(RadianceCache::load_matching(&file, &other_config, CacheDevice::Cpu).unwrap_err());
+    let m =
+        message(RadianceCache::load_matching(&file, &other_config, CacheDevice::Cpu).unwrap_err());
     assert!(m.contains("network"), "{m}");
     assert!(RadianceCache::load_matching(&file, &config(), CacheDevice::Cpu).is_ok());
 
@@ -121,7 +154,10 @@ fn damaged_foreign_and_mismatched_files_are_rejected() {
     // (The metadata JSON sits escaped inside the header: `n_hidden_layers\":3`.)
     let needle = br#"n_hidden_layers\":3"#;
     let mut swapped = bytes.clone();
-    let pos = swapped.windows(needle.len()).position(|w| w == needle).expect("metadata holds the config");
+    let pos = swapped
+        .windows(needle.len())
+        .position(|w| w == needle)
+        .expect("metadata holds the config");
     swapped[pos + needle.len() - 1] = b'4';
     let f = dir.path().join("inconsistent.nrc");
     std::fs::write(&f, &swapped).unwrap();
@@ -129,5 +165,8 @@ fn damaged_foreign_and_mismatched_files_are_rejected() {
     assert!(m.contains("shape"), "{m}");
 
     // Missing file: an I/O error naming the path.
-    assert!(matches!(RadianceCache::load(&dir.path().join("absent.nrc"), CacheDevice::Cpu), Err(CacheError::Io { .. })));
+    assert!(matches!(
+        RadianceCache::load(&dir.path().join("absent.nrc"), CacheDevice::Cpu),
+        Err(CacheError::Io { .. })
+    ));
 }

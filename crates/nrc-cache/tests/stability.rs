@@ -2,12 +2,17 @@
 //! No weight or output may become non-finite, the loss stays finite, bad samples are counted.
 
 use nrc_cache::config::NestedEncoding;
-use nrc_cache::{CacheConfig, CacheDevice, CacheQuery, ComputePath, RadianceCache, SceneBox, TrainingBatch};
+use nrc_cache::{
+    CacheConfig, CacheDevice, CacheQuery, ComputePath, RadianceCache, SceneBox, TrainingBatch,
+};
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64Mcg;
 
 fn small(mut c: CacheConfig) -> CacheConfig {
-    if let Some(NestedEncoding::HashGrid { log2_hashmap_size, .. }) = c.encoding.nested.first_mut() {
+    if let Some(NestedEncoding::HashGrid {
+        log2_hashmap_size, ..
+    }) = c.encoding.nested.first_mut()
+    {
         *log2_hashmap_size = 15;
     }
     c
@@ -23,7 +28,11 @@ fn hard_batch(seed: u64) -> (TrainingBatch, usize, usize) {
     for i in 0..2000 {
         let mut q = CacheQuery {
             position: [r.random(), r.random(), r.random()],
-            direction: [r.random_range(-1.0..1.0), r.random_range(-1.0..1.0), r.random_range(-1.0..1.0)],
+            direction: [
+                r.random_range(-1.0..1.0),
+                r.random_range(-1.0..1.0),
+                r.random_range(-1.0..1.0),
+            ],
             normal: [0.0, 0.0, 1.0],
             roughness: r.random_range(0.0..1.0),
             diffuse: [0.5, 0.4, 0.3],
@@ -69,25 +78,49 @@ fn hard_batch(seed: u64) -> (TrainingBatch, usize, usize) {
         targets.push(t);
         weights.push(w);
     }
-    (TrainingBatch { queries, targets, weights: Some(weights) }, nonfinite, absurd)
+    (
+        TrainingBatch {
+            queries,
+            targets,
+            weights: Some(weights),
+        },
+        nonfinite,
+        absurd,
+    )
 }
 
 fn check(config: CacheConfig, path: ComputePath) {
-    let mut cache = RadianceCache::with_path(config, SceneBox::default(), CacheDevice::Cpu, path).unwrap();
+    let mut cache =
+        RadianceCache::with_path(config, SceneBox::default(), CacheDevice::Cpu, path).unwrap();
     for round in 0..4 {
         let (batch, nonfinite, absurd) = hard_batch(round);
         let stats = cache.train(&batch, 5).unwrap();
         assert_eq!(stats.dropped_nonfinite, nonfinite, "{path}");
         assert_eq!(stats.dropped_absurd, absurd, "{path}");
         assert_eq!(stats.used, batch.queries.len() - nonfinite - absurd);
-        assert!(stats.loss.is_finite() && stats.first_loss.is_finite(), "{path}: loss {stats:?}");
+        assert!(
+            stats.loss.is_finite() && stats.first_loss.is_finite(),
+            "{path}: loss {stats:?}"
+        );
         let out = cache.infer(&batch.queries);
         for (i, o) in out.iter().enumerate() {
-            assert!(o.iter().all(|v| v.is_finite() && *v >= 0.0), "{path}: output {i} = {o:?}");
+            assert!(
+                o.iter().all(|v| v.is_finite() && *v >= 0.0),
+                "{path}: output {i} = {o:?}"
+            );
         }
     }
     let host = cache.host_state();
-    for (name, v) in [("grid", &host.grid), ("grid_m", &host.grid_m), ("grid_v", &host.grid_v), ("grid_ema", &host.grid_ema), ("mlp", &host.mlp), ("mlp_m", &host.mlp_m), ("mlp_v", &host.mlp_v), ("mlp_ema", &host.mlp_ema)] {
+    for (name, v) in [
+        ("grid", &host.grid),
+        ("grid_m", &host.grid_m),
+        ("grid_v", &host.grid_v),
+        ("grid_ema", &host.grid_ema),
+        ("mlp", &host.mlp),
+        ("mlp_m", &host.mlp_m),
+        ("mlp_v", &host.mlp_v),
+        ("mlp_ema", &host.mlp_ema),
+    ] {
         assert!(v.iter().all(|x| x.is_finite()), "{path}: non-finite {name}");
     }
     // A batch with nothing usable takes no step.
@@ -95,7 +128,10 @@ fn check(config: CacheConfig, path: ComputePath) {
     batch.targets.iter_mut().for_each(|t| *t = [f32::NAN; 3]);
     let before = cache.step_count();
     let stats = cache.train(&batch, 3).unwrap();
-    assert_eq!((stats.used, stats.steps, cache.step_count()), (0, 0, before));
+    assert_eq!(
+        (stats.used, stats.steps, cache.step_count()),
+        (0, 0, before)
+    );
     // Mismatched lengths are an error, not a panic.
     batch.targets.pop();
     assert!(cache.train(&batch, 1).is_err());
@@ -109,6 +145,9 @@ fn hard_cases_fused_cpu_step() {
 
 #[test]
 fn hard_cases_tensor_paths() {
-    check(small(CacheConfig::hash_grid_preset()), ComputePath::CustomOps);
+    check(
+        small(CacheConfig::hash_grid_preset()),
+        ComputePath::CustomOps,
+    );
     check(CacheConfig::triangle_wave_preset(), ComputePath::Unfused);
 }

@@ -37,16 +37,33 @@ pub enum Store {
 }
 
 /// `C[m×n] (op)= A[m×k] · B[k×n]`; `n` must be a multiple of 8.
-pub fn gemm(m: usize, n: usize, k: usize, a: Strided<'_>, b: Rows<&[f32]>, c: Rows<&mut [f32]>, store: Store) {
+pub fn gemm(
+    m: usize,
+    n: usize,
+    k: usize,
+    a: Strided<'_>,
+    b: Rows<&[f32]>,
+    c: Rows<&mut [f32]>,
+    store: Store,
+) {
     assert!(n.is_multiple_of(8), "gemm: n = {n} must be a multiple of 8");
     if m == 0 || n == 0 {
         return;
     }
     if k > 0 {
-        assert!((m - 1) * a.row_stride + (k - 1) * a.col_stride < a.data.len(), "gemm: A out of bounds");
-        assert!((k - 1) * b.stride + n <= b.data.len(), "gemm: B out of bounds");
+        assert!(
+            (m - 1) * a.row_stride + (k - 1) * a.col_stride < a.data.len(),
+            "gemm: A out of bounds"
+        );
+        assert!(
+            (k - 1) * b.stride + n <= b.data.len(),
+            "gemm: B out of bounds"
+        );
     }
-    assert!((m - 1) * c.stride + n <= c.data.len(), "gemm: C out of bounds");
+    assert!(
+        (m - 1) * c.stride + n <= c.data.len(),
+        "gemm: C out of bounds"
+    );
     #[cfg(target_arch = "x86_64")]
     if has_avx2_fma() {
         // SAFETY: the features were detected at run time and all accesses were bounds-checked above.
@@ -69,7 +86,15 @@ pub fn has_avx2_fma() -> bool {
 }
 
 /// Plain loops (the reference, and the kernel without AVX2).
-pub fn gemm_portable(m: usize, n: usize, k: usize, a: Strided<'_>, b: Rows<&[f32]>, c: Rows<&mut [f32]>, store: Store) {
+pub fn gemm_portable(
+    m: usize,
+    n: usize,
+    k: usize,
+    a: Strided<'_>,
+    b: Rows<&[f32]>,
+    c: Rows<&mut [f32]>,
+    store: Store,
+) {
     let mut acc = vec![0f32; n];
     for i in 0..m {
         acc.fill(0.0);
@@ -95,14 +120,33 @@ mod avx2 {
     use std::arch::x86_64::*;
 
     #[target_feature(enable = "avx2,fma")]
-    pub(super) unsafe fn gemm(m: usize, n: usize, k: usize, a: Strided<'_>, b: Rows<&[f32]>, c: Rows<&mut [f32]>, store: Store) {
+    pub(super) unsafe fn gemm(
+        m: usize,
+        n: usize,
+        k: usize,
+        a: Strided<'_>,
+        b: Rows<&[f32]>,
+        c: Rows<&mut [f32]>,
+        store: Store,
+    ) {
         let (ap, bp, cp) = (a.data.as_ptr(), b.data.as_ptr(), c.data.as_mut_ptr());
         let (ars, acs, ldb, ldc) = (a.row_stride, a.col_stride, b.stride, c.stride);
         let mut i = 0;
         // SAFETY (all blocks): rows i..i+MR < m and columns j..j+8·NV ≤ n, checked by the caller.
         unsafe {
             while i + 6 <= m {
-                row_block::<6>(n, k, ap.add(i * ars), ars, acs, bp, ldb, cp.add(i * ldc), ldc, store);
+                row_block::<6>(
+                    n,
+                    k,
+                    ap.add(i * ars),
+                    ars,
+                    acs,
+                    bp,
+                    ldb,
+                    cp.add(i * ldc),
+                    ldc,
+                    store,
+                );
                 i += 6;
             }
             let rest = m - i;

@@ -97,10 +97,22 @@ pub fn split_levels<'a, T>(grid: &HashGrid, f: usize, mut data: &'a mut [T]) -> 
 pub fn forward(grid: &HashGrid, table: &[f32], positions: &[f32], out: &mut [f32]) {
     let d = grid.output_dims();
     let levels = grid.fast_levels();
-    out.par_chunks_mut(d * 256).zip(positions.par_chunks(3 * 256)).for_each(|(o, p)| {
-        let m = p.len() / 3;
-        encode_tile(grid, &levels, table, grid.features(), m, |i| [p[3 * i], p[3 * i + 1], p[3 * i + 2]], o, d, 0);
-    });
+    out.par_chunks_mut(d * 256)
+        .zip(positions.par_chunks(3 * 256))
+        .for_each(|(o, p)| {
+            let m = p.len() / 3;
+            encode_tile(
+                grid,
+                &levels,
+                table,
+                grid.features(),
+                m,
+                |i| [p[3 * i], p[3 * i + 1], p[3 * i + 2]],
+                o,
+                d,
+                0,
+            );
+        });
 }
 
 /// Gradient of the table for `dout` (`[N][L·F]`), written into `grad` (zeroed first).
@@ -109,17 +121,33 @@ pub fn backward_table(grid: &HashGrid, positions: &[f32], dout: &[f32], grad: &m
     grad.fill(0.0);
     let levels = split_levels(grid, f, grad);
     levels.into_par_iter().enumerate().for_each(|(l, g)| {
-        scatter_level(grid, l, positions.len() / 3, |i| [positions[3 * i], positions[3 * i + 1], positions[3 * i + 2]], |i| &dout[i * grid.output_dims() + l * f..i * grid.output_dims() + (l + 1) * f], g, None);
+        scatter_level(
+            grid,
+            l,
+            positions.len() / 3,
+            |i| [positions[3 * i], positions[3 * i + 1], positions[3 * i + 2]],
+            |i| &dout[i * grid.output_dims() + l * f..i * grid.output_dims() + (l + 1) * f],
+            g,
+            None,
+        );
     });
 }
 
 /// Gradient of the positions for `dout`: `[N][3]`.
-pub fn backward_positions(grid: &HashGrid, table: &[f32], positions: &[f32], dout: &[f32]) -> Vec<f32> {
+pub fn backward_positions(
+    grid: &HashGrid,
+    table: &[f32],
+    positions: &[f32],
+    dout: &[f32],
+) -> Vec<f32> {
     let d = grid.output_dims();
     let mut out = vec![0f32; positions.len()];
-    out.par_chunks_mut(3).zip(positions.par_chunks(3)).zip(dout.par_chunks(d)).for_each(|((o, p), g)| {
-        o.copy_from_slice(&grid.backward_input_one(table, [p[0], p[1], p[2]], g));
-    });
+    out.par_chunks_mut(3)
+        .zip(positions.par_chunks(3))
+        .zip(dout.par_chunks(d))
+        .for_each(|((o, p), g)| {
+            o.copy_from_slice(&grid.backward_input_one(table, [p[0], p[1], p[2]], g));
+        });
     out
 }
 

@@ -14,35 +14,68 @@ use crate::record::RAW_INPUT_DIMS;
 pub fn infer(layout: &ModelLayout, grid: &[f32], mlp: &[f32], rows: &[f32], out: &mut [f32]) {
     let prepared = PreparedMlp::new(&layout.layers, mlp);
     let network_out = network_outputs(layout, &prepared, grid, rows);
-    out.par_chunks_mut(3).zip(network_out.par_chunks(3)).zip(rows.par_chunks(QUERY_ROW)).for_each(|((o, y), r)| {
-        for c in 0..3 {
-            o[c] = activate(layout.output_activation, y[c]).0 * r[FACTOR_AT + c];
-        }
-    });
+    out.par_chunks_mut(3)
+        .zip(network_out.par_chunks(3))
+        .zip(rows.par_chunks(QUERY_ROW))
+        .for_each(|((o, y), r)| {
+            for c in 0..3 {
+                o[c] = activate(layout.output_activation, y[c]).0 * r[FACTOR_AT + c];
+            }
+        });
 }
 
 /// The raw network outputs (before the output activation and reflectance factor), `[n][3]`.
-pub fn network_outputs(layout: &ModelLayout, prepared: &PreparedMlp, grid: &[f32], rows: &[f32]) -> Vec<f32> {
+pub fn network_outputs(
+    layout: &ModelLayout,
+    prepared: &PreparedMlp,
+    grid: &[f32],
+    rows: &[f32],
+) -> Vec<f32> {
     let n = rows.len() / QUERY_ROW;
     let k_in = prepared.inputs();
     let mut out = vec![0f32; n * 3];
-    let fast = layout.encoding.grid().map(|(g, _)| g.fast_levels()).unwrap_or_default();
-    out.par_chunks_mut(TILE * 3).zip(rows.par_chunks(TILE * QUERY_ROW)).for_each_init(
-        || TileScratch::new(k_in, prepared.hidden()),
-        |s, (o, r)| {
-            let m = r.len() / QUERY_ROW;
-            for i in 0..m {
-                layout.encoding.forward_one_without_grid(&r[i * QUERY_ROW..i * QUERY_ROW + RAW_INPUT_DIMS], &mut s.x[i * k_in..(i + 1) * k_in]);
-            }
-            if let Some((hg, part)) = layout.encoding.grid() {
-                let at = part.in_offset;
-                encode_tile(hg, &fast, grid, hg.features(), m, |i| [r[i * QUERY_ROW + at], r[i * QUERY_ROW + at + 1], r[i * QUERY_ROW + at + 2]], &mut s.x, k_in, part.out_offset);
-            }
-            forward_tile(prepared, m, s);
-            for i in 0..m {
-                o[i * 3..i * 3 + 3].copy_from_slice(&s.out[i * OUT_PAD..i * OUT_PAD + 3]);
-            }
-        },
-    );
+    let fast = layout
+        .encoding
+        .grid()
+        .map(|(g, _)| g.fast_levels())
+        .unwrap_or_default();
+    out.par_chunks_mut(TILE * 3)
+        .zip(rows.par_chunks(TILE * QUERY_ROW))
+        .for_each_init(
+            || TileScratch::new(k_in, prepared.hidden()),
+            |s, (o, r)| {
+                let m = r.len() / QUERY_ROW;
+                for i in 0..m {
+                    layout.encoding.forward_one_without_grid(
+                        &r[i * QUERY_ROW..i * QUERY_ROW + RAW_INPUT_DIMS],
+                        &mut s.x[i * k_in..(i + 1) * k_in],
+                    );
+                }
+                if let Some((hg, part)) = layout.encoding.grid() {
+                    let at = part.in_offset;
+                    encode_tile(
+                        hg,
+                        &fast,
+                        grid,
+                        hg.features(),
+                        m,
+                        |i| {
+                            [
+                                r[i * QUERY_ROW + at],
+                                r[i * QUERY_ROW + at + 1],
+                                r[i * QUERY_ROW + at + 2],
+                            ]
+                        },
+                        &mut s.x,
+                        k_in,
+                        part.out_offset,
+                    );
+                }
+                forward_tile(prepared, m, s);
+                for i in 0..m {
+                    o[i * 3..i * 3 + 3].copy_from_slice(&s.out[i * OUT_PAD..i * OUT_PAD + 3]);
+                }
+            },
+        );
     out
 }

@@ -40,7 +40,8 @@ impl PreparedMlp {
             let cols = if l == last { OUT_PAD } else { s.outputs };
             let mut f = vec![0f32; s.inputs * cols];
             for k in 0..s.inputs {
-                f[k * cols..k * cols + s.outputs].copy_from_slice(&m[k * s.outputs..(k + 1) * s.outputs]);
+                f[k * cols..k * cols + s.outputs]
+                    .copy_from_slice(&m[k * s.outputs..(k + 1) * s.outputs]);
             }
             forward.push(f);
             let ip = pad8(s.inputs);
@@ -52,7 +53,11 @@ impl PreparedMlp {
             }
             transposed.push(t);
         }
-        Self { layers: layers.to_vec(), forward, transposed }
+        Self {
+            layers: layers.to_vec(),
+            forward,
+            transposed,
+        }
     }
 
     /// Network input width.
@@ -104,7 +109,9 @@ pub struct MlpGrad {
 impl MlpGrad {
     /// Zeroed gradients for `mlp`.
     pub fn zeros(mlp: &PreparedMlp) -> Self {
-        Self { layers: mlp.forward.iter().map(|f| vec![0.0; f.len()]).collect() }
+        Self {
+            layers: mlp.forward.iter().map(|f| vec![0.0; f.len()]).collect(),
+        }
     }
 
     /// Adds another thread's gradients.
@@ -119,7 +126,8 @@ impl MlpGrad {
         for (s, g) in layers.iter().zip(&self.layers) {
             let cols = g.len() / s.inputs;
             for k in 0..s.inputs {
-                out[s.offset + k * s.outputs..s.offset + (k + 1) * s.outputs].copy_from_slice(&g[k * cols..k * cols + s.outputs]);
+                out[s.offset + k * s.outputs..s.offset + (k + 1) * s.outputs]
+                    .copy_from_slice(&g[k * cols..k * cols + s.outputs]);
             }
         }
     }
@@ -132,14 +140,28 @@ pub fn forward_tile(mlp: &PreparedMlp, m: usize, s: &mut TileScratch) {
     let hidden = mlp.hidden();
     for l in 0..hidden {
         let (prev, rest) = s.h.split_at_mut(l);
-        let (a, ars, k) = if l == 0 { (&s.x[..], k_in, k_in) } else { (&prev[l - 1][..], WIDTH, WIDTH) };
+        let (a, ars, k) = if l == 0 {
+            (&s.x[..], k_in, k_in)
+        } else {
+            (&prev[l - 1][..], WIDTH, WIDTH)
+        };
         gemm(
             m,
             WIDTH,
             k,
-            Strided { data: a, row_stride: ars, col_stride: 1 },
-            Rows { data: &mlp.forward[l], stride: WIDTH },
-            Rows { data: &mut rest[0][..], stride: WIDTH },
+            Strided {
+                data: a,
+                row_stride: ars,
+                col_stride: 1,
+            },
+            Rows {
+                data: &mlp.forward[l],
+                stride: WIDTH,
+            },
+            Rows {
+                data: &mut rest[0][..],
+                stride: WIDTH,
+            },
             Store::Relu,
         );
     }
@@ -147,9 +169,19 @@ pub fn forward_tile(mlp: &PreparedMlp, m: usize, s: &mut TileScratch) {
         m,
         OUT_PAD,
         WIDTH,
-        Strided { data: &s.h[hidden - 1], row_stride: WIDTH, col_stride: 1 },
-        Rows { data: &mlp.forward[hidden], stride: OUT_PAD },
-        Rows { data: &mut s.out[..], stride: OUT_PAD },
+        Strided {
+            data: &s.h[hidden - 1],
+            row_stride: WIDTH,
+            col_stride: 1,
+        },
+        Rows {
+            data: &mlp.forward[hidden],
+            stride: OUT_PAD,
+        },
+        Rows {
+            data: &mut s.out[..],
+            stride: OUT_PAD,
+        },
         Store::Overwrite,
     );
 }
@@ -157,7 +189,13 @@ pub fn forward_tile(mlp: &PreparedMlp, m: usize, s: &mut TileScratch) {
 /// Backward pass of a tile after [`forward_tile`], with `scratch.dout` holding ∂L/∂out (zero in
 /// the padding columns): accumulates the weight gradients into `grad` and, when `dx` is given
 /// as `(first column, columns, buffer [m][columns])`, writes ∂L/∂x for those input columns.
-pub fn backward_tile(mlp: &PreparedMlp, m: usize, s: &mut TileScratch, grad: &mut MlpGrad, dx: Option<(usize, usize, &mut [f32])>) {
+pub fn backward_tile(
+    mlp: &PreparedMlp,
+    m: usize,
+    s: &mut TileScratch,
+    grad: &mut MlpGrad,
+    dx: Option<(usize, usize, &mut [f32])>,
+) {
     let hidden = mlp.hidden();
     let k_in = mlp.inputs();
     // Output layer: dM += h_lastᵀ · dout, dh = dout · Mᵀ ⊙ relu'.
@@ -165,9 +203,19 @@ pub fn backward_tile(mlp: &PreparedMlp, m: usize, s: &mut TileScratch, grad: &mu
         WIDTH,
         OUT_PAD,
         m,
-        Strided { data: &s.h[hidden - 1], row_stride: 1, col_stride: WIDTH },
-        Rows { data: &s.dout, stride: OUT_PAD },
-        Rows { data: &mut grad.layers[hidden][..], stride: OUT_PAD },
+        Strided {
+            data: &s.h[hidden - 1],
+            row_stride: 1,
+            col_stride: WIDTH,
+        },
+        Rows {
+            data: &s.dout,
+            stride: OUT_PAD,
+        },
+        Rows {
+            data: &mut grad.layers[hidden][..],
+            stride: OUT_PAD,
+        },
         Store::Accumulate,
     );
     let [dh_a, dh_b] = &mut s.dh;
@@ -175,9 +223,19 @@ pub fn backward_tile(mlp: &PreparedMlp, m: usize, s: &mut TileScratch, grad: &mu
         m,
         WIDTH,
         OUTPUTS,
-        Strided { data: &s.dout, row_stride: OUT_PAD, col_stride: 1 },
-        Rows { data: &mlp.transposed[hidden], stride: WIDTH },
-        Rows { data: &mut dh_a[..], stride: WIDTH },
+        Strided {
+            data: &s.dout,
+            row_stride: OUT_PAD,
+            col_stride: 1,
+        },
+        Rows {
+            data: &mlp.transposed[hidden],
+            stride: WIDTH,
+        },
+        Rows {
+            data: &mut dh_a[..],
+            stride: WIDTH,
+        },
         Store::Overwrite,
     );
     relu_mask(&mut dh_a[..m * WIDTH], &s.h[hidden - 1][..m * WIDTH]);
@@ -187,18 +245,38 @@ pub fn backward_tile(mlp: &PreparedMlp, m: usize, s: &mut TileScratch, grad: &mu
             WIDTH,
             WIDTH,
             m,
-            Strided { data: &s.h[l - 1], row_stride: 1, col_stride: WIDTH },
-            Rows { data: &cur[..], stride: WIDTH },
-            Rows { data: &mut grad.layers[l][..], stride: WIDTH },
+            Strided {
+                data: &s.h[l - 1],
+                row_stride: 1,
+                col_stride: WIDTH,
+            },
+            Rows {
+                data: &cur[..],
+                stride: WIDTH,
+            },
+            Rows {
+                data: &mut grad.layers[l][..],
+                stride: WIDTH,
+            },
             Store::Accumulate,
         );
         gemm(
             m,
             WIDTH,
             WIDTH,
-            Strided { data: &cur[..], row_stride: WIDTH, col_stride: 1 },
-            Rows { data: &mlp.transposed[l], stride: WIDTH },
-            Rows { data: &mut next[..], stride: WIDTH },
+            Strided {
+                data: &cur[..],
+                row_stride: WIDTH,
+                col_stride: 1,
+            },
+            Rows {
+                data: &mlp.transposed[l],
+                stride: WIDTH,
+            },
+            Rows {
+                data: &mut next[..],
+                stride: WIDTH,
+            },
             Store::Overwrite,
         );
         relu_mask(&mut next[..m * WIDTH], &s.h[l - 1][..m * WIDTH]);
@@ -209,9 +287,19 @@ pub fn backward_tile(mlp: &PreparedMlp, m: usize, s: &mut TileScratch, grad: &mu
         k_in,
         WIDTH,
         m,
-        Strided { data: &s.x, row_stride: 1, col_stride: k_in },
-        Rows { data: &cur[..], stride: WIDTH },
-        Rows { data: &mut grad.layers[0][..], stride: WIDTH },
+        Strided {
+            data: &s.x,
+            row_stride: 1,
+            col_stride: k_in,
+        },
+        Rows {
+            data: &cur[..],
+            stride: WIDTH,
+        },
+        Rows {
+            data: &mut grad.layers[0][..],
+            stride: WIDTH,
+        },
         Store::Accumulate,
     );
     if let Some((first, cols, out)) = dx {
@@ -224,9 +312,19 @@ pub fn backward_tile(mlp: &PreparedMlp, m: usize, s: &mut TileScratch, grad: &mu
             m,
             n,
             WIDTH,
-            Strided { data: &cur[..], row_stride: WIDTH, col_stride: 1 },
-            Rows { data: &mlp.transposed[0][start..], stride: ip },
-            Rows { data: &mut tmp[..], stride: n },
+            Strided {
+                data: &cur[..],
+                row_stride: WIDTH,
+                col_stride: 1,
+            },
+            Rows {
+                data: &mlp.transposed[0][start..],
+                stride: ip,
+            },
+            Rows {
+                data: &mut tmp[..],
+                stride: n,
+            },
             Store::Overwrite,
         );
         let off = first - start;

@@ -38,7 +38,15 @@ impl StepConstants {
     pub fn new(adam: AdamParams, ema: Option<f32>, step: u32) -> Self {
         let t = step.min(i32::MAX as u32) as i32;
         let (bc1, bc2) = (1.0 - adam.beta1.powi(t), 1.0 - adam.beta2.powi(t));
-        Self { adam, ema, step, bc1, bc2, step_size: adam.learning_rate / bc1, inv_bc2: 1.0 / bc2 }
+        Self {
+            adam,
+            ema,
+            step,
+            bc1,
+            bc2,
+            step_size: adam.learning_rate / bc1,
+            inv_bc2: 1.0 / bc2,
+        }
     }
 
     /// One Adam update of a single weight; returns the new weight. Non-finite gradients are
@@ -46,7 +54,11 @@ impl StepConstants {
     #[inline(always)]
     pub fn adam(&self, w: &mut f32, m: &mut f32, v: &mut f32, g: f32) {
         let a = &self.adam;
-        let g = if g.is_finite() { g + a.l2_reg * *w } else { a.l2_reg * *w };
+        let g = if g.is_finite() {
+            g + a.l2_reg * *w
+        } else {
+            a.l2_reg * *w
+        };
         *m = a.beta1 * *m + (1.0 - a.beta1) * g;
         *v = a.beta2 * *v + (1.0 - a.beta2) * g * g;
         // lr · (m / (1 − β1^t)) / (sqrt(v / (1 − β2^t)) + ε), divisions hoisted per step.
@@ -76,7 +88,10 @@ impl DecayTable {
 
     /// Powers of `alpha`, computed as [`decay_pow`] does so results are identical.
     pub fn new(alpha: f32) -> Self {
-        Self { alpha, powers: (0..Self::LEN as u32).map(|k| decay_pow(alpha, k)).collect() }
+        Self {
+            alpha,
+            powers: (0..Self::LEN as u32).map(|k| decay_pow(alpha, k)).collect(),
+        }
     }
 
     /// `α^k`.
@@ -90,7 +105,14 @@ impl DecayTable {
 }
 
 /// Dense Adam + EMA over a parameter group (the MLP), consuming `grad`.
-pub fn dense_step(c: &StepConstants, w: &mut [f32], m: &mut [f32], v: &mut [f32], ema: &mut [f32], grad: &[f32]) {
+pub fn dense_step(
+    c: &StepConstants,
+    w: &mut [f32],
+    m: &mut [f32],
+    v: &mut [f32],
+    ema: &mut [f32],
+    grad: &[f32],
+) {
     for i in 0..w.len() {
         c.adam(&mut w[i], &mut m[i], &mut v[i], grad[i]);
         if let Some(alpha) = c.ema {
@@ -131,7 +153,14 @@ pub fn unpack_records(f: usize, records: &[f32]) -> [Vec<f32>; 4] {
 /// Sparse Adam + lazy EMA over one hash-grid level: for every entry whose bit is set in
 /// `touched`, updates its record (`f` features) from `grad` (which is zeroed), catches its EMA
 /// up and records the step in `last`. The bitmap is cleared.
-pub fn sparse_step(c: &StepConstants, f: usize, touched: &mut [u64], records: &mut [f32], grad: &mut [f32], last: &mut [u32]) {
+pub fn sparse_step(
+    c: &StepConstants,
+    f: usize,
+    touched: &mut [u64],
+    records: &mut [f32],
+    grad: &mut [f32],
+    last: &mut [u32],
+) {
     match f {
         1 => sparse_step_f::<1>(c, touched, records, grad, last),
         2 => sparse_step_f::<2>(c, touched, records, grad, last),
@@ -142,7 +171,13 @@ pub fn sparse_step(c: &StepConstants, f: usize, touched: &mut [u64], records: &m
 }
 
 /// [`sparse_step`] for `F` features (a compile-time constant, so the record loop unrolls).
-fn sparse_step_f<const F: usize>(c: &StepConstants, touched: &mut [u64], records: &mut [f32], grad: &mut [f32], last: &mut [u32]) {
+fn sparse_step_f<const F: usize>(
+    c: &StepConstants,
+    touched: &mut [u64],
+    records: &mut [f32],
+    grad: &mut [f32],
+    last: &mut [u32],
+) {
     let ema_on = c.ema.is_some();
     let alpha = c.ema.unwrap_or(0.0);
     let table = DecayTable::new(alpha);
@@ -193,9 +228,19 @@ pub fn catch_up(alpha: f32, step: u32, f: usize, records: &mut [f32], last: &mut
 
 /// Bias-corrected EMA weights of one level at `step` without modifying the state:
 /// `(α^k e + (1 − α^k) w) / (1 − α^t)`, or the weights themselves at step 0 or without EMA.
-pub fn materialize_grid(alpha: Option<f32>, step: u32, f: usize, records: &[f32], last: &[u32], out: &mut [f32]) {
+pub fn materialize_grid(
+    alpha: Option<f32>,
+    step: u32,
+    f: usize,
+    records: &[f32],
+    last: &[u32],
+    out: &mut [f32],
+) {
     let Some(alpha) = alpha.filter(|_| step > 0) else {
-        for (o, r) in out.chunks_exact_mut(f).zip(records.chunks_exact(RECORD * f)) {
+        for (o, r) in out
+            .chunks_exact_mut(f)
+            .zip(records.chunks_exact(RECORD * f))
+        {
             o.copy_from_slice(&r[..f]);
         }
         return;

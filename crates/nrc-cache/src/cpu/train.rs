@@ -64,30 +64,69 @@ pub struct LossSettings {
 /// Phase A of a step, parallel over tiles: forward, loss and backward of every tile. Returns
 /// the summed loss, the MLP weight gradients, and ∂L/∂(hash-grid columns) `[n][L·F]`.
 /// `grid_w` holds entry `e`'s features at `grid_w[e·grid_stride..]`.
-fn forward_backward(layout: &ModelLayout, grid_w: &[f32], grid_stride: usize, mlp_w: &[f32], rows: &[f32], loss: LossSettings) -> (f64, MlpGrad, Vec<f32>) {
+fn forward_backward(
+    layout: &ModelLayout,
+    grid_w: &[f32],
+    grid_stride: usize,
+    mlp_w: &[f32],
+    rows: &[f32],
+    loss: LossSettings,
+) -> (f64, MlpGrad, Vec<f32>) {
     let n = rows.len() / TRAIN_ROW;
     let prepared = PreparedMlp::new(&layout.layers, mlp_w);
     let k_in = prepared.inputs();
     let hidden = prepared.hidden();
-    let (grid_col, grid_dims) = layout.encoding.grid().map_or((0, 0), |(g, p)| (p.out_offset, g.output_dims()));
+    let (grid_col, grid_dims) = layout
+        .encoding
+        .grid()
+        .map_or((0, 0), |(g, p)| (p.out_offset, g.output_dims()));
     let scale = 1.0 / (3.0 * n as f32);
-    let fast = layout.encoding.grid().map(|(g, _)| g.fast_levels()).unwrap_or_default();
+    let fast = layout
+        .encoding
+        .grid()
+        .map(|(g, _)| g.fast_levels())
+        .unwrap_or_default();
     let mut dxg = vec![0f32; n * grid_dims.max(1)];
     let (loss_sum, mgrad) = rows
         .par_chunks(TILE * TRAIN_ROW)
         .zip(dxg.par_chunks_mut(TILE * grid_dims.max(1)))
         .fold(
-            || (0f64, MlpGrad::zeros(&prepared), TileScratch::new(k_in, hidden)),
+            || {
+                (
+                    0f64,
+                    MlpGrad::zeros(&prepared),
+                    TileScratch::new(k_in, hidden),
+                )
+            },
             |(mut loss_acc, mut grad, mut s), (rows_t, dxg_t)| {
                 let m = rows_t.len() / TRAIN_ROW;
                 let t_encode = Instant::now();
                 for i in 0..m {
                     let row = &rows_t[i * TRAIN_ROW..(i + 1) * TRAIN_ROW];
-                    layout.encoding.forward_one_without_grid(&row[..RAW_INPUT_DIMS], &mut s.x[i * k_in..(i + 1) * k_in]);
+                    layout.encoding.forward_one_without_grid(
+                        &row[..RAW_INPUT_DIMS],
+                        &mut s.x[i * k_in..(i + 1) * k_in],
+                    );
                 }
                 if let Some((hg, part)) = layout.encoding.grid() {
                     let at = part.in_offset;
-                    encode_tile(hg, &fast, grid_w, grid_stride, m, |i| [rows_t[i * TRAIN_ROW + at], rows_t[i * TRAIN_ROW + at + 1], rows_t[i * TRAIN_ROW + at + 2]], &mut s.x, k_in, part.out_offset);
+                    encode_tile(
+                        hg,
+                        &fast,
+                        grid_w,
+                        grid_stride,
+                        m,
+                        |i| {
+                            [
+                                rows_t[i * TRAIN_ROW + at],
+                                rows_t[i * TRAIN_ROW + at + 1],
+                                rows_t[i * TRAIN_ROW + at + 2],
+                            ]
+                        },
+                        &mut s.x,
+                        k_in,
+                        part.out_offset,
+                    );
                 }
                 add_phase(0, t_encode);
                 let t_mlp = Instant::now();
@@ -109,7 +148,8 @@ fn forward_backward(layout: &ModelLayout, grid_w: &[f32], grid_stride: usize, ml
                     d[..3].copy_from_slice(&g);
                     d[3..].fill(0.0);
                 }
-                let dx = (grid_dims > 0).then(|| (grid_col, grid_dims, &mut dxg_t[..m * grid_dims]));
+                let dx =
+                    (grid_dims > 0).then(|| (grid_col, grid_dims, &mut dxg_t[..m * grid_dims]));
                 backward_tile(&prepared, m, &mut s, &mut grad, dx);
                 add_phase(1, t_mlp);
                 (loss_acc, grad, s)
@@ -128,7 +168,13 @@ fn forward_backward(layout: &ModelLayout, grid_w: &[f32], grid_stride: usize, ml
 
 /// Loss and gradients of the fused step without an update (what the step feeds to Adam):
 /// mean loss, ∂L/∂table (dense), ∂L/∂MLP weights.
-pub fn gradients(layout: &ModelLayout, grid_w: &[f32], mlp_w: &[f32], rows: &[f32], loss: LossSettings) -> (f64, Vec<f32>, Vec<f32>) {
+pub fn gradients(
+    layout: &ModelLayout,
+    grid_w: &[f32],
+    mlp_w: &[f32],
+    rows: &[f32],
+    loss: LossSettings,
+) -> (f64, Vec<f32>, Vec<f32>) {
     let n = rows.len() / TRAIN_ROW;
     let f = layout.encoding.grid().map_or(1, |(g, _)| g.features());
     let (loss_sum, mgrad, dxg) = forward_backward(layout, grid_w, f, mlp_w, rows, loss);
@@ -178,20 +224,30 @@ pub fn train_step(
     let t_grid = Instant::now();
     if let (Some(g), Some((hg, _))) = (grid, grid_part) {
         let f = hg.features();
-        let GridState { records, grad, last } = g;
+        let GridState {
+            records,
+            grad,
+            last,
+        } = g;
         let rs = split_levels(hg, f * super::optim::RECORD, records);
         let gs = split_levels(hg, f, grad);
         let ls = split_levels(hg, 1, last);
         // Level-major copies of the gradient columns and compact positions, so each level's
         // pass streams through ~130 KiB + 200 KiB instead of strided rows.
         let mut by_level = vec![0f32; n * grid_dims];
-        by_level.par_chunks_mut(n * f).enumerate().for_each(|(l, out)| {
-            for i in 0..n {
-                out[i * f..(i + 1) * f].copy_from_slice(&dxg[i * grid_dims + l * f..i * grid_dims + (l + 1) * f]);
-            }
-        });
+        by_level
+            .par_chunks_mut(n * f)
+            .enumerate()
+            .for_each(|(l, out)| {
+                for i in 0..n {
+                    out[i * f..(i + 1) * f]
+                        .copy_from_slice(&dxg[i * grid_dims + l * f..i * grid_dims + (l + 1) * f]);
+                }
+            });
         let mut pos = vec![0f32; n * 3];
-        pos.par_chunks_mut(3).enumerate().for_each(|(i, p)| p.copy_from_slice(&rows[i * TRAIN_ROW + grid_in..i * TRAIN_ROW + grid_in + 3]));
+        pos.par_chunks_mut(3).enumerate().for_each(|(i, p)| {
+            p.copy_from_slice(&rows[i * TRAIN_ROW + grid_in..i * TRAIN_ROW + grid_in + 3])
+        });
         let (by_level, pos) = (&by_level, &pos);
         rs.into_par_iter()
             .zip(gs)

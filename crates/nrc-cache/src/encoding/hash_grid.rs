@@ -92,12 +92,22 @@ impl HashGrid {
                 let r3 = u64::from(resolution).pow(3);
                 let dense = r3 <= t;
                 let entries = if dense { t.min(r3.div_ceil(8) * 8) } else { t } as u32;
-                let level = GridLevel { scale, resolution, dense, entries, offset };
+                let level = GridLevel {
+                    scale,
+                    resolution,
+                    dense,
+                    entries,
+                    offset,
+                };
                 offset += entries as usize;
                 level
             })
             .collect();
-        Self { params, levels, total_entries: offset }
+        Self {
+            params,
+            levels,
+            total_entries: offset,
+        }
     }
 
     /// The batch kernels' per-level constants.
@@ -137,9 +147,16 @@ impl HashGrid {
             *c = fl as u32;
             *f = pos - fl;
         }
-        let mut out = Corners { frac, ..Corners::default() };
+        let mut out = Corners {
+            frac,
+            ..Corners::default()
+        };
         for c in 0..8u32 {
-            let v = [cell[0] + (c & 1), cell[1] + ((c >> 1) & 1), cell[2] + ((c >> 2) & 1)];
+            let v = [
+                cell[0] + (c & 1),
+                cell[1] + ((c >> 1) & 1),
+                cell[2] + ((c >> 2) & 1),
+            ];
             let mut w = 1.0;
             for (d, fd) in frac.iter().enumerate() {
                 w *= if (c >> d) & 1 == 1 { *fd } else { 1.0 - fd };
@@ -199,7 +216,11 @@ impl HashGrid {
                     let mut dw = if (k >> dim) & 1 == 1 { 1.0 } else { -1.0 };
                     for e in 0..3 {
                         if e != dim {
-                            dw *= if (k >> e) & 1 == 1 { c.frac[e] } else { 1.0 - c.frac[e] };
+                            dw *= if (k >> e) & 1 == 1 {
+                                c.frac[e]
+                            } else {
+                                1.0 - c.frac[e]
+                            };
                         }
                     }
                     *gd += level.scale * dw * dot;
@@ -258,7 +279,9 @@ impl FastLevel {
         let mut idx = [0u32; 8];
         if self.dense {
             let (r, r2) = (self.res, self.res2);
-            let base = c[0].wrapping_add(c[1].wrapping_mul(r)).wrapping_add(c[2].wrapping_mul(r2));
+            let base = c[0]
+                .wrapping_add(c[1].wrapping_mul(r))
+                .wrapping_add(c[2].wrapping_mul(r2));
             let offs = [0, 1, r, r + 1, r2, r2 + 1, r2 + r, r2 + r + 1];
             if base < self.entries - (r2 + r + 1).min(self.entries) {
                 for k in 0..8 {
@@ -271,8 +294,14 @@ impl FastLevel {
             }
         } else {
             let hx = [c[0], c[0].wrapping_add(1)];
-            let hy = [c[1].wrapping_mul(PRIMES[1]), c[1].wrapping_add(1).wrapping_mul(PRIMES[1])];
-            let hz = [c[2].wrapping_mul(PRIMES[2]), c[2].wrapping_add(1).wrapping_mul(PRIMES[2])];
+            let hy = [
+                c[1].wrapping_mul(PRIMES[1]),
+                c[1].wrapping_add(1).wrapping_mul(PRIMES[1]),
+            ];
+            let hz = [
+                c[2].wrapping_mul(PRIMES[2]),
+                c[2].wrapping_add(1).wrapping_mul(PRIMES[2]),
+            ];
             let mask = self.entries - 1;
             for k in 0..8 {
                 idx[k] = self.offset + ((hx[k & 1] ^ hy[(k >> 1) & 1] ^ hz[k >> 2]) & mask);
@@ -299,10 +328,14 @@ pub fn level_scale(base_resolution: f32, per_level_scale: f32, level: u32) -> f3
 pub fn vertex_index(level: &GridLevel, v: [u32; 3]) -> u32 {
     if level.dense {
         let r = level.resolution;
-        let i = v[0].wrapping_add(v[1].wrapping_mul(r)).wrapping_add(v[2].wrapping_mul(r.wrapping_mul(r)));
+        let i = v[0]
+            .wrapping_add(v[1].wrapping_mul(r))
+            .wrapping_add(v[2].wrapping_mul(r.wrapping_mul(r)));
         i % level.entries
     } else {
-        let h = v[0].wrapping_mul(PRIMES[0]) ^ v[1].wrapping_mul(PRIMES[1]) ^ v[2].wrapping_mul(PRIMES[2]);
+        let h = v[0].wrapping_mul(PRIMES[0])
+            ^ v[1].wrapping_mul(PRIMES[1])
+            ^ v[2].wrapping_mul(PRIMES[2]);
         h & (level.entries - 1)
     }
 }

@@ -79,7 +79,14 @@ impl InputEncoding {
         for n in &config.nested {
             let in_dims = n.n_dims_to_encode() as usize;
             let (kind, out_dims) = match n {
-                NestedEncoding::HashGrid { n_levels, n_features_per_level, log2_hashmap_size, base_resolution, per_level_scale, .. } => {
+                NestedEncoding::HashGrid {
+                    n_levels,
+                    n_features_per_level,
+                    log2_hashmap_size,
+                    base_resolution,
+                    per_level_scale,
+                    ..
+                } => {
                     let g = HashGrid::new(hash_grid::HashGridParams {
                         n_levels: *n_levels,
                         n_features_per_level: *n_features_per_level,
@@ -90,20 +97,43 @@ impl InputEncoding {
                     let d = g.output_dims();
                     (EncodingKind::HashGrid(g), d)
                 }
-                NestedEncoding::OneBlob { n_bins, wrap, .. } => {
-                    (EncodingKind::OneBlob { bins: *n_bins as usize, wrap: *wrap }, in_dims * *n_bins as usize)
-                }
-                NestedEncoding::TriangleWave { n_frequencies, .. } => {
-                    (EncodingKind::TriangleWave { frequencies: *n_frequencies as usize }, in_dims * *n_frequencies as usize)
-                }
-                NestedEncoding::Identity { scale, offset, .. } => (EncodingKind::Identity { scale: *scale, offset: *offset }, in_dims),
+                NestedEncoding::OneBlob { n_bins, wrap, .. } => (
+                    EncodingKind::OneBlob {
+                        bins: *n_bins as usize,
+                        wrap: *wrap,
+                    },
+                    in_dims * *n_bins as usize,
+                ),
+                NestedEncoding::TriangleWave { n_frequencies, .. } => (
+                    EncodingKind::TriangleWave {
+                        frequencies: *n_frequencies as usize,
+                    },
+                    in_dims * *n_frequencies as usize,
+                ),
+                NestedEncoding::Identity { scale, offset, .. } => (
+                    EncodingKind::Identity {
+                        scale: *scale,
+                        offset: *offset,
+                    },
+                    in_dims,
+                ),
             };
-            parts.push(EncodingPart { kind, in_offset: i, in_dims, out_offset: o, out_dims });
+            parts.push(EncodingPart {
+                kind,
+                in_offset: i,
+                in_dims,
+                out_offset: o,
+                out_dims,
+            });
             i += in_dims;
             o += out_dims;
         }
         let pad = config.pad_to_multiple as usize;
-        Self { parts, unpadded_dims: o, padded_dims: o.div_ceil(pad) * pad }
+        Self {
+            parts,
+            unpadded_dims: o,
+            padded_dims: o.div_ceil(pad) * pad,
+        }
     }
 
     /// The hash grid and its output column offset, if any.
@@ -180,14 +210,21 @@ impl InputEncoding {
     }
 
     /// Gradient of `⟨dout, encode(raw)⟩` with respect to the raw inputs (for gradient checks).
-    pub fn backward_input_one(&self, grid: &[f32], raw: &[f32], dout: &[f32]) -> [f32; RAW_INPUT_DIMS] {
+    pub fn backward_input_one(
+        &self,
+        grid: &[f32],
+        raw: &[f32],
+        dout: &[f32],
+    ) -> [f32; RAW_INPUT_DIMS] {
         let mut g = [0f32; RAW_INPUT_DIMS];
         for part in &self.parts {
             let x = &raw[part.in_offset..part.in_offset + part.in_dims];
             let d = &dout[part.out_offset..part.out_offset + part.out_dims];
             let gi = &mut g[part.in_offset..part.in_offset + part.in_dims];
             match &part.kind {
-                EncodingKind::HashGrid(h) => gi.copy_from_slice(&h.backward_input_one(grid, [x[0], x[1], x[2]], d)),
+                EncodingKind::HashGrid(h) => {
+                    gi.copy_from_slice(&h.backward_input_one(grid, [x[0], x[1], x[2]], d))
+                }
                 EncodingKind::OneBlob { bins, wrap } => {
                     for (k, xd) in x.iter().enumerate() {
                         gi[k] = one_blob::backward_input(*xd, *wrap, &d[k * bins..(k + 1) * bins]);
@@ -195,7 +232,10 @@ impl InputEncoding {
                 }
                 EncodingKind::TriangleWave { frequencies } => {
                     for (k, xd) in x.iter().enumerate() {
-                        gi[k] = triangle_wave::backward_input(*xd, &d[k * frequencies..(k + 1) * frequencies]);
+                        gi[k] = triangle_wave::backward_input(
+                            *xd,
+                            &d[k * frequencies..(k + 1) * frequencies],
+                        );
                     }
                 }
                 EncodingKind::Identity { scale, .. } => {
@@ -223,7 +263,12 @@ impl InputEncoding {
         self.encode_tensor_with(grid, raw, false)
     }
 
-    fn encode_tensor_with(&self, grid: Option<Tensor<1>>, raw: Tensor<2>, custom_op: bool) -> Tensor<2> {
+    fn encode_tensor_with(
+        &self,
+        grid: Option<Tensor<1>>,
+        raw: Tensor<2>,
+        custom_op: bool,
+    ) -> Tensor<2> {
         let [n, _] = raw.dims();
         let device = raw.device();
         let mut cols = Vec::with_capacity(self.parts.len() + 1);
@@ -232,15 +277,24 @@ impl InputEncoding {
             cols.push(match &part.kind {
                 EncodingKind::HashGrid(g) => {
                     let table = grid.clone().expect("a hash-grid encoding needs its table");
-                    if custom_op { crate::hash_grid_op::hash_grid(g, table, x) } else { hash_grid_tensor(g, table, x) }
+                    if custom_op {
+                        crate::hash_grid_op::hash_grid(g, table, x)
+                    } else {
+                        hash_grid_tensor(g, table, x)
+                    }
                 }
                 EncodingKind::OneBlob { bins, wrap } => one_blob_tensor(x, *bins, *wrap),
                 EncodingKind::TriangleWave { frequencies } => triangle_wave_tensor(x, *frequencies),
-                EncodingKind::Identity { scale, offset } => x.mul_scalar(*scale).add_scalar(*offset),
+                EncodingKind::Identity { scale, offset } => {
+                    x.mul_scalar(*scale).add_scalar(*offset)
+                }
             });
         }
         if self.padded_dims > self.unpadded_dims {
-            cols.push(Tensor::ones([n, self.padded_dims - self.unpadded_dims], &device));
+            cols.push(Tensor::ones(
+                [n, self.padded_dims - self.unpadded_dims],
+                &device,
+            ));
         }
         Tensor::cat(cols, 1)
     }
@@ -261,7 +315,8 @@ pub fn one_blob_tensor(x: Tensor<2>, bins: usize, wrap: bool) -> Tensor<2> {
     let cdf = |u: Tensor<2>| {
         let u = u.clamp(-1.0, 1.0);
         let u2 = u.clone() * u.clone();
-        let poly = u2.clone().mul_scalar(-2.0 / 3.0).add_scalar(1.0) + u2.clone() * u2.mul_scalar(0.2);
+        let poly =
+            u2.clone().mul_scalar(-2.0 / 3.0).add_scalar(1.0) + u2.clone() * u2.mul_scalar(0.2);
         (u * poly).mul_scalar(15.0 / 16.0).add_scalar(0.5)
     };
     let mut outs = Vec::with_capacity(d);
@@ -270,7 +325,9 @@ pub fn one_blob_tensor(x: Tensor<2>, bins: usize, wrap: bool) -> Tensor<2> {
         let diff = boundaries.clone() - xk; // [N, bins+1]
         let mut c = cdf(diff.clone().mul_scalar(nb));
         if wrap {
-            c = c + cdf(diff.clone().sub_scalar(1.0).mul_scalar(nb)) + cdf(diff.add_scalar(1.0).mul_scalar(nb));
+            c = c
+                + cdf(diff.clone().sub_scalar(1.0).mul_scalar(nb))
+                + cdf(diff.add_scalar(1.0).mul_scalar(nb));
         }
         outs.push(c.clone().narrow(1, 1, bins) - c.narrow(1, 0, bins));
     }
@@ -283,7 +340,10 @@ pub fn one_blob_tensor(x: Tensor<2>, bins: usize, wrap: bool) -> Tensor<2> {
 pub fn triangle_wave_tensor(x: Tensor<2>, frequencies: usize) -> Tensor<2> {
     let [_, d] = x.dims();
     let device = x.device();
-    let freqs = row((0..frequencies).map(|j| (1u32 << j) as f32).collect(), &device);
+    let freqs = row(
+        (0..frequencies).map(|j| (1u32 << j) as f32).collect(),
+        &device,
+    );
     let mut outs = Vec::with_capacity(d);
     for k in 0..d {
         let u = (x.clone().narrow(1, k, 1) * freqs.clone()).sub_scalar(0.25); // [N, n]
@@ -314,12 +374,22 @@ pub fn hash_grid_tensor(grid: &HashGrid, table: Tensor<1>, p: Tensor<2>) -> Tens
             for d in 0..3 {
                 let bit = (c >> d) & 1;
                 let fd = frac.clone().narrow(1, d, 1);
-                let wd = if bit == 1 { fd } else { fd.neg().add_scalar(1.0) };
+                let wd = if bit == 1 {
+                    fd
+                } else {
+                    fd.neg().add_scalar(1.0)
+                };
                 w = Some(match w {
                     None => wd,
                     Some(w) => w * wd,
                 });
-                coords.push(cell_i.clone().narrow(1, d, 1).add_scalar(bit as i64).reshape([n]));
+                coords.push(
+                    cell_i
+                        .clone()
+                        .narrow(1, d, 1)
+                        .add_scalar(bit as i64)
+                        .reshape([n]),
+                );
             }
             // All products are taken modulo 2^32 in the kernels; only the low log2(T) bits
             // matter for hashed levels, and dense indices stay far below 2^31, so the same
@@ -328,11 +398,14 @@ pub fn hash_grid_tensor(grid: &HashGrid, table: Tensor<1>, p: Tensor<2>) -> Tens
             let [x, y, z] = [coords[0].clone(), coords[1].clone(), coords[2].clone()];
             let index = if level.dense {
                 let r = i64::from(level.resolution);
-                (x + y.mul_scalar(r) + z.mul_scalar(r * r)).remainder_scalar(i64::from(level.entries))
+                (x + y.mul_scalar(r) + z.mul_scalar(r * r))
+                    .remainder_scalar(i64::from(level.entries))
             } else {
                 let p1 = i64::from(PRIMES[1] as i32);
                 let p2 = i64::from(PRIMES[2] as i32);
-                x.bitwise_xor(y.mul_scalar(p1)).bitwise_xor(z.mul_scalar(p2)).bitwise_and_scalar(i64::from(level.entries - 1))
+                x.bitwise_xor(y.mul_scalar(p1))
+                    .bitwise_xor(z.mul_scalar(p2))
+                    .bitwise_and_scalar(i64::from(level.entries - 1))
             };
             let index = index.add_scalar(level.offset as i64);
             let feats = table.clone().select(0, index); // [N, F]

@@ -26,13 +26,21 @@ pub fn cdf(u: f32) -> f32 {
 #[inline(always)]
 fn cdf_sum(boundary: f32, x: f32, bins: f32, wrap: bool) -> f32 {
     let c = cdf((boundary - x) * bins);
-    if wrap { c + cdf((boundary - x - 1.0) * bins) + cdf((boundary - x + 1.0) * bins) } else { c }
+    if wrap {
+        c + cdf((boundary - x - 1.0) * bins) + cdf((boundary - x + 1.0) * bins)
+    } else {
+        c
+    }
 }
 
 #[inline(always)]
 fn kernel_sum(boundary: f32, x: f32, bins: f32, wrap: bool) -> f32 {
     let k = kernel((boundary - x) * bins);
-    if wrap { k + kernel((boundary - x - 1.0) * bins) + kernel((boundary - x + 1.0) * bins) } else { k }
+    if wrap {
+        k + kernel((boundary - x - 1.0) * bins) + kernel((boundary - x + 1.0) * bins)
+    } else {
+        k
+    }
 }
 
 /// Encodes `x` into `out` (length = number of bins).
