@@ -218,26 +218,8 @@ const MEAN_FILE: &str = "mean.exr";
 const VARIANCE_FILE: &str = "variance.exr";
 const META_FILE: &str = "reference.json";
 
-/// The characters of a glTF URI, percent-decoded (as the scene loader resolves them).
-fn percent_decode(uri: &str) -> String {
-    let hex = |c: u8| (c as char).to_digit(16).map(|d| d as u8);
-    let b = uri.as_bytes();
-    let mut out = Vec::with_capacity(b.len());
-    let mut i = 0;
-    while i < b.len() {
-        if b[i] == b'%'
-            && i + 2 < b.len()
-            && let (Some(h), Some(l)) = (hex(b[i + 1]), hex(b[i + 2]))
-        {
-            out.push(h * 16 + l);
-            i += 3;
-            continue;
-        }
-        out.push(b[i]);
-        i += 1;
-    }
-    String::from_utf8_lossy(&out).into_owned()
-}
+/// The characters of a glTF URI, percent-decoded, exactly as the scene loader resolves them.
+use nrc_scene::gltf_load::percent_decode;
 
 /// The JSON document of a `.gltf` file, or the JSON chunk of a `.glb` container.
 fn gltf_json(path: &Path, bytes: &[u8]) -> Result<serde_json::Value> {

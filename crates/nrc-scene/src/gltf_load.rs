@@ -130,7 +130,7 @@ fn check_glb_header(bytes: &[u8]) -> std::result::Result<(), String> {
 }
 
 /// Decodes `%XX` escapes of a relative URI.
-fn percent_decode(uri: &str) -> String {
+pub fn percent_decode(uri: &str) -> String {
     let hex = |c: u8| (c as char).to_digit(16).map(|d| d as u8);
     let b = uri.as_bytes();
     let mut out = Vec::with_capacity(b.len());
