@@ -157,6 +157,12 @@ pub trait Method: Send {
     /// Samples per pixel of one pass.
     fn samples_per_pass(&self) -> u32;
 
+    /// Gets ready to render `width × height` frames from `camera` (cache methods train here);
+    /// called once, untimed, before the first measured frame. An error names what is wrong.
+    fn prepare(&mut self, _scene: &Scene, _camera: &Camera, _width: u32, _height: u32) -> Result<(), String> {
+        Ok(())
+    }
+
     /// Renders one pass of `width × height` pixels from `camera`; `seed` chooses the random
     /// streams, so passes with different seeds are independent estimates.
     fn render_pass(&mut self, scene: &Scene, camera: &Camera, width: u32, height: u32, seed: u64) -> Pass;

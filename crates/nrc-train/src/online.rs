@@ -1,0 +1,215 @@
+//! The online loop: per frame, predict training queries, produce records, train the cache,
+//! and render with it.
+
+use std::time::Instant;
+
+use nrc_cache::{CacheError, RadianceCache, TrainingBatch};
+use nrc_render::methods::pass_seed;
+use nrc_render::{PathTracer, PixelSampler};
+use nrc_scene::{Camera, Scene};
+
+use crate::inference::{CacheRenderer, InferenceOutput, InferenceStats};
+use crate::producer::{ProducerContext, ProducerMix, ProducerSpec, ProducerStats};
+use crate::query::QueryMaker;
+use crate::starts::{self, TerminationPoint};
+
+/// Settings of the online loop.
+#[derive(Clone, Debug, PartialEq)]
+pub struct OnlineSettings {
+    /// The producers and their shares of the record budget.
+    pub producer: ProducerSpec,
+    /// Training records produced per frame.
+    pub records_per_frame: usize,
+    /// Records per optimisation step: a frame's records are shuffled and trained in batches
+    /// of this size, one step each (NRC: 4 × 2^14).
+    pub batch_size: usize,
+    /// Fraction of the training queries aimed at the previous frame's termination points
+    /// (the rest are camera primary hits in jittered tiles).
+    pub from_terminations: f32,
+    /// Depth and Russian roulette of training paths.
+    pub tracer: PathTracer,
+    /// The inference pass.
+    pub renderer: CacheRenderer,
+    /// Samples per pixel of the inference pass.
+    pub spp: u32,
+    pub seed: u64,
+}
+
+impl OnlineSettings {
+    /// NRC's defaults for `scene`: 2^16 records a frame in steps of 2^14, camera-tile queries,
+    /// spread-heuristic termination with NEE, 1 sample per pixel.
+    pub fn new(producer: ProducerSpec, scene: &Scene, tracer: PathTracer) -> Self {
+        Self {
+            producer,
+            records_per_frame: 1 << 16,
+            batch_size: 1 << 14,
+            from_terminations: 0.0,
+            tracer,
+            renderer: CacheRenderer {
+                termination: Default::default(),
+                nee: true,
+                tracer,
+                queries: QueryMaker::new(&scene.bounds()),
+            },
+            spp: 1,
+            seed: 0,
+        }
+    }
+
+    /// Checks the settings, naming the first bad one.
+    pub fn validate(&self) -> Result<(), String> {
+        if self.records_per_frame == 0 {
+            return Err("records per frame must be at least 1".into());
+        }
+        if self.batch_size == 0 {
+            return Err("the batch size must be at least 1".into());
+        }
+        if !(0.0..=1.0).contains(&self.from_terminations) {
+            return Err(format!(
+                "the fraction of queries from termination points must be in [0, 1], got {}",
+                self.from_terminations
+            ));
+        }
+        if self.spp == 0 {
+            return Err("samples per pixel must be at least 1".into());
+        }
+        Ok(())
+    }
+}
+
+/// What one frame did and cost.
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
+pub struct FrameStats {
+    pub frame: u64,
+    /// Milliseconds producing training records (query prediction and producers).
+    pub produce_ms: f64,
+    /// Milliseconds training.
+    pub train_ms: f64,
+    /// Milliseconds of the inference pass (0 when the frame was not rendered).
+    pub infer_ms: f64,
+    /// Records produced.
+    pub records: usize,
+    /// Records trained on.
+    pub used: usize,
+    /// Records dropped for a NaN or infinite query field or target.
+    pub dropped_nonfinite: usize,
+    /// Records dropped for a negative or absurdly large target.
+    pub dropped_absurd: usize,
+    /// Optimisation steps taken.
+    pub steps: u32,
+    /// Mean loss of the frame's last step.
+    pub loss: f32,
+    pub producer: ProducerStats,
+    pub inference: InferenceStats,
+}
+
+/// A cache trained online on one scene.
+pub struct OnlineTrainer {
+    pub cache: RadianceCache,
+    pub settings: OnlineSettings,
+    mix: ProducerMix,
+    previous: Vec<TerminationPoint>,
+    frame: u64,
+}
+
+impl OnlineTrainer {
+    /// A trainer of `cache` (whose scene box should be `settings.renderer.queries.scene_box`).
+    pub fn new(cache: RadianceCache, settings: OnlineSettings) -> Result<Self, String> {
+        settings.validate()?;
+        Ok(Self {
+            cache,
+            mix: ProducerMix::new(&settings.producer),
+            settings,
+            previous: Vec::new(),
+            frame: 0,
+        })
+    }
+
+    /// Frames run so far.
+    pub fn frames(&self) -> u64 {
+        self.frame
+    }
+
+    /// One frame: produce and train, then (when `render`) the inference pass of a
+    /// `width × height` image from `camera`.
+    pub fn frame(
+        &mut self,
+        scene: &Scene,
+        camera: &Camera,
+        width: u32,
+        height: u32,
+        render: bool,
+    ) -> Result<(FrameStats, Option<InferenceOutput>), CacheError> {
+        let s = &self.settings;
+        let seed = pass_seed(s.seed, self.frame as u32);
+        let mut stats = FrameStats {
+            frame: self.frame,
+            ..Default::default()
+        };
+
+        let t = Instant::now();
+        let starts = starts::predict(
+            camera,
+            width,
+            height,
+            &self.previous,
+            s.from_terminations,
+            s.records_per_frame,
+            seed,
+        );
+        let ctx = ProducerContext {
+            scene,
+            camera,
+            cache: &self.cache,
+            queries: &s.renderer.queries,
+            starts: &starts,
+            tracer: s.tracer,
+        };
+        let produced = self.mix.produce(&ctx, s.records_per_frame, seed);
+        stats.produce_ms = t.elapsed().as_secs_f64() * 1e3;
+        stats.records = produced.batch.queries.len();
+        stats.producer = produced.stats;
+
+        let t = Instant::now();
+        let order = shuffled(produced.batch.queries.len(), seed);
+        for chunk in order.chunks(s.batch_size) {
+            let batch = TrainingBatch {
+                queries: chunk.iter().map(|&i| produced.batch.queries[i]).collect(),
+                targets: chunk.iter().map(|&i| produced.batch.targets[i]).collect(),
+                weights: None,
+            };
+            let st = self.cache.train(&batch, 1)?;
+            stats.used += st.used;
+            stats.dropped_nonfinite += st.dropped_nonfinite;
+            stats.dropped_absurd += st.dropped_absurd;
+            stats.steps += st.steps;
+            if st.steps > 0 {
+                stats.loss = st.loss;
+            }
+        }
+        stats.train_ms = t.elapsed().as_secs_f64() * 1e3;
+
+        let mut output = None;
+        if render {
+            let t = Instant::now();
+            let out = s.renderer.render(scene, camera, &self.cache, width, height, s.spp, seed ^ 0x1F3D_5B79);
+            stats.infer_ms = t.elapsed().as_secs_f64() * 1e3;
+            stats.inference = out.stats;
+            self.previous = out.terminations.clone();
+            output = Some(out);
+        }
+        self.frame += 1;
+        Ok((stats, output))
+    }
+}
+
+/// A permutation of `0..n` (Fisher–Yates on the stream `seed`).
+fn shuffled(n: usize, seed: u64) -> Vec<usize> {
+    let mut order: Vec<usize> = (0..n).collect();
+    let mut s = PixelSampler::new(seed, u64::MAX - 3, 0);
+    for i in (1..n).rev() {
+        let j = ((s.next_1d() as f64 * (i + 1) as f64) as usize).min(i);
+        order.swap(i, j);
+    }
+    order
+}

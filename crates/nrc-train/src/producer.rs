@@ -1,0 +1,232 @@
+//! The producer interface, and the configuration that chooses and mixes producers.
+
+use std::fmt;
+use std::str::FromStr;
+
+use nrc_cache::TrainingBatch;
+use nrc_render::PathTracer;
+use nrc_scene::{Camera, Scene};
+
+use crate::producers::{
+    bt::BidirectionalProducer, lt::LightProducer, pt::PathProducer, sppc::SppcProducer,
+};
+use crate::query::QueryMaker;
+use crate::starts::StartRay;
+use crate::view::RadianceView;
+
+/// What a producer may read in a frame.
+pub struct ProducerContext<'a> {
+    pub scene: &'a Scene,
+    pub camera: &'a Camera,
+    /// The cache, read-only (self-learning targets).
+    pub cache: &'a dyn RadianceView,
+    pub queries: &'a QueryMaker,
+    /// Query prediction: the rays whose first hits are this frame's training queries (camera
+    /// tiles and previous termination points); producers that start at the camera use them in
+    /// order, cycling if they need more.
+    pub starts: &'a [StartRay],
+    /// Depth and Russian roulette of training paths.
+    pub tracer: PathTracer,
+}
+
+/// What a producer counted while producing.
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
+pub struct ProducerStats {
+    /// Paths traced (camera, light or photon paths).
+    pub paths: u64,
+    /// Rays traced (closest hit and shadow).
+    pub rays: u64,
+    /// Records whose target was not finite or was negative, left out of the batch.
+    pub dropped: u64,
+}
+
+impl ProducerStats {
+    pub fn add(&mut self, o: &ProducerStats) {
+        self.paths += o.paths;
+        self.rays += o.rays;
+        self.dropped += o.dropped;
+    }
+}
+
+/// A producer's output for one frame.
+#[derive(Clone, Debug, Default)]
+pub struct Produced {
+    pub batch: TrainingBatch,
+    pub stats: ProducerStats,
+}
+
+/// A source of training records. Deterministic: the same context, budget and seed give the
+/// same batch whatever the thread count.
+pub trait Producer: Send {
+    /// The producer's name as configured (`pt-sl`, `sppc`, ...).
+    fn name(&self) -> &str;
+
+    /// About `budget` training records (never more) for this frame; `seed` chooses the random
+    /// streams.
+    fn produce(&mut self, ctx: &ProducerContext, budget: usize, seed: u64) -> Produced;
+}
+
+/// One producer and its settings, as named in a configuration.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum ProducerKind {
+    /// Path tracing; `self_learning` ends training suffixes in the cache.
+    Pt { self_learning: bool },
+    /// Bidirectional training.
+    Bt,
+    /// Light training.
+    Lt,
+    /// Sparse progressive photon collection.
+    Sppc,
+}
+
+/// A mix of producers with their shares of the record budget (shares sum to 1).
+#[derive(Clone, Debug, PartialEq)]
+pub struct ProducerSpec {
+    pub parts: Vec<(ProducerKind, f32)>,
+}
+
+/// The grammar of producer names, for help texts and errors.
+pub const PRODUCER_NAMES: &str = "pt (path tracing), pt-sl (path tracing with self-learning), bt (bidirectional), \
+     lt (light training), sppc (sparse progressive photon collection), or mix:NAME=SHARE,NAME=SHARE,... \
+     (e.g. mix:pt-sl=0.5,sppc=0.5)";
+
+impl ProducerKind {
+    fn parse(s: &str) -> Result<Self, String> {
+        Ok(match s.trim() {
+            "pt" => Self::Pt {
+                self_learning: false,
+            },
+            "pt-sl" => Self::Pt {
+                self_learning: true,
+            },
+            "bt" => Self::Bt,
+            "lt" => Self::Lt,
+            "sppc" => Self::Sppc,
+            other => return Err(format!("unknown producer `{other}`; known: {PRODUCER_NAMES}")),
+        })
+    }
+
+    /// The producer with default settings.
+    pub fn build(self) -> Box<dyn Producer> {
+        match self {
+            Self::Pt { self_learning } => Box::new(PathProducer::new(self_learning)),
+            Self::Bt => Box::new(BidirectionalProducer::default()),
+            Self::Lt => Box::new(LightProducer::default()),
+            Self::Sppc => Box::new(SppcProducer::default()),
+        }
+    }
+}
+
+impl fmt::Display for ProducerKind {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            Self::Pt {
+                self_learning: false,
+            } => "pt",
+            Self::Pt {
+                self_learning: true,
+            } => "pt-sl",
+            Self::Bt => "bt",
+            Self::Lt => "lt",
+            Self::Sppc => "sppc",
+        })
+    }
+}
+
+impl FromStr for ProducerSpec {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, String> {
+        let Some(list) = s.trim().strip_prefix("mix:") else {
+            return Ok(Self {
+                parts: vec![(ProducerKind::parse(s)?, 1.0)],
+            });
+        };
+        let mut parts = Vec::new();
+        for item in list.split(',') {
+            let (name, share) = item
+                .split_once('=')
+                .ok_or_else(|| format!("mix entry `{item}` needs NAME=SHARE; {PRODUCER_NAMES}"))?;
+            let share: f32 = share
+                .trim()
+                .parse()
+                .map_err(|_| format!("share `{share}` of `{name}` is not a number"))?;
+            if !share.is_finite() || share <= 0.0 {
+                return Err(format!("share of `{name}` must be positive, got {share}"));
+            }
+            parts.push((ProducerKind::parse(name)?, share));
+        }
+        if parts.is_empty() {
+            return Err(format!("an empty mix; {PRODUCER_NAMES}"));
+        }
+        let total: f32 = parts.iter().map(|p| p.1).sum();
+        for p in &mut parts {
+            p.1 /= total;
+        }
+        Ok(Self { parts })
+    }
+}
+
+impl fmt::Display for ProducerSpec {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self.parts.as_slice() {
+            [(k, _)] => write!(f, "{k}"),
+            parts => {
+                let items: Vec<String> = parts.iter().map(|(k, s)| format!("{k}={s}")).collect();
+                write!(f, "mix:{}", items.join(","))
+            }
+        }
+    }
+}
+
+/// The configured producers of a frame, each with its share of the budget.
+pub struct ProducerMix {
+    parts: Vec<(Box<dyn Producer>, f32)>,
+}
+
+impl ProducerMix {
+    pub fn new(spec: &ProducerSpec) -> Self {
+        Self {
+            parts: spec.parts.iter().map(|(k, s)| (k.build(), *s)).collect(),
+        }
+    }
+
+    /// Runs every producer on its share of `budget` and concatenates the batches.
+    pub fn produce(&mut self, ctx: &ProducerContext, budget: usize, seed: u64) -> Produced {
+        let mut out = Produced::default();
+        let mut left = budget;
+        let n = self.parts.len();
+        for (i, (producer, share)) in self.parts.iter_mut().enumerate() {
+            // The last producer takes what rounding left, so shares sum to the budget.
+            let b = if i + 1 == n {
+                left
+            } else {
+                ((budget as f32 * *share).round() as usize).min(left)
+            };
+            left -= b;
+            let p = producer.produce(ctx, b, seed ^ (i as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15));
+            out.batch.queries.extend(p.batch.queries);
+            out.batch.targets.extend(p.batch.targets);
+            out.stats.add(&p.stats);
+        }
+        out
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn specs_parse_and_print() {
+        for name in ["pt", "pt-sl", "bt", "lt", "sppc"] {
+            assert_eq!(name.parse::<ProducerSpec>().unwrap().to_string(), name);
+        }
+        let mix: ProducerSpec = "mix:pt-sl=1,sppc=3".parse().unwrap();
+        assert_eq!(mix.parts.len(), 2);
+        assert!((mix.parts[1].1 - 0.75).abs() < 1e-6);
+        for bad in ["", "ptx", "mix:", "mix:pt", "mix:pt=0", "mix:pt=-1", "mix:pt=x", "mix:foo=1"] {
+            assert!(bad.parse::<ProducerSpec>().is_err(), "{bad}");
+        }
+    }
+}
