@@ -26,7 +26,8 @@ use nrc_eval::{
     BiasVarianceAccumulator, ErrorMetrics, HdrFlipParams, ImageView, Report, ReportRow, ScalarImage, SweepPoint,
     SweepSeries, hdr_flip, write_report,
 };
-use nrc_render::methods::{Budget, Frame, FrameRequest, MethodSettings, MethodSpec, pass_seed, render_frame};
+use nrc_render::methods::{Budget, Frame, FrameRequest, MethodSettings, pass_seed, render_frame};
+use nrc_train::methods::MethodSpec;
 use nrc_scene::{Image, Scene};
 use serde::{Deserialize, Serialize};
 
@@ -41,7 +42,9 @@ pub struct CompareArgs {
     pub scene: SceneArgs,
 
     /// Methods to compare, comma-separated: pt-<N>spp (path tracer, N samples per pixel per
-    /// pass, NEE and BSDF sampling by MIS) or pt-<N>spp-nonee (BSDF sampling only).
+    /// pass, NEE and BSDF sampling by MIS), pt-<N>spp-nonee (BSDF sampling only), or
+    /// nrc-<producer>[-<termination>] (a cache trained online by pt, pt-sl, bt, lt or sppc,
+    /// rendered at 1 spp with paths ending in it: first, diffuse, spread (default), bth).
     #[arg(long, value_delimiter = ',', required = true)]
     pub methods: Vec<MethodSpec>,
 
@@ -106,6 +109,18 @@ pub struct CompareArgs {
 
     #[command(flatten)]
     pub cache: CacheArgs,
+
+    /// Cache methods: frames of online training before measurement (untimed).
+    #[arg(long, default_value_t = 64)]
+    pub train_frames: u32,
+
+    /// Cache methods: stop training once measurement starts (else every pass is a full online
+    /// frame: produce, train and render, all timed).
+    #[arg(long)]
+    pub frozen: bool,
+
+    #[command(flatten)]
+    pub model: crate::cache_args::RadianceCacheArgs,
 
     /// Worker threads (default: all cores).
     #[arg(long)]
@@ -317,6 +332,8 @@ fn compare(args: &CompareArgs, budget: Budget, scene: &Scene) -> Result<()> {
     let settings = MethodSettings {
         tracer: args.depth.tracer(),
     };
+    let mut cache_settings = args.model.method_settings(args.train_frames, args.seed)?;
+    cache_settings.online = !args.frozen;
     let steps = if args.sweep { args.sweep_steps } else { 1 };
     let total = args.methods.len() as u64 * (args.runs + steps - 1) as u64;
     let bar = ProgressBar::new(total).with_style(
@@ -345,7 +362,10 @@ fn compare(args: &CompareArgs, budget: Budget, scene: &Scene) -> Result<()> {
     let mut plot_series = Vec::new();
 
     for spec in &args.methods {
-        let mut method = spec.build(&settings);
+        let mut method = spec.build(&settings, &cache_settings);
+        method
+            .prepare(scene, &scene.camera, w, h)
+            .map_err(|e| anyhow::anyhow!("{spec}: {e}"))?;
         let name = method.name().to_string();
         bar.set_message(name.clone());
         // Untimed warm-up pass on a small image (thread pool, caches), so that the first

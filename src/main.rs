@@ -1,16 +1,19 @@
 //! `nrc`: the neural radiance cache command line.
 //!
-//! Subcommands: `render` (the reference path tracer), `info` (what a scene holds) and
-//! `bench` (measured throughput). Every failure is reported as one `error: ...` line and a
+//! Subcommands: `render` (the reference path tracer, or rendering from a cache snapshot),
+//! `train` (the online loop), `compare` (methods against a reference), `reference`, `info`
+//! and `bench` (measured throughput). Every failure is reported as one `error: ...` line and a
 //! non-zero exit status.
 
 mod args;
 mod bench;
+mod cache_args;
 mod compare;
 mod info;
 mod reference;
 mod render;
 mod scene_args;
+mod train;
 
 use clap::{Parser, Subcommand};
 
@@ -36,6 +39,9 @@ enum Command {
     /// Compare rendering methods against a reference: errors, bias and variance, equal-time
     /// and equal-sample studies, report, plots and images.
     Compare(Box<compare::CompareArgs>),
+    /// Train a neural radiance cache online on a scene: per frame produce training records,
+    /// train, and render with paths ending in the cache; statistics, frames and a snapshot.
+    Train(Box<train::TrainArgs>),
 }
 
 fn main() -> std::process::ExitCode {
@@ -46,6 +52,7 @@ fn main() -> std::process::ExitCode {
         Command::Bench(b) => bench::run(&b),
         Command::Reference(a) => reference::run(&a),
         Command::Compare(a) => compare::run(&a),
+        Command::Train(a) => train::run(&a),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

@@ -104,6 +104,52 @@ pub struct RenderArgs {
 
     #[command(flatten)]
     pub tracer: TracerArgs,
+
+    /// Render from a saved cache (a snapshot written by `nrc train --snapshot`): camera
+    /// paths end in the cache by --termination instead of being traced to the end.
+    #[arg(long)]
+    pub cache: Option<PathBuf>,
+
+    /// With --cache: where paths end in it (first, diffuse[:R], spread[:C], bth[:K]).
+    #[arg(long, default_value = "spread", value_parser = crate::cache_args::parse_termination)]
+    pub termination: nrc_train::Termination,
+
+    /// With --cache: where the cache computes.
+    #[arg(long, value_enum, default_value_t = crate::cache_args::DeviceArg::Cpu)]
+    pub device: crate::cache_args::DeviceArg,
+}
+
+/// Renders from a cache snapshot: cache-terminated paths at `spp`, NEE per --strategy
+/// (MIS unless `bsdf`).
+fn render_cached(args: &RenderArgs, snapshot: &std::path::Path, scene: &nrc_scene::Scene) -> Result<nrc_scene::Image> {
+    let cache = nrc_cache::RadianceCache::load(snapshot, args.device.resolve())
+        .with_context(|| format!("cannot load the cache snapshot {}", snapshot.display()))?;
+    let tracer = args.tracer.tracer();
+    let renderer = nrc_train::CacheRenderer {
+        termination: args.termination,
+        nee: tracer.strategy != LightStrategy::BsdfOnly,
+        tracer,
+        queries: nrc_train::QueryMaker {
+            scene_box: cache.scene_box(),
+        },
+    };
+    let pool = thread_pool(args.threads)?;
+    let start = std::time::Instant::now();
+    let out = pool.install(|| renderer.render(scene, &scene.camera, &cache, args.width, args.height, args.spp, args.seed));
+    if out.stats.invalid_samples > 0 {
+        eprintln!("warning: {} samples were NaN or infinite and counted as black", out.stats.invalid_samples);
+    }
+    println!(
+        "rendered {}x{} at {} spp from the cache {} in {:.3} s ({} cache queries, {:.1} ms in the cache)",
+        args.width,
+        args.height,
+        args.spp,
+        snapshot.display(),
+        start.elapsed().as_secs_f64(),
+        out.stats.queries,
+        out.stats.cache_ms
+    );
+    Ok(out.image)
 }
 
 /// A rayon pool of `threads` workers (all cores when `None`).
@@ -148,6 +194,17 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     let scene = args.scene.load()?;
     for w in scene.warnings() {
         eprintln!("warning: {w}");
+    }
+    if let Some(snapshot) = &args.cache {
+        if args.variance.is_some() {
+            bail!("--variance is not available with --cache");
+        }
+        let image = render_cached(args, snapshot, &scene)?;
+        image.write_exr(&args.out)?;
+        if let Some(png) = &args.png {
+            image.write_png_preview(png, args.exposure)?;
+        }
+        return Ok(());
     }
     let settings = RenderSettings {
         width: args.width,

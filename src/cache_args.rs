@@ -1,0 +1,92 @@
+//! Options shared by the subcommands that build, train or read a radiance cache.
+
+use std::path::PathBuf;
+
+use anyhow::{Context, Result, bail};
+use nrc_cache::{CacheConfig, CacheDevice};
+use nrc_train::Termination;
+use nrc_train::methods::CacheMethodSettings;
+
+/// Where the cache computes.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum DeviceArg {
+    /// wgpu when a hardware GPU adapter exists, else the CPU.
+    Auto,
+    /// burn's Flex CPU backend (fused training step).
+    Cpu,
+    /// burn's wgpu backend.
+    Wgpu,
+}
+
+impl DeviceArg {
+    /// The device, printed with the reason it was chosen.
+    pub fn resolve(self) -> CacheDevice {
+        let (device, reason) = match self {
+            Self::Auto => CacheDevice::auto(),
+            Self::Cpu => (CacheDevice::Cpu, "--device cpu".to_string()),
+            Self::Wgpu => (CacheDevice::Wgpu, "--device wgpu".to_string()),
+        };
+        eprintln!("cache device: {device} ({reason})");
+        device
+    }
+}
+
+/// The cache model and how it is trained.
+#[derive(clap::Args, Debug, Clone)]
+pub struct RadianceCacheArgs {
+    /// Cache configuration: a tiny-cuda-nn-style JSON file, or a preset name: `hashgrid`
+    /// (models/nrc-hashgrid.json) or `trianglewave` (models/nrc-trianglewave.json).
+    #[arg(long, default_value = "hashgrid")]
+    pub config: String,
+
+    /// Where the cache computes.
+    #[arg(long, value_enum, default_value_t = DeviceArg::Cpu)]
+    pub device: DeviceArg,
+
+    /// Finest resolution of the encoding along the scene's longest axis (the grid is sized
+    /// from it: the smallest resolved feature is the longest extent divided by it).
+    #[arg(long, default_value_t = 512)]
+    pub resolution: u32,
+
+    /// Training records produced per frame.
+    #[arg(long, default_value_t = 1 << 16)]
+    pub records: usize,
+
+    /// Records per optimisation step (a frame trains records/batch steps).
+    #[arg(long, default_value_t = 1 << 14)]
+    pub batch: usize,
+}
+
+impl RadianceCacheArgs {
+    /// The configuration named by `--config`.
+    pub fn config(&self) -> Result<CacheConfig> {
+        Ok(match self.config.as_str() {
+            "hashgrid" => CacheConfig::hash_grid_preset(),
+            "trianglewave" => CacheConfig::triangle_wave_preset(),
+            path => CacheConfig::from_file(&PathBuf::from(path))
+                .with_context(|| format!("--config {path}"))?,
+        })
+    }
+
+    /// The settings of cache methods, checked.
+    pub fn method_settings(&self, train_frames: u32, seed: u64) -> Result<CacheMethodSettings> {
+        if self.resolution == 0 || self.resolution > 1 << 16 {
+            bail!("--resolution must be in 1..=65536, got {}", self.resolution);
+        }
+        if self.records == 0 || self.batch == 0 {
+            bail!("--records and --batch must be at least 1");
+        }
+        let mut s = CacheMethodSettings::new(self.config()?, self.device.resolve());
+        s.resolution = self.resolution;
+        s.records_per_frame = self.records;
+        s.batch_size = self.batch;
+        s.train_frames = train_frames;
+        s.seed = seed;
+        Ok(s)
+    }
+}
+
+/// Parses a termination strategy for clap.
+pub fn parse_termination(s: &str) -> Result<Termination, String> {
+    s.parse()
+}

@@ -1,0 +1,244 @@
+//! `nrc train`: the online loop on a scene. Per frame: query prediction, the producers, the
+//! training steps and the cache-terminated inference pass; per-frame statistics, optional
+//! EXR frames, a snapshot at the end.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result, bail};
+use glam::Vec3;
+use indicatif::{ProgressBar, ProgressStyle};
+use nrc_scene::{Camera, Scene};
+use nrc_train::{FrameStats, ProducerSpec, Termination};
+
+use crate::cache_args::{RadianceCacheArgs, parse_termination};
+use crate::render::TracerArgs;
+use crate::scene_args::SceneArgs;
+
+/// Arguments of `nrc train`.
+#[derive(clap::Args, Debug)]
+pub struct TrainArgs {
+    #[command(flatten)]
+    pub scene: SceneArgs,
+
+    /// Training-data producer: pt, pt-sl, bt, lt, sppc, or mix:NAME=SHARE,... (e.g.
+    /// mix:pt-sl=0.5,sppc=0.5).
+    #[arg(long, default_value = "pt-sl")]
+    pub producer: ProducerSpec,
+
+    /// Frames to run.
+    #[arg(long, default_value_t = 64)]
+    pub frames: u32,
+
+    /// Camera path: a JSON list of keyframes `{"position": [x,y,z], "target": [x,y,z],
+    /// "up": [x,y,z] (optional), "fov_y": degrees (optional)}`, spread evenly over the frames
+    /// and interpolated linearly. Default: the scene's camera, still.
+    #[arg(long)]
+    pub camera_path: Option<PathBuf>,
+
+    /// Write the cache here at the end (safetensors + JSON metadata; see nrc-cache's snapshot
+    /// module).
+    #[arg(long)]
+    pub snapshot: Option<PathBuf>,
+
+    /// Write inference frames as EXR into this folder (frame-NNNNN.exr).
+    #[arg(long)]
+    pub frames_out: Option<PathBuf>,
+
+    /// With --frames-out: write every N-th frame (and the last).
+    #[arg(long, default_value_t = 1)]
+    pub every: u32,
+
+    /// Per-frame statistics (time of each phase, loss, records used and dropped): `.csv` or
+    /// `.json`.
+    #[arg(long)]
+    pub stats: Option<PathBuf>,
+
+    /// Image width of the inference pass (and of query prediction).
+    #[arg(long, default_value_t = 256)]
+    pub width: u32,
+
+    /// Image height.
+    #[arg(long, default_value_t = 256)]
+    pub height: u32,
+
+    /// Samples per pixel of the inference pass.
+    #[arg(long, default_value_t = 1)]
+    pub spp: u32,
+
+    /// Where rendering paths end in the cache: first, diffuse[:R], spread[:C], bth[:K].
+    #[arg(long, default_value = "spread", value_parser = parse_termination)]
+    pub termination: Termination,
+
+    /// Next-event estimation off in the inference pass (BSDF sampling only).
+    #[arg(long)]
+    pub no_nee: bool,
+
+    /// Fraction of training queries aimed at the previous frame's termination points.
+    #[arg(long, default_value_t = 0.0)]
+    pub from_terminations: f32,
+
+    #[command(flatten)]
+    pub cache: RadianceCacheArgs,
+
+    /// Seed: a seed gives the same run whatever the thread count (on the CPU device).
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+
+    /// Worker threads (default: all cores).
+    #[arg(long)]
+    pub threads: Option<usize>,
+
+    #[command(flatten)]
+    pub tracer: TracerArgs,
+}
+
+/// One keyframe of a camera path.
+#[derive(serde::Deserialize, Debug, Clone)]
+#[serde(deny_unknown_fields)]
+struct Keyframe {
+    position: [f32; 3],
+    target: [f32; 3],
+    up: Option<[f32; 3]>,
+    fov_y: Option<f32>,
+}
+
+/// The camera of each frame.
+fn camera_path(path: Option<&Path>, base: &Camera, frames: u32) -> Result<Vec<Camera>> {
+    let Some(path) = path else {
+        return Ok(vec![*base; frames as usize]);
+    };
+    let text = std::fs::read_to_string(path).with_context(|| format!("cannot read camera path {}", path.display()))?;
+    let keys: Vec<Keyframe> = serde_json::from_str(&text).with_context(|| format!("camera path {}", path.display()))?;
+    if keys.is_empty() {
+        bail!("camera path {}: no keyframes", path.display());
+    }
+    let v = |a: [f32; 3]| Vec3::from_array(a);
+    (0..frames)
+        .map(|f| {
+            let t = if frames > 1 { f as f32 / (frames - 1) as f32 } else { 0.0 } * (keys.len() - 1) as f32;
+            let i = (t.floor() as usize).min(keys.len() - 1);
+            let j = (i + 1).min(keys.len() - 1);
+            let s = t - i as f32;
+            let (a, b) = (&keys[i], &keys[j]);
+            let up = v(a.up.unwrap_or([0.0, 1.0, 0.0])).lerp(v(b.up.unwrap_or([0.0, 1.0, 0.0])), s);
+            let fov = a.fov_y.unwrap_or(base.fov_y.to_degrees()) * (1.0 - s) + b.fov_y.unwrap_or(base.fov_y.to_degrees()) * s;
+            Camera::look_at(v(a.position).lerp(v(b.position), s), v(a.target).lerp(v(b.target), s), up, fov)
+                .map_err(|e| anyhow::anyhow!("camera path {}, frame {f}: {e}", path.display()))
+        })
+        .collect()
+}
+
+/// Writes the statistics as CSV or JSON (atomically).
+pub fn write_stats(path: &Path, stats: &[FrameStats]) -> Result<()> {
+    let bytes = if path.extension().is_some_and(|e| e == "json") {
+        serde_json::to_vec_pretty(stats)?
+    } else {
+        let mut s = String::from(
+            "frame,produce_ms,train_ms,infer_ms,records,used,dropped_nonfinite,dropped_absurd,steps,loss,paths,rays,cache_queries,invalid_samples\n",
+        );
+        for f in stats {
+            s.push_str(&format!(
+                "{},{:.3},{:.3},{:.3},{},{},{},{},{},{},{},{},{},{}\n",
+                f.frame,
+                f.produce_ms,
+                f.train_ms,
+                f.infer_ms,
+                f.records,
+                f.used,
+                f.dropped_nonfinite,
+                f.dropped_absurd,
+                f.steps,
+                f.loss,
+                f.producer.paths,
+                f.producer.rays + f.inference.rays,
+                f.inference.queries,
+                f.inference.invalid_samples
+            ));
+        }
+        s.into_bytes()
+    };
+    nrc_eval::atomic::atomic_write(path, &bytes).with_context(|| format!("cannot write statistics {}", path.display()))
+}
+
+/// Runs `nrc train`.
+pub fn run(args: &TrainArgs) -> Result<()> {
+    if args.width == 0 || args.height == 0 {
+        bail!("image size {}x{} is empty", args.width, args.height);
+    }
+    if args.frames == 0 {
+        bail!("--frames must be at least 1");
+    }
+    if args.every == 0 {
+        bail!("--every must be at least 1");
+    }
+    if args.spp == 0 {
+        bail!("--spp must be at least 1");
+    }
+    if !(0.0..=1.0).contains(&args.from_terminations) {
+        bail!("--from-terminations must be in [0, 1], got {}", args.from_terminations);
+    }
+    let scene: Scene = args.scene.load()?;
+    for w in scene.warnings() {
+        eprintln!("warning: {w}");
+    }
+    let cameras = camera_path(args.camera_path.as_deref(), &scene.camera, args.frames)?;
+    if let Some(dir) = &args.frames_out {
+        std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+    }
+    let settings = args.cache.method_settings(0, args.seed)?;
+    let tracer = args.tracer.tracer();
+    let mut trainer = nrc_train::methods::scene_trainer(&scene, args.producer.clone(), args.termination, &settings, tracer)
+        .map_err(anyhow::Error::msg)?;
+    trainer.settings.renderer.nee = !args.no_nee;
+    trainer.settings.spp = args.spp;
+    trainer.settings.from_terminations = args.from_terminations;
+    eprintln!("{}", trainer.cache.describe());
+    let pool = crate::render::thread_pool(args.threads)?;
+    let bar = ProgressBar::new(args.frames as u64).with_style(
+        ProgressStyle::with_template("{elapsed_precise} [{bar:30}] {pos}/{len} frames {msg}")
+            .expect("valid progress template")
+            .progress_chars("=> "),
+    );
+    let mut all = Vec::with_capacity(args.frames as usize);
+    pool.install(|| -> Result<()> {
+        for (f, camera) in cameras.iter().enumerate() {
+            let (stats, out) = trainer.frame(&scene, camera, args.width, args.height, true)?;
+            let last = f + 1 == cameras.len();
+            if let (Some(dir), Some(out)) = (&args.frames_out, &out)
+                && (f as u32 % args.every == 0 || last)
+            {
+                out.image.write_exr(&dir.join(format!("frame-{f:05}.exr")))?;
+            }
+            bar.set_message(format!(
+                "loss {:.4}, {:.0} ms/frame",
+                stats.loss,
+                stats.produce_ms + stats.train_ms + stats.infer_ms
+            ));
+            bar.inc(1);
+            all.push(stats);
+        }
+        Ok(())
+    })?;
+    bar.finish_and_clear();
+    if let Some(path) = &args.stats {
+        write_stats(path, &all)?;
+    }
+    if let Some(path) = &args.snapshot {
+        trainer.cache.save(path)?;
+    }
+    let n = all.len() as f64;
+    let mean = |f: fn(&FrameStats) -> f64| all.iter().map(f).sum::<f64>() / n;
+    let dropped: usize = all.iter().map(|s| s.dropped_nonfinite + s.dropped_absurd).sum();
+    println!(
+        "trained {} frames of {} ({} records/frame): produce {:.1} ms, train {:.1} ms, infer {:.1} ms per frame; final loss {:.5}; {} records dropped",
+        all.len(),
+        args.producer,
+        args.cache.records,
+        mean(|s| s.produce_ms),
+        mean(|s| s.train_ms),
+        mean(|s| s.infer_ms),
+        all.last().map_or(0.0, |s| s.loss),
+        dropped
+    );
+    Ok(())
+}

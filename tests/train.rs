@@ -1,0 +1,100 @@
+//! End to end: `nrc train` writes statistics, frames and a snapshot; `nrc render --cache`
+//! renders from the snapshot deterministically; bad input is a clear error.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn nrc(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_nrc"))
+        .args(args)
+        .output()
+        .expect("nrc runs")
+}
+
+fn cornell() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/cornell-box.gltf")
+}
+
+fn text(b: &[u8]) -> String {
+    String::from_utf8_lossy(b).into_owned()
+}
+
+/// Failed cleanly: non-zero status, no panic, an `error: ...` line naming `needle`.
+fn assert_error(out: &Output, needle: &str) {
+    let err = text(&out.stderr);
+    assert!(!out.status.success(), "succeeded: {err}");
+    assert!(!err.contains("panicked"), "panic: {err}");
+    assert!(err.lines().any(|l| l.starts_with("error: ") && l.contains(needle)), "{err}");
+}
+
+#[test]
+fn train_then_render_from_the_snapshot() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = |n: &str| dir.path().join(n).to_str().unwrap().to_string();
+    let scene = cornell();
+    let out = nrc(&[
+        "train", "--scene", scene.to_str().unwrap(), "--frames", "3", "--width", "32", "--height", "24",
+        "--records", "2048", "--batch", "1024", "--snapshot", &p("c.nrc"), "--stats", &p("stats.csv"),
+        "--frames-out", &p("frames"), "--every", "2", "--producer", "mix:pt-sl=0.5,sppc=0.5",
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    assert!(text(&out.stdout).contains("trained 3 frames"), "{}", text(&out.stdout));
+    // Frames 0 and 2 (every 2nd, and the last).
+    let mut frames: Vec<String> = std::fs::read_dir(dir.path().join("frames"))
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    frames.sort();
+    assert_eq!(frames, ["frame-00000.exr", "frame-00002.exr"]);
+    let csv = std::fs::read_to_string(p("stats.csv")).unwrap();
+    let rows: Vec<&str> = csv.lines().collect();
+    assert_eq!(rows.len(), 4, "{csv}");
+    assert!(rows[0].starts_with("frame,produce_ms,train_ms,infer_ms,records,used,dropped"));
+    for row in &rows[1..] {
+        let cols: Vec<&str> = row.split(',').collect();
+        let (records, used): (usize, usize) = (cols[4].parse().unwrap(), cols[5].parse().unwrap());
+        assert!(records > 0 && used == records, "{row}");
+        assert!(cols[9].parse::<f32>().unwrap().is_finite());
+    }
+
+    // Two renders from the snapshot are identical; a different seed differs.
+    let render = |out: &str, seed: &str| {
+        let o = nrc(&[
+            "render", "--scene", scene.to_str().unwrap(), "--cache", &p("c.nrc"), "--width", "32", "--height",
+            "24", "--spp", "2", "--seed", seed, "--out", &p(out),
+        ]);
+        assert!(o.status.success(), "{}", text(&o.stderr));
+        std::fs::read(p(out)).unwrap()
+    };
+    let a = render("a.exr", "3");
+    assert_eq!(a, render("b.exr", "3"));
+    assert_ne!(a, render("c.exr", "4"));
+
+    // A truncated snapshot is an error naming the file, not a panic.
+    let bytes = std::fs::read(p("c.nrc")).unwrap();
+    std::fs::write(p("t.nrc"), &bytes[..bytes.len() / 2]).unwrap();
+    let o = nrc(&[
+        "render", "--scene", scene.to_str().unwrap(), "--cache", &p("t.nrc"), "--width", "8", "--height", "8",
+        "--out", &p("t.exr"),
+    ]);
+    assert_error(&o, "t.nrc");
+}
+
+#[test]
+fn bad_training_options_are_clear_errors() {
+    let scene = cornell();
+    let s = scene.to_str().unwrap();
+    for (args, needle) in [
+        (vec!["--producer", "ptx"], "unknown producer"),
+        (vec!["--producer", "mix:pt=0"], "positive"),
+        (vec!["--termination", "spread:-1"], "positive number"),
+        (vec!["--frames", "0"], "--frames"),
+        (vec!["--from-terminations", "2"], "--from-terminations"),
+        (vec!["--resolution", "0"], "--resolution"),
+        (vec!["--config", "/nonexistent.json"], "nonexistent"),
+    ] {
+        let mut all = vec!["train", "--scene", s, "--width", "8", "--height", "8"];
+        all.extend(args.iter());
+        assert_error(&nrc(&all), needle);
+    }
+}
