@@ -34,6 +34,54 @@ pub enum BenchCommand {
     /// Closest-hit throughput (primary and incoherent rays, Mrays/s) and path-tracer
     /// samples/s, on one thread and on all threads.
     Trace(TraceArgs),
+    /// Neural radiance cache: training samples/s and inference queries/s of both presets
+    /// (models/nrc-hashgrid.json, models/nrc-trianglewave.json) at batch 2^14 and 2^16, per
+    /// device, and the fused-vs-unfused ratios.
+    Cache(CacheBenchArgs),
+}
+
+/// Which cache devices `nrc bench cache` measures.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum BenchDevices {
+    Cpu,
+    Wgpu,
+    /// Both (wgpu is skipped with a message when no adapter exists).
+    All,
+}
+
+/// Arguments of `nrc bench cache`.
+#[derive(clap::Args, Debug)]
+pub struct CacheBenchArgs {
+    #[arg(long, value_enum, default_value_t = BenchDevices::All)]
+    pub device: BenchDevices,
+
+    /// Measure each figure for at least this many milliseconds.
+    #[arg(long, default_value_t = 2000)]
+    pub min_ms: u64,
+
+    /// Skip the unfused and custom-op paths (slow) and the fused-vs-unfused ratios.
+    #[arg(long)]
+    pub no_compare: bool,
+}
+
+/// `nrc bench cache`: prints its table as it measures (nrc_cache::bench).
+fn cache(a: &CacheBenchArgs) -> Result<()> {
+    use nrc_cache::CacheDevice;
+    if a.min_ms == 0 {
+        anyhow::bail!("--min-ms must be at least 1");
+    }
+    let options = nrc_cache::bench::BenchOptions {
+        devices: match a.device {
+            BenchDevices::Cpu => vec![CacheDevice::Cpu],
+            BenchDevices::Wgpu => vec![CacheDevice::Wgpu],
+            BenchDevices::All => vec![CacheDevice::Cpu, CacheDevice::Wgpu],
+        },
+        min_time: std::time::Duration::from_millis(a.min_ms),
+        compare_paths: !a.no_compare,
+        ..Default::default()
+    };
+    nrc_cache::bench::run(&options);
+    Ok(())
 }
 
 /// Arguments of `nrc bench trace`.
@@ -70,6 +118,7 @@ pub struct TraceArgs {
 pub fn run(cmd: &BenchCommand) -> Result<()> {
     match cmd {
         BenchCommand::Trace(a) => trace(a),
+        BenchCommand::Cache(a) => cache(a),
     }
 }
 

@@ -1,6 +1,6 @@
 //! Throughput benchmark: training samples/s and inference queries/s for both presets at batch
 //! 2^14 and 2^16 per device, the fused-vs-unfused ratios, and where the fused step's time goes.
-//! Run it with `cargo run --release -p nrc-cache --example bench` (or `nrc bench cache`).
+//! Run it with `nrc bench cache` (`cargo run --release -- bench cache --help`).
 
 use std::time::{Duration, Instant};
 
