@@ -110,6 +110,12 @@ pub struct CompareArgs {
     #[command(flatten)]
     pub cache: CacheArgs,
 
+    /// Exclude from the errors the pixels that see an emitter, and their 8 neighbours (their
+    /// error is set to zero): at low sample counts the emitters' anti-aliasing can dominate
+    /// the MSE of every method alike.
+    #[arg(long)]
+    pub exclude_emitters: bool,
+
     /// Cache methods: frames of online training before measurement (untimed).
     #[arg(long, default_value_t = 64)]
     pub train_frames: u32,
@@ -332,6 +338,7 @@ fn compare(args: &CompareArgs, budget: Budget, scene: &Scene) -> Result<()> {
     let settings = MethodSettings {
         tracer: args.depth.tracer(),
     };
+    let emitter_mask = args.exclude_emitters.then(|| emitter_pixels(scene, w, h));
     let mut cache_settings = args.model.method_settings(args.train_frames, args.seed)?;
     cache_settings.online = !args.frozen;
     let steps = if args.sweep { args.sweep_steps } else { 1 };
@@ -353,6 +360,13 @@ fn compare(args: &CompareArgs, budget: Budget, scene: &Scene) -> Result<()> {
         .map(|s| s.to_string_lossy().into_owned())
         .unwrap_or_default();
     let mut report = Report::new(format!("{scene_name}: {mode}"), w as usize, h as usize);
+    if let Some(m) = &emitter_mask {
+        let n = m.iter().filter(|x| **x).count();
+        eprintln!("excluding {n} pixels that see an emitter (and their neighbours) from the errors");
+        report.notes.push(format!(
+            "Errors exclude the {n} pixels that see an emitter or touch one that does (their error is set to zero; means are still over all pixels)."
+        ));
+    }
     report.scene = Some(args.scene.scene.display().to_string());
     report.reference = Some(match ref_meta {
         Some(m) => format!("{} ({})", m.describe(), ref_location.display()),
@@ -379,7 +393,7 @@ fn compare(args: &CompareArgs, budget: Budget, scene: &Scene) -> Result<()> {
         let mut first: Option<(Frame, ErrorMetrics)> = None;
         for r in 0..args.runs {
             let seed = pass_seed(base, r);
-            let frame = render_frame(
+            let mut frame = render_frame(
                 method.as_mut(),
                 scene,
                 &scene.camera,
@@ -390,6 +404,7 @@ fn compare(args: &CompareArgs, budget: Budget, scene: &Scene) -> Result<()> {
                     budget,
                 },
             )?;
+            exclude(&mut frame.image, emitter_mask.as_deref(), ref_image);
             let (m, flip_map) = errors(&frame.image, &ref_view, !args.no_flip, &name)?;
             if args.runs >= 2 {
                 acc.add(&ImageView::of_scene_image(&name, &frame.image)?)?;
@@ -433,7 +448,7 @@ fn compare(args: &CompareArgs, budget: Budget, scene: &Scene) -> Result<()> {
             for step in 1..steps {
                 let seed = pass_seed(base ^ 0x5EE9_5EE9_5EE9_5EE9, step);
                 let b = scaled_budget(budget, step);
-                let frame = render_frame(
+                let mut frame = render_frame(
                     method.as_mut(),
                     scene,
                     &scene.camera,
@@ -444,6 +459,7 @@ fn compare(args: &CompareArgs, budget: Budget, scene: &Scene) -> Result<()> {
                         budget: b,
                     },
                 )?;
+                exclude(&mut frame.image, emitter_mask.as_deref(), ref_image);
                 let (m, _) = errors(&frame.image, &ref_view, !args.no_flip, &name)?;
                 runs.push(record(&name, None, Some(step), seed, b, &frame, m));
                 series.points.push(SweepPoint {
@@ -555,4 +571,41 @@ fn write_images(
         )?;
     }
     Ok(())
+}
+
+/// Pixels whose footprint sees an emitter (4×4 primary rays per pixel), dilated by one pixel.
+fn emitter_pixels(scene: &Scene, w: u32, h: u32) -> Vec<bool> {
+    let sees = |x: u32, y: u32| {
+        (0..16).any(|k| {
+            let film = glam::Vec2::new(x as f32 + ((k % 4) as f32 + 0.5) / 4.0, y as f32 + ((k / 4) as f32 + 0.5) / 4.0);
+            let ray = scene.camera.generate_ray(film, w, h);
+            scene
+                .intersect(&ray)
+                .is_some_and(|hit| scene.emission(&scene.interaction(&ray, &hit)) != glam::Vec3::ZERO)
+        })
+    };
+    let direct: Vec<bool> = (0..h).flat_map(|y| (0..w).map(move |x| (x, y))).map(|(x, y)| sees(x, y)).collect();
+    let (wi, hi) = (w as i64, h as i64);
+    (0..hi)
+        .flat_map(|y| (0..wi).map(move |x| (x, y)))
+        .map(|(x, y)| {
+            (-1..=1).any(|dy| {
+                (-1..=1).any(|dx| {
+                    let (u, v) = (x + dx, y + dy);
+                    u >= 0 && v >= 0 && u < wi && v < hi && direct[(v * wi + u) as usize]
+                })
+            })
+        })
+        .collect()
+}
+
+/// Copies the reference into the excluded pixels (zero error there).
+fn exclude(image: &mut Image, mask: Option<&[bool]>, reference: &Image) {
+    if let Some(mask) = mask {
+        for ((p, r), m) in image.data.iter_mut().zip(&reference.data).zip(mask) {
+            if *m {
+                *p = *r;
+            }
+        }
+    }
 }

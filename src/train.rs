@@ -185,6 +185,12 @@ pub fn run(args: &TrainArgs) -> Result<()> {
     if let Some(dir) = &args.frames_out {
         std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
     }
+    // Output folders exist before the run, not only at its end.
+    for file in args.snapshot.iter().chain(&args.stats) {
+        if let Some(parent) = file.parent().filter(|p| !p.as_os_str().is_empty()) {
+            std::fs::create_dir_all(parent).with_context(|| format!("cannot create {}", parent.display()))?;
+        }
+    }
     let settings = args.cache.method_settings(0, args.seed)?;
     let tracer = args.tracer.tracer();
     let mut trainer = nrc_train::methods::scene_trainer(&scene, args.producer.clone(), args.termination, &settings, tracer)

@@ -1,0 +1,33 @@
+#!/usr/bin/env bash
+# Reproduces the tables of RESULTS.md: on each shipped scene, path tracing at 1 spp and each
+# producer's cache (trained online for $FRAMES frames, then measured at 1 spp, training
+# included in the frame time), at equal samples; then path tracing at the caches' mean time per
+# frame (equal time). Usage: scripts/results.sh [OUT_DIR]   (env: FRAMES, W, H, RUNS)
+set -euo pipefail
+cd "$(dirname "$0")/.."
+out=${1:-out/results}
+FRAMES=${FRAMES:-200}
+W=${W:-128}
+H=${H:-128}
+RUNS=${RUNS:-4}
+cargo build --release --quiet
+nrc=${CARGO_TARGET_DIR:-target}/release/nrc
+mkdir -p "$out"
+for scene in cornell-box caustics ajar; do
+  case $scene in
+    cornell-box) res=128; extra=(nrc-pt-sl-first); masks=("" "--exclude-emitters") ;;
+    *) res=256; extra=(); masks=("") ;;
+  esac
+  methods=$(IFS=,; echo "pt-1spp,nrc-pt,nrc-pt-sl,nrc-bt,nrc-lt,nrc-sppc${extra:+,${extra[*]}}")
+  for mask in "${masks[@]}"; do
+    dir="$out/$scene${mask:+-noemit}"
+    "$nrc" compare --scene "scenes/$scene.gltf" --methods "$methods" --equal-spp 1 \
+      --width "$W" --height "$H" --runs "$RUNS" --train-frames "$FRAMES" --records 16384 \
+      --resolution "$res" $mask --out "$dir/equal-spp"
+    # Path tracing at the mean time per frame of the caches.
+    t=$(python3 -c "import json,sys; r=json.load(open('$dir/equal-spp/report.json'))['rows']; \
+t=[x['time_per_frame_ms'] for x in r if x['method'].startswith('nrc-')]; print(round(sum(t)/len(t)))")
+    "$nrc" compare --scene "scenes/$scene.gltf" --methods pt-1spp --equal-time "$t" \
+      --width "$W" --height "$H" --runs "$RUNS" $mask --out "$dir/equal-time"
+  done
+done
