@@ -39,7 +39,7 @@ pub enum Termination {
     /// least `roughness` (0.3 by default): glossy and specular chains are traced through.
     FirstDiffuse { roughness: f32 },
     /// The area-spread heuristic of Müller et al. 2021 with threshold `c` (0.01 by default;
-    /// see [`crate::spread`]).
+    /// see [`crate::spread`]), at the first non-delta vertex where it fires.
     SpreadAngle { c: f32 },
     /// The balanced termination heuristic: at a non-delta vertex, end with probability
     /// `t = (K·p_L)² / ((K·p_L)² + p_B²)`, the power heuristic of the Lambertian density
@@ -152,7 +152,10 @@ impl CacheRenderer {
         match self.termination {
             Termination::FirstVertex => true,
             Termination::FirstDiffuse { roughness } => !bsdf.is_delta() && bsdf.roughness() >= roughness,
-            Termination::SpreadAngle { .. } => arrival.unwrap_or(false),
+            // Never at a delta vertex: its radiance is a view-dependent spike the cache cannot
+            // hold; the path goes on to the next vertex, where the spread (which only grows)
+            // still says stop.
+            Termination::SpreadAngle { .. } => arrival.unwrap_or(false) && !bsdf.is_delta(),
             Termination::Balanced { k } => {
                 // Always draw, so the stream does not depend on the BSDF.
                 let u = sampler.next_1d();

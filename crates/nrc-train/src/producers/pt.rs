@@ -87,6 +87,7 @@ impl PathProducer {
         let (mut prev_pdf, mut prev_delta) = (0.0f32, true);
         let mut spread = Spread::new(self.spread_c);
         let mut in_suffix = false;
+        let mut fired = false;
         // Segments traced so far (the camera-side segment counts, as in the path tracer).
         let mut depth: u32 = 0;
         loop {
@@ -111,7 +112,12 @@ impl PathProducer {
             if heuristic {
                 let cos = si.ng.dot(si.wo);
                 let pdf = (!prev_delta).then_some(prev_pdf);
-                if spread.arrive(dist * dist, pdf, cos) {
+                // `fired` stays set once the spread exceeds the threshold: a suffix never
+                // closes at a delta vertex (the cache cannot hold its radiance), it goes on to
+                // the next one.
+                fired |= spread.arrive(dist * dist, pdf, cos);
+                if fired && !bsdf.is_delta() {
+                    fired = false;
                     if in_suffix {
                         out.tail = Some(query);
                         break;
