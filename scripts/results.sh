@@ -15,19 +15,21 @@ nrc=${CARGO_TARGET_DIR:-target}/release/nrc
 mkdir -p "$out"
 for scene in cornell-box caustics ajar; do
   case $scene in
-    cornell-box) res=128; extra=(nrc-pt-sl-first); masks=("" "--exclude-emitters") ;;
-    *) res=256; extra=(); masks=("") ;;
+    cornell-box) res=128; refspp=1024; extra=(nrc-pt-sl-first); masks=("" "--exclude-emitters") ;;
+    caustics) res=256; refspp=4096; extra=(nrc-pt-sl-first); masks=("") ;;
+    *) res=256; refspp=1024; extra=(nrc-pt-sl-first); masks=("") ;;
   esac
   methods=$(IFS=,; echo "pt-1spp,nrc-pt,nrc-pt-sl,nrc-bt,nrc-lt,nrc-sppc${extra:+,${extra[*]}}")
   for mask in "${masks[@]}"; do
     dir="$out/$scene${mask:+-noemit}"
     "$nrc" compare --scene "scenes/$scene.gltf" --methods "$methods" --equal-spp 1 \
       --width "$W" --height "$H" --runs "$RUNS" --train-frames "$FRAMES" --records 16384 \
-      --resolution "$res" $mask --out "$dir/equal-spp"
-    # Path tracing at the mean time per frame of the caches.
-    t=$(python3 -c "import json,sys; r=json.load(open('$dir/equal-spp/report.json'))['rows']; \
-t=[x['time_per_frame_ms'] for x in r if x['method'].startswith('nrc-')]; print(round(sum(t)/len(t)))")
-    "$nrc" compare --scene "scenes/$scene.gltf" --methods pt-1spp --equal-time "$t" \
-      --width "$W" --height "$H" --runs "$RUNS" $mask --out "$dir/equal-time"
+      --resolution "$res" --reference-spp "$refspp" $mask --out "$dir/equal-spp"
+    # Path tracing at equal time: at each cache's time per frame.
+    python3 -c "import json; [print(x['method'], round(x['time_per_frame_ms'])) for x in json.load(open('$dir/equal-spp/report.json'))['rows'] if x['method'].startswith('nrc-')]" |
+    while read -r m t; do
+      "$nrc" compare --scene "scenes/$scene.gltf" --methods pt-1spp --equal-time "$t" \
+        --width "$W" --height "$H" --runs "$RUNS" --reference-spp "$refspp" $mask --out "$dir/equal-time-$m"
+    done
   done
 done

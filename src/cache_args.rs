@@ -19,13 +19,18 @@ pub enum DeviceArg {
 }
 
 impl DeviceArg {
-    /// The device, printed with the reason it was chosen.
-    pub fn resolve(self) -> CacheDevice {
-        let (device, reason) = match self {
+    /// The device and the reason it was chosen.
+    pub fn resolve(self) -> (CacheDevice, String) {
+        match self {
             Self::Auto => CacheDevice::auto(),
             Self::Cpu => (CacheDevice::Cpu, "--device cpu".to_string()),
             Self::Wgpu => (CacheDevice::Wgpu, "--device wgpu".to_string()),
-        };
+        }
+    }
+
+    /// The device, printed with the reason it was chosen.
+    pub fn resolve_and_print(self) -> CacheDevice {
+        let (device, reason) = self.resolve();
         eprintln!("cache device: {device} ({reason})");
         device
     }
@@ -68,15 +73,16 @@ impl RadianceCacheArgs {
         })
     }
 
-    /// The settings of cache methods, checked.
-    pub fn method_settings(&self, train_frames: u32, seed: u64) -> Result<CacheMethodSettings> {
+    /// The settings of cache methods, checked; `print` reports the device chosen.
+    pub fn method_settings(&self, train_frames: u32, seed: u64, print: bool) -> Result<CacheMethodSettings> {
         if self.resolution == 0 || self.resolution > 1 << 16 {
             bail!("--resolution must be in 1..=65536, got {}", self.resolution);
         }
         if self.records == 0 || self.batch == 0 {
             bail!("--records and --batch must be at least 1");
         }
-        let mut s = CacheMethodSettings::new(self.config()?, self.device.resolve());
+        let device = if print { self.device.resolve_and_print() } else { self.device.resolve().0 };
+        let mut s = CacheMethodSettings::new(self.config()?, device);
         s.resolution = self.resolution;
         s.records_per_frame = self.records;
         s.batch_size = self.batch;

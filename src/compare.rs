@@ -339,7 +339,8 @@ fn compare(args: &CompareArgs, budget: Budget, scene: &Scene) -> Result<()> {
         tracer: args.depth.tracer(),
     };
     let emitter_mask = args.exclude_emitters.then(|| emitter_pixels(scene, w, h));
-    let mut cache_settings = args.model.method_settings(args.train_frames, args.seed)?;
+    let any_cache = args.methods.iter().any(|m| matches!(m, MethodSpec::Cache(_)));
+    let mut cache_settings = args.model.method_settings(args.train_frames, args.seed, any_cache)?;
     cache_settings.online = !args.frozen;
     let steps = if args.sweep { args.sweep_steps } else { 1 };
     let total = args.methods.len() as u64 * (args.runs + steps - 1) as u64;

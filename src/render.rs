@@ -122,7 +122,7 @@ pub struct RenderArgs {
 /// Renders from a cache snapshot: cache-terminated paths at `spp`, NEE per --strategy
 /// (MIS unless `bsdf`).
 fn render_cached(args: &RenderArgs, snapshot: &std::path::Path, scene: &nrc_scene::Scene) -> Result<nrc_scene::Image> {
-    let cache = nrc_cache::RadianceCache::load(snapshot, args.device.resolve())
+    let cache = nrc_cache::RadianceCache::load(snapshot, args.device.resolve_and_print())
         .with_context(|| format!("cannot load the cache snapshot {}", snapshot.display()))?;
     let tracer = args.tracer.tracer();
     let renderer = nrc_train::CacheRenderer {

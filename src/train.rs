@@ -191,7 +191,7 @@ pub fn run(args: &TrainArgs) -> Result<()> {
             std::fs::create_dir_all(parent).with_context(|| format!("cannot create {}", parent.display()))?;
         }
     }
-    let settings = args.cache.method_settings(0, args.seed)?;
+    let settings = args.cache.method_settings(0, args.seed, true)?;
     let tracer = args.tracer.tracer();
     let mut trainer = nrc_train::methods::scene_trainer(&scene, args.producer.clone(), args.termination, &settings, tracer)
         .map_err(anyhow::Error::msg)?;
