@@ -1,0 +1,618 @@
+//! Light training (LT, the NRC thesis §5.4): training queries where light actually arrives.
+//!
+//! Light paths are traced from the lights (a point chosen by power, a cosine-distributed
+//! direction on the emitting side or sides). At every non-delta vertex `y_j` (`j ≥ 1`) the
+//! producer makes a query: the radiance leaving `y_j` toward `ωo`, where `ωo` is the direction
+//! in which the light path continues, sampled by the BSDF at `y_j` given the direction the light
+//! came from (adjoint sampling: the directions into which `y_j` scatters most of the light it
+//! receives, so the queries sit where the reflected radiance is large). Its target is an
+//! independent path-traced estimate of `L_o(y_j, ωo)` ([`outgoing_radiance`]: next-event
+//! estimation and BSDF sampling combined by MIS, Russian roulette; the emission of `y_j` itself
+//! left out), so every target is an unbiased estimate of the radiance the cache must learn.
+//!
+//! **Balancing.** Light paths leave most of the scene without queries (the shadowed parts, the
+//! surfaces far from lights). The thesis (eq. 5.11) balances this by adding samples at uniformly
+//! chosen surface points and at camera primary hits whose targets are *zero radiance*. This
+//! implementation adds samples at the same places ([`LightProducer::surface_balance`],
+//! [`LightProducer::camera_balance`]: fractions of the budget) but gives them *estimated*
+//! targets, computed exactly like the light-vertex targets. A regression on unbiased targets
+//! learns the true radiance; zero targets would pull the cache toward zero wherever balance
+//! samples fall, a bias that only vanishes where light vertices outnumber them. Both balances
+//! default to 0.
+//!
+//! This file also holds the light-path tracer shared by the bidirectional (BT) and photon
+//! (SPPC) producers: [`trace_light_path`] and its flux bookkeeping.
+//!
+//! **Light transport on light paths.** The BSDFs are written for radiance transport
+//! (`f(wo, wi)`, `wo` toward the viewer). A light path samples at `y` with `wo` set to the
+//! direction *toward the previous light vertex*, which gives `f(w_prev, w_next)`, while the
+//! physical contribution is `f(w_next, w_prev)`. For reflection and for the Lambertian and
+//! conductor lobes the two are equal (reciprocity); for refraction the generalized reciprocity
+//! `f(wo, wi)/η_o² = f(wi, wo)/η_i²` of the dielectric lobes gives the factor `η_t²/η_i²`
+//! ([`adjoint_scale`]), which removes the radiance-only `1/η²` scaling. With shading normals
+//! the update also carries Veach's correction `|w_prev·n_s| |w_next·n_g| / (|w_prev·n_g|
+//! |w_next·n_s|)` (as PBRT's light tracer does), so that a light-path vertex's weight is the
+//! flux arriving per unit *geometric* area while the BSDF integrals use shading cosines.
+
+use glam::Vec3;
+use nrc_cache::{CacheQuery, TrainingBatch};
+use nrc_render::path_tracer::{emission_mis_weight, next_event};
+use nrc_render::{PathStats, PathTracer, PixelSampler};
+use nrc_scene::{
+    LightSample, Ray, Scene, SurfaceInteraction,
+    accel::Hit,
+    bsdf::Bsdf,
+    sampling::{Frame, sample_cosine_hemisphere, sample_uniform_triangle},
+    spawn_ray,
+};
+use rayon::prelude::*;
+
+use crate::producer::{Produced, Producer, ProducerContext, ProducerStats};
+
+/// Items produced per parallel round (each index has its own random stream, so the result does
+/// not depend on the thread count).
+pub(crate) const ROUND: usize = 1024;
+
+/// The light-training producer.
+#[derive(Clone, Debug)]
+pub struct LightProducer {
+    /// Fraction of the budget spent on queries at uniformly area-sampled surface points (a
+    /// triangle chosen in proportion to its area, a uniform point on it, `ωo` cosine-distributed
+    /// on its front side). In `[0, 1]`; default 0.
+    pub surface_balance: f32,
+    /// Fraction of the budget spent on queries at camera primary hits (the context's start
+    /// rays, `ωo` toward the camera). In `[0, 1]`; default 0.
+    pub camera_balance: f32,
+}
+
+impl Default for LightProducer {
+    fn default() -> Self {
+        Self {
+            surface_balance: 0.0,
+            camera_balance: 0.0,
+        }
+    }
+}
+
+impl LightProducer {
+    /// Checks the settings: each balance finite in `[0, 1]`, their sum at most 1.
+    pub fn validate(&self) -> Result<(), String> {
+        for (name, v) in [
+            ("surface_balance", self.surface_balance),
+            ("camera_balance", self.camera_balance),
+        ] {
+            if !(0.0..=1.0).contains(&v) {
+                return Err(format!(
+                    "light training: {name} must lie in [0, 1], got {v}"
+                ));
+            }
+        }
+        if self.surface_balance + self.camera_balance > 1.0 {
+            return Err(format!(
+                "light training: surface_balance + camera_balance must be at most 1, got {}",
+                self.surface_balance + self.camera_balance
+            ));
+        }
+        Ok(())
+    }
+
+    /// The budget split `(light, surface, camera)`; out-of-range balances are clamped to
+    /// `[0, 1]` (NaN counts as 0) and scaled down to sum at most 1 (see [`Self::validate`]).
+    pub fn split(&self, budget: usize) -> (usize, usize, usize) {
+        let clean = |v: f32| if v.is_nan() { 0.0 } else { v.clamp(0.0, 1.0) };
+        let (mut s, mut c) = (clean(self.surface_balance), clean(self.camera_balance));
+        if s + c > 1.0 {
+            let t = s + c;
+            s /= t;
+            c /= t;
+        }
+        let surface = ((budget as f32 * s).round() as usize).min(budget);
+        let camera = ((budget as f32 * c).round() as usize).min(budget - surface);
+        (budget - surface - camera, surface, camera)
+    }
+}
+
+/// One training record before filtering.
+type Record = (CacheQuery, Vec3);
+
+impl Producer for LightProducer {
+    fn name(&self) -> &str {
+        "lt"
+    }
+
+    fn produce(&mut self, ctx: &ProducerContext, budget: usize, seed: u64) -> Produced {
+        let mut stats = ProducerStats::default();
+        if budget == 0 {
+            return Produced::default();
+        }
+        let (n_light, n_surface, n_camera) = self.split(budget);
+        let scene = ctx.scene;
+        let max_vertices = light_vertex_limit(&ctx.tracer, 1);
+
+        // Queries at light-path vertices: light path i uses stream (i, 0); the target of its
+        // vertex j uses stream (i, 1 + j).
+        let light = fill_rounds(n_light, |i| {
+            let mut sampler = PixelSampler::new(seed, i as u64, 0);
+            let mut ps = PathStats::default();
+            let path = trace_light_path(scene, &ctx.tracer, max_vertices, &mut sampler, &mut ps);
+            let mut out = Vec::new();
+            for (j, v) in path.vertices.iter().enumerate() {
+                let Some(wo) = v.next else { continue };
+                if v.bsdf.is_delta() {
+                    continue;
+                }
+                let mut s = PixelSampler::new(seed, i as u64, 1 + j as u64);
+                let target = outgoing_radiance(ctx, &v.si, &v.bsdf, wo, &mut s, &mut ps);
+                out.push((ctx.queries.query_toward(&v.si, &v.bsdf, wo), target));
+            }
+            (out, ps.rays())
+        });
+        stats.paths += light.tried as u64;
+        stats.rays += light.rays;
+
+        // Balance at uniformly area-sampled surface points (streams offset by 2⁶² so they
+        // never coincide with the light paths').
+        let surface = if n_surface > 0 {
+            let areas = SurfaceSampler::new(scene);
+            fill_rounds(n_surface, |i| {
+                let mut s = PixelSampler::new(seed, (1u64 << 62) + i as u64, 0);
+                let mut ps = PathStats::default();
+                let mut out = Vec::new();
+                if let Some((si, wo)) = areas.sample(scene, &mut s) {
+                    let bsdf = Bsdf::from_pbr(&scene.pbr(&si));
+                    if !bsdf.is_delta() {
+                        let target = outgoing_radiance(ctx, &si, &bsdf, wo, &mut s, &mut ps);
+                        out.push((ctx.queries.query_toward(&si, &bsdf, wo), target));
+                    }
+                }
+                (out, ps.rays())
+            })
+        } else {
+            Rounds::default()
+        };
+        stats.paths += surface.tried as u64;
+        stats.rays += surface.rays;
+
+        // Balance at camera primary hits (streams offset by 2⁶³).
+        let camera = if n_camera > 0 && !ctx.starts.is_empty() {
+            fill_rounds(n_camera, |i| {
+                let mut s = PixelSampler::new(seed, (1u64 << 63) + i as u64, 0);
+                let mut ps = PathStats::default();
+                let mut out = Vec::new();
+                ps.closest_rays += 1;
+                let ray = ctx.starts[i % ctx.starts.len()].ray;
+                if let Some(hit) = scene.intersect(&ray) {
+                    let si = scene.interaction(&ray, &hit);
+                    let bsdf = Bsdf::from_pbr(&scene.pbr(&si));
+                    if !bsdf.is_delta() {
+                        let target = outgoing_radiance(ctx, &si, &bsdf, si.wo, &mut s, &mut ps);
+                        out.push((ctx.queries.query(&si, &bsdf), target));
+                    }
+                }
+                (out, ps.rays())
+            })
+        } else {
+            Rounds::default()
+        };
+        stats.paths += camera.tried as u64;
+        stats.rays += camera.rays;
+
+        let mut batch = TrainingBatch::default();
+        for (records, n) in [
+            (light.items, n_light),
+            (surface.items, n_surface),
+            (camera.items, n_camera),
+        ] {
+            push_records(&mut batch, &mut stats, records.into_iter().take(n));
+        }
+        Produced { batch, stats }
+    }
+}
+
+/// Appends records with finite, non-negative targets; counts the others as dropped.
+pub(crate) fn push_records(
+    batch: &mut TrainingBatch,
+    stats: &mut ProducerStats,
+    records: impl Iterator<Item = Record>,
+) {
+    for (q, t) in records {
+        if t.is_finite() && t.min_element() >= 0.0 {
+            batch.queries.push(q);
+            batch.targets.push(t.to_array());
+        } else {
+            stats.dropped += 1;
+        }
+    }
+}
+
+/// What [`fill_rounds`] collected.
+#[derive(Debug)]
+pub(crate) struct Rounds<T> {
+    /// The items, in index order.
+    pub items: Vec<T>,
+    /// Indices tried.
+    pub tried: usize,
+    /// Rays traced.
+    pub rays: u64,
+}
+
+impl<T> Default for Rounds<T> {
+    fn default() -> Self {
+        Self {
+            items: Vec::new(),
+            tried: 0,
+            rays: 0,
+        }
+    }
+}
+
+/// Calls `f(i)` for `i = 0, 1, ...` in parallel rounds of [`ROUND`] indices and concatenates
+/// the items in index order until there are at least `want`. Deterministic whatever the thread
+/// count. Stops early when a round yields nothing (after at least four rounds: nothing in the
+/// scene produces items, e.g. no lights or starts that miss).
+pub(crate) fn fill_rounds<T: Send>(
+    want: usize,
+    f: impl Fn(usize) -> (Vec<T>, u64) + Sync,
+) -> Rounds<T> {
+    let mut out = Rounds::default();
+    let mut round = 0;
+    while out.items.len() < want {
+        let first = out.tried;
+        let results: Vec<(Vec<T>, u64)> = (first..first + ROUND).into_par_iter().map(&f).collect();
+        out.tried += ROUND;
+        let before = out.items.len();
+        for (items, rays) in results {
+            out.items.extend(items);
+            out.rays += rays;
+        }
+        round += 1;
+        if out.items.len() == before && round >= 4 {
+            break;
+        }
+    }
+    out
+}
+
+/// The number of light-path vertices worth tracing when the vertex's light reaches the camera
+/// through `camera_segments` more segments, under the tracer's maximum depth (segments from the
+/// camera, Mitsuba's convention); `u32::MAX` when unlimited.
+pub(crate) fn light_vertex_limit(tracer: &PathTracer, camera_segments: u32) -> u32 {
+    if tracer.max_depth <= 0 {
+        u32::MAX
+    } else {
+        (tracer.max_depth as u32).saturating_sub(camera_segments)
+    }
+}
+
+/// One surface vertex of a light path.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct LightVertex {
+    /// The hit; `si.wo` points back toward the previous light vertex (where the light came
+    /// from).
+    pub si: SurfaceInteraction,
+    pub bsdf: Bsdf,
+    pub frame: Frame,
+    /// `si.wo` in the local shading frame.
+    pub wo_local: Vec3,
+    /// Flux weight of the light arriving here, per unit geometric area, with the shading-normal
+    /// factor `|w_prev·n_s| / |w_prev·n_g|` applied: the estimate of the irradiance-weighted
+    /// integrals `∫ g(ω) L_i(ω) |ω·n_s| dω dA` is the sum of `g(ω_prev) · beta` over vertices.
+    pub beta: Vec3,
+    /// The direction (world) the BSDF sampled for the path's continuation, if it sampled one
+    /// (the path may still have ended there by Russian roulette or the depth limit).
+    pub next: Option<Vec3>,
+}
+
+/// A light path: the point on the light it started from and its surface vertices `y_1, y_2, ...`.
+#[derive(Clone, Debug, Default)]
+pub(crate) struct LightPath {
+    pub origin: Option<LightSample>,
+    pub vertices: Vec<LightVertex>,
+}
+
+/// The adjoint factor of a light-path scattering event sampled with `wo = w_prev`:
+/// `f(w_next, w_prev) / f(w_prev, w_next)`, which is `η_t² / η_i²` for refraction through a
+/// dielectric interface (index `η_t` on `w_next`'s side, `η_i` on `w_prev`'s side) and 1
+/// otherwise.
+pub(crate) fn adjoint_scale(bsdf: &Bsdf, w_prev: Vec3, w_next: Vec3) -> f32 {
+    if w_prev.z * w_next.z >= 0.0 {
+        return 1.0;
+    }
+    let eta = match *bsdf {
+        Bsdf::Dielectric { eta, .. } => eta,
+        Bsdf::MetallicRoughness { ior, .. } => ior,
+        _ => return 1.0,
+    };
+    // `eta` is the inside (z < 0) over the outside index.
+    let etap = if w_prev.z > 0.0 { eta } else { 1.0 / eta };
+    etap * etap
+}
+
+/// Traces one light path with at most `max_vertices` surface vertices: a light point chosen by
+/// power, a cosine-distributed emission direction (on a uniformly chosen side of a two-sided
+/// emitter), then BSDF sampling with Russian roulette from `tracer.rr_depth` scattering events
+/// on, relative to the emitted weight. The first vertex's weight is
+/// `β₁ = Le cos θ / (p_A(y₀) p_ω(ω₀))`; each scattering multiplies by
+/// `f(w_next, w_prev) |w_next·n_g| / p(w_next)` times the shading-normal factor described in
+/// the module documentation.
+pub(crate) fn trace_light_path(
+    scene: &Scene,
+    tracer: &PathTracer,
+    max_vertices: u32,
+    sampler: &mut PixelSampler,
+    stats: &mut PathStats,
+) -> LightPath {
+    let mut path = LightPath::default();
+    let u_light = sampler.next_1d();
+    let u_point = sampler.next_2d();
+    let u_side = sampler.next_1d();
+    let u_dir = sampler.next_2d();
+    let Some(ls) = scene.sample_light(u_light, u_point) else {
+        return path;
+    };
+    path.origin = Some(ls);
+    if max_vertices == 0 {
+        return path;
+    }
+    let (n, side_pdf) = if ls.two_sided {
+        (if u_side < 0.5 { ls.n } else { -ls.n }, 0.5)
+    } else {
+        (ls.n, 1.0)
+    };
+    let local = sample_cosine_hemisphere(u_dir);
+    let dir = Frame::from_normal(n).to_world(local);
+    let le = ls.le_toward(dir);
+    if local.z <= 0.0 || ls.pdf_area <= 0.0 || le == Vec3::ZERO {
+        return path;
+    }
+    // β = Le cos / (p_A · cos/π · side_pdf).
+    let beta0 = le * (std::f32::consts::PI / (ls.pdf_area * side_pdf));
+    let beta0_max = beta0.max_element();
+    let mut beta = beta0;
+    let mut ray = spawn_ray(ls.p, ls.n, dir);
+    let mut events: u32 = 0;
+    while (path.vertices.len() as u32) < max_vertices {
+        stats.closest_rays += 1;
+        let Some(hit) = scene.intersect(&ray) else {
+            break;
+        };
+        let si = scene.interaction(&ray, &hit);
+        let cos_s = si.wo.dot(si.ns).abs();
+        let cos_g = si.wo.dot(si.ng).abs();
+        if cos_g == 0.0 {
+            break;
+        }
+        let bsdf = Bsdf::from_pbr(&scene.pbr(&si));
+        let frame = Frame::from_normal(si.ns);
+        let wo_local = frame.to_local(si.wo);
+        let u_lobe = sampler.next_1d();
+        let u = sampler.next_2d();
+        let bs = bsdf.sample(wo_local, u, u_lobe);
+        let next = bs.map(|s| frame.to_world(s.wi));
+        path.vertices.push(LightVertex {
+            si,
+            bsdf,
+            frame,
+            wo_local,
+            beta: beta * (cos_s / cos_g),
+            next,
+        });
+        let (Some(bs), Some(wn)) = (bs, next) else {
+            break;
+        };
+        let cos_next_s = bs.wi.z.abs();
+        if cos_next_s == 0.0 {
+            break;
+        }
+        let correction = adjoint_scale(&bsdf, wo_local, bs.wi) * (cos_s * wn.dot(si.ng).abs())
+            / (cos_g * cos_next_s);
+        beta *= bs.weight * correction;
+        events += 1;
+        if !beta.is_finite() || beta.max_element() <= 0.0 {
+            break;
+        }
+        if events >= tracer.rr_depth {
+            let q = (beta.max_element() / beta0_max).min(0.95);
+            if q.is_nan() || q <= 0.0 || sampler.next_1d() >= q {
+                break;
+            }
+            beta /= q;
+        }
+        ray = spawn_ray(si.p, si.ng, wn);
+    }
+    path
+}
+
+/// A path-traced estimate of the radiance leaving the surface point `si` toward `wo` (unit,
+/// world), the point's own emission excluded: next-event estimation and BSDF sampling combined
+/// by MIS (power heuristic), Russian roulette from `tracer.rr_depth` scattering events on, as
+/// the reference path tracer. The point counts as a camera primary hit for the tracer's
+/// maximum depth (one segment already used).
+pub fn outgoing_radiance(
+    ctx: &ProducerContext,
+    si: &SurfaceInteraction,
+    bsdf: &Bsdf,
+    wo: Vec3,
+    sampler: &mut PixelSampler,
+    stats: &mut PathStats,
+) -> Vec3 {
+    let scene = ctx.scene;
+    let limit = if ctx.tracer.max_depth <= 0 {
+        u32::MAX
+    } else {
+        ctx.tracer.max_depth as u32
+    };
+    let use_nee = scene.light_count() > 0;
+    let mut radiance = Vec3::ZERO;
+    let mut throughput = Vec3::ONE;
+    let (mut si, mut bsdf, mut wo_world) = (*si, *bsdf, wo);
+    // Segments from the camera to the current vertex, and scattering events so far.
+    let mut segments: u32 = 1;
+    let mut events: u32 = 0;
+    loop {
+        if segments >= limit {
+            break;
+        }
+        let frame = Frame::from_normal(si.ns);
+        let wo = frame.to_local(wo_world);
+        if use_nee && !bsdf.is_delta() {
+            radiance +=
+                throughput * next_event(scene, &si, &bsdf, &frame, wo, true, sampler, stats);
+        } else {
+            sampler.next_1d();
+            sampler.next_2d();
+        }
+        let u_lobe = sampler.next_1d();
+        let u_dir = sampler.next_2d();
+        let Some(bs) = bsdf.sample(wo, u_dir, u_lobe) else {
+            break;
+        };
+        throughput *= bs.weight;
+        events += 1;
+        if throughput == Vec3::ZERO {
+            break;
+        }
+        if events >= ctx.tracer.rr_depth {
+            let q = throughput.max_element().min(0.95);
+            if q.is_nan() || q <= 0.0 || sampler.next_1d() >= q {
+                break;
+            }
+            throughput /= q;
+        }
+        let ray = spawn_ray(si.p, si.ng, frame.to_world(bs.wi));
+        stats.closest_rays += 1;
+        let Some(hit) = scene.intersect(&ray) else {
+            radiance += throughput * scene.background;
+            break;
+        };
+        let next = scene.interaction(&ray, &hit);
+        let le = scene.emission(&next);
+        if le != Vec3::ZERO {
+            let w = emission_mis_weight(
+                scene,
+                &next,
+                hit.t * ray.d.length(),
+                bs.pdf,
+                bs.delta || !use_nee,
+            );
+            radiance += throughput * le * w;
+        }
+        segments += 1;
+        wo_world = next.wo;
+        bsdf = Bsdf::from_pbr(&scene.pbr(&next));
+        si = next;
+    }
+    radiance
+}
+
+/// Uniform points on the scene's surfaces: a triangle chosen in proportion to its area, a
+/// uniform point on it.
+#[derive(Clone, Debug)]
+pub(crate) struct SurfaceSampler {
+    /// Cumulative areas, normalised so the last is 1.
+    cdf: Vec<f32>,
+}
+
+impl SurfaceSampler {
+    pub fn new(scene: &Scene) -> Self {
+        let mut acc = 0.0f64;
+        let mut cdf: Vec<f64> = Vec::with_capacity(scene.triangle_count());
+        for t in 0..scene.triangle_count() as u32 {
+            acc += scene.triangle_area(t) as f64;
+            cdf.push(acc);
+        }
+        let mut cdf: Vec<f32> = cdf.iter().map(|c| (c / acc) as f32).collect();
+        if let Some(last) = cdf.last_mut() {
+            *last = 1.0;
+        }
+        Self { cdf }
+    }
+
+    /// A uniform surface point with a direction cosine-distributed about the front side
+    /// (the side the geometric normal points to: the visible side by glTF's winding rule) of
+    /// its shading normal. Uses four numbers of `sampler`.
+    pub fn sample(
+        &self,
+        scene: &Scene,
+        sampler: &mut PixelSampler,
+    ) -> Option<(SurfaceInteraction, Vec3)> {
+        let u = sampler.next_1d();
+        let u_tri = sampler.next_2d();
+        let u_dir = sampler.next_2d();
+        if self.cdf.is_empty() {
+            return None;
+        }
+        let tri = self
+            .cdf
+            .partition_point(|&c| c <= u)
+            .min(self.cdf.len() - 1) as u32;
+        let (b1, b2) = sample_uniform_triangle(u_tri);
+        let [a, b, c] = scene.triangle_vertices(tri);
+        let p = a * (1.0 - b1 - b2) + b * b1 + c * b2;
+        let ng = scene.triangle_normal(tri);
+        // A ray arriving along −ng at the point: the interaction fills in the shading data.
+        let ray = Ray::new(p + ng, -ng);
+        let si = scene.interaction(
+            &ray,
+            &Hit {
+                t: 1.0,
+                tri,
+                b1,
+                b2,
+            },
+        );
+        let wo = Frame::from_normal(si.ns).to_world(sample_cosine_hemisphere(u_dir));
+        (wo.dot(si.ng) > 0.0).then_some((SurfaceInteraction { wo, ..si }, wo))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The adjoint factor turns the sampled `f(w_prev, w_next)` into the physical
+    /// `f(w_next, w_prev)` for rough refraction in both directions, and is 1 for reflection.
+    #[test]
+    fn adjoint_scale_matches_reciprocity() {
+        let glass = Bsdf::Dielectric {
+            eta: 1.5,
+            alpha: 0.3,
+            tint: Vec3::ONE,
+        };
+        let (mut checked, mut refracted) = (0, 0);
+        for i in 0..64u64 {
+            let mut s = PixelSampler::new(5, i, 0);
+            let w_prev = nrc_scene::sampling::sample_uniform_sphere(s.next_2d());
+            let u = s.next_2d();
+            let Some(bs) = glass.sample(w_prev, u, s.next_1d()) else {
+                continue;
+            };
+            if bs.delta {
+                continue;
+            }
+            let forward = glass.eval(w_prev, bs.wi);
+            let physical = glass.eval(bs.wi, w_prev);
+            if forward.x < 1e-3 {
+                continue;
+            }
+            let scale = adjoint_scale(&glass, w_prev, bs.wi);
+            assert!(
+                ((forward.x * scale) / physical.x - 1.0).abs() < 1e-3,
+                "{w_prev} {:?}: {forward} {physical} {scale}",
+                bs.wi
+            );
+            checked += 1;
+            refracted += (w_prev.z * bs.wi.z < 0.0) as u32;
+        }
+        assert!(
+            checked > 20 && refracted > 5,
+            "{checked} checked, {refracted} refracted"
+        );
+        let diffuse = Bsdf::Diffuse { albedo: Vec3::ONE };
+        assert_eq!(adjoint_scale(&diffuse, Vec3::Z, -Vec3::Z), 1.0);
+        assert_eq!(
+            adjoint_scale(&glass, Vec3::Z, Vec3::new(0.6, 0.0, 0.8)),
+            1.0
+        );
+    }
+}

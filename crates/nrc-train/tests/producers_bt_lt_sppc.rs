@@ -1,0 +1,435 @@
+//! Bidirectional (BT), light (LT) and photon-collection (SPPC) training producers, checked
+//! against a configuration with a closed-form answer: the *emissive enclosure*, a closed box
+//! whose inward-facing walls all emit `Le` and reflect diffusely with albedo `ρ`. Everywhere
+//! inside, `L = Le + ρ L`, so the radiance reflected at any wall point (the cache's target:
+//! emission excluded) is `ρ Le / (1 − ρ)`. With `ρ = (0.2, 0.5, 0.8)` and `Le = 1` that is
+//! `(0.25, 1, 4)`.
+//!
+//! Statistical bounds: BT and LT targets are independent unbiased estimates (one light path
+//! per record), so their mean must lie within 4 standard errors (from the sample variance) of
+//! the exact value, per channel; a false alarm has probability about 6·10⁻⁵ per check (the
+//! seeds are fixed, so the tests are deterministic). SPPC estimates are unbiased in this scene
+//! for balls inside one wall (see `sppc.rs`: `τ/πR²` sums per-frame estimates whose radius was
+//! fixed before the frame's photons), and balls placed on a grid whose spacing exceeds their
+//! diameter share no photon hit, so the same 4-standard-error bound applies to their mean.
+
+#[path = "../../nrc-render/tests/common/mod.rs"]
+mod common;
+
+use common::{Mesh, SceneBuilder, mat};
+use glam::Vec3;
+use nrc_cache::TrainingBatch;
+use nrc_render::PathTracer;
+use nrc_scene::{Ray, Scene};
+use nrc_train::producers::{bt::BidirectionalProducer, lt::LightProducer, sppc::SppcProducer};
+use nrc_train::starts::{StartRay, camera_tiles};
+use nrc_train::view::ZeroView;
+use nrc_train::{Producer, ProducerContext, QueryMaker};
+
+const RHO: Vec3 = Vec3::new(0.2, 0.5, 0.8);
+
+/// `ρ Le / (1 − ρ)` with `Le = 1`.
+fn exact() -> Vec3 {
+    RHO / (Vec3::ONE - RHO)
+}
+
+/// The emissive enclosure `[-1, 1]³`, camera at the centre looking at the `z = −1` wall with a
+/// 60° field of view (its primary hits stay at least 0.42 from the wall's edges, where the
+/// connection's `1/d²` to the adjacent walls stays bounded).
+fn enclosure() -> Scene {
+    let mut b = SceneBuilder::new();
+    let m = b.material(mat::emissive(RHO, Vec3::ONE, false));
+    b.mesh(
+        &Mesh::cuboid(Vec3::splat(-1.0), Vec3::splat(1.0), true),
+        m,
+        false,
+    )
+    .camera(Vec3::ZERO, -Vec3::Z, 60.0);
+    b.build()
+}
+
+fn tracer() -> PathTracer {
+    PathTracer {
+        max_depth: -1,
+        rr_depth: 3,
+        ..PathTracer::default()
+    }
+}
+
+/// Runs `f` with a context over `scene` and `starts`.
+fn with_ctx<R>(scene: &Scene, starts: &[StartRay], f: impl FnOnce(&ProducerContext) -> R) -> R {
+    let queries = QueryMaker::new(&scene.bounds());
+    let ctx = ProducerContext {
+        scene,
+        camera: &scene.camera,
+        cache: &ZeroView,
+        queries: &queries,
+        starts,
+        tracer: tracer(),
+    };
+    f(&ctx)
+}
+
+fn tiles(scene: &Scene, n: usize) -> Vec<StartRay> {
+    camera_tiles(&scene.camera, 64, 64, n, 11)
+}
+
+/// Per-channel mean and standard error of the mean of the targets.
+fn mean_se(targets: &[[f32; 3]]) -> ([f64; 3], [f64; 3]) {
+    let n = targets.len() as f64;
+    let mut mean = [0.0; 3];
+    let mut se = [0.0; 3];
+    for c in 0..3 {
+        let m = targets.iter().map(|t| t[c] as f64).sum::<f64>() / n;
+        let var = targets
+            .iter()
+            .map(|t| (t[c] as f64 - m).powi(2))
+            .sum::<f64>()
+            / (n - 1.0);
+        mean[c] = m;
+        se[c] = (var / n).sqrt();
+    }
+    (mean, se)
+}
+
+/// Every target finite and non-negative; the mean within 4 standard errors of `ρ/(1 − ρ)` per
+/// channel, and the standard error small enough (2% of the value) for the check to mean
+/// something.
+fn assert_unbiased(batch: &TrainingBatch, what: &str) {
+    assert_eq!(batch.queries.len(), batch.targets.len());
+    for t in &batch.targets {
+        assert!(
+            t.iter().all(|v| v.is_finite() && *v >= 0.0),
+            "{what}: bad target {t:?}"
+        );
+    }
+    let (mean, se) = mean_se(&batch.targets);
+    let exact = exact();
+    for c in 0..3 {
+        let d = mean[c] - exact[c] as f64;
+        println!(
+            "{what} channel {c}: mean {:.4} exact {:.4} se {:.4} ({:+.2} se, n {})",
+            mean[c],
+            exact[c],
+            se[c],
+            d / se[c],
+            batch.targets.len()
+        );
+        assert!(
+            d.abs() <= 4.0 * se[c],
+            "{what}: channel {c} mean {} vs exact {}, {:.1} standard errors",
+            mean[c],
+            exact[c],
+            d / se[c]
+        );
+        assert!(
+            se[c] <= 0.02 * exact[c] as f64,
+            "{what}: channel {c} standard error {} too large",
+            se[c]
+        );
+    }
+}
+
+#[test]
+fn bt_targets_match_the_enclosure() {
+    let scene = enclosure();
+    let starts = tiles(&scene, 4096);
+    let out = with_ctx(&scene, &starts, |ctx| {
+        BidirectionalProducer::default().produce(ctx, 30000, 1)
+    });
+    assert_eq!(
+        out.batch.queries.len(),
+        30000,
+        "every start hits a diffuse wall"
+    );
+    assert_eq!(out.stats.dropped, 0);
+    assert_unbiased(&out.batch, "bt");
+}
+
+#[test]
+fn bt_with_depth_two_sees_direct_light_only() {
+    // max_depth 2: camera → x → light, so only the j = 0 connection: the reflected direct
+    // light ρ Le (each wall sees the other five; the wall x lies on contributes nothing).
+    let scene = enclosure();
+    let starts = tiles(&scene, 4096);
+    let queries = QueryMaker::new(&scene.bounds());
+    let ctx = ProducerContext {
+        scene: &scene,
+        camera: &scene.camera,
+        cache: &ZeroView,
+        queries: &queries,
+        starts: &starts,
+        tracer: PathTracer {
+            max_depth: 2,
+            ..tracer()
+        },
+    };
+    let out = BidirectionalProducer::default().produce(&ctx, 30000, 2);
+    let (mean, se) = mean_se(&out.batch.targets);
+    for c in 0..3 {
+        println!(
+            "bt depth 2 channel {c}: mean {:.4} exact {:.4} se {:.4}",
+            mean[c], RHO[c], se[c]
+        );
+        assert!(
+            (mean[c] - RHO[c] as f64).abs() <= 4.0 * se[c],
+            "channel {c}: {} vs {}",
+            mean[c],
+            RHO[c]
+        );
+    }
+}
+
+#[test]
+fn lt_targets_match_the_enclosure() {
+    let scene = enclosure();
+    let starts = tiles(&scene, 4096);
+    let out = with_ctx(&scene, &starts, |ctx| {
+        LightProducer::default().produce(ctx, 20000, 3)
+    });
+    assert_eq!(out.batch.queries.len(), 20000);
+    assert_unbiased(&out.batch, "lt");
+    // The queries lie on the walls, spread over all six.
+    let mut walls = [0usize; 6];
+    for q in &out.batch.queries {
+        let n = Vec3::from_array(q.normal);
+        let axis = n.abs().max_position();
+        walls[2 * axis + (n[axis] > 0.0) as usize] += 1;
+    }
+    assert!(walls.iter().all(|&w| w > 20000 / 12), "{walls:?}");
+}
+
+#[test]
+fn lt_balance_records_are_estimated_not_zero() {
+    let scene = enclosure();
+    let starts = tiles(&scene, 4096);
+    let producer = LightProducer {
+        surface_balance: 0.3,
+        camera_balance: 0.3,
+    };
+    assert!(producer.validate().is_ok());
+    assert_eq!(producer.split(20000), (8000, 6000, 6000));
+    let out = with_ctx(&scene, &starts, |ctx| {
+        producer.clone().produce(ctx, 20000, 4)
+    });
+    assert_eq!(out.batch.queries.len(), 20000);
+    assert_unbiased(&out.batch, "lt balanced");
+    // The camera part (the last 6000 records) faces the camera: direction = −ray direction,
+    // on the z = −1 wall.
+    for q in &out.batch.queries[14000..] {
+        assert!(q.normal[2] > 0.99 && q.direction[2] > 0.0, "{q:?}");
+    }
+    for bad in [
+        LightProducer {
+            surface_balance: -0.1,
+            camera_balance: 0.0,
+        },
+        LightProducer {
+            surface_balance: f32::NAN,
+            camera_balance: 0.0,
+        },
+        LightProducer {
+            surface_balance: 0.7,
+            camera_balance: 0.7,
+        },
+    ] {
+        assert!(bad.validate().is_err(), "{bad:?}");
+        let (l, s, c) = bad.split(100);
+        assert_eq!(l + s + c, 100);
+    }
+}
+
+/// An SPPC producer with the given capacity, replacement fraction and photons per record.
+fn sppc(capacity: usize, replace_fraction: f32, photons_per_record: f32) -> SppcProducer {
+    let mut p = SppcProducer::default();
+    p.capacity = capacity;
+    p.replace_fraction = replace_fraction;
+    p.photons_per_record = photons_per_record;
+    p
+}
+
+/// Rays from the centre to a grid of points on every wall, 0.1 apart within `[-0.6, 0.6]²`:
+/// 1014 balls, at least 0.4 from any edge.
+fn wall_grid() -> Vec<StartRay> {
+    let mut out = Vec::new();
+    for axis in 0..3 {
+        for side in [-1.0f32, 1.0] {
+            for a in -6..=6 {
+                for b in -6..=6 {
+                    let mut p = Vec3::ZERO;
+                    p[axis] = side;
+                    p[(axis + 1) % 3] = a as f32 * 0.1;
+                    p[(axis + 2) % 3] = b as f32 * 0.1;
+                    out.push(StartRay {
+                        ray: Ray::new(Vec3::ZERO, p.normalize()),
+                    });
+                }
+            }
+        }
+    }
+    out
+}
+
+#[test]
+fn sppc_estimates_converge_in_the_enclosure() {
+    let scene = enclosure();
+    let starts = wall_grid();
+    let n = starts.len();
+    let mut producer = sppc(n, 0.0, 48.0);
+    assert!(producer.validate().is_ok());
+    let r0 = 0.01 * (2.0 * 3f32.sqrt());
+    // Grid spacing 0.1 > 2 r0: no two balls share a photon hit.
+    assert!(2.0 * r0 < 0.1);
+    let frames = 10;
+    let mut spread = Vec::new();
+    let mut last = None;
+    for frame in 0..frames {
+        let out = with_ctx(&scene, &starts, |ctx| producer.produce(ctx, n, 100 + frame));
+        assert_eq!(out.batch.queries.len(), n);
+        let (mean, se) = mean_se(&out.batch.targets);
+        spread.push(se[1] * (n as f64).sqrt() / mean[1]);
+        last = Some(out);
+    }
+    // Radius reduction: the first frame keeps α of the photons, so R² ≤ α r0² for every ball.
+    for b in producer.balls() {
+        assert!(
+            b.radius2 <= 0.7 * r0 * r0 * 1.0001,
+            "radius² {} vs {}",
+            b.radius2,
+            r0 * r0
+        );
+        assert!(b.photons > 0.0);
+    }
+    // The balls' estimates converge: their relative spread shrinks with the frames.
+    println!("sppc relative spread of the ball estimates per frame: {spread:.3?}");
+    assert!(spread[frames as usize - 1] < 0.6 * spread[0], "{spread:?}");
+    assert_unbiased(&last.unwrap().batch, "sppc");
+}
+
+#[test]
+fn sppc_ring_replaces_the_oldest_balls() {
+    let scene = enclosure();
+    let starts = tiles(&scene, 400);
+    let mut producer = sppc(300, 0.25, 8.0);
+    let first = with_ctx(&scene, &starts, |ctx| producer.produce(ctx, 100, 1));
+    assert_eq!(first.batch.queries.len(), 100);
+    let photons_per_frame = 800;
+    assert_eq!(producer.balls().count(), 300);
+    assert!(producer.balls().all(|b| b.emitted == photons_per_frame));
+    let second = with_ctx(&scene, &starts, |ctx| producer.produce(ctx, 100, 2));
+    assert_eq!(second.batch.queries.len(), 100);
+    let emitted: Vec<u64> = producer.balls().map(|b| b.emitted).collect();
+    // Oldest first: 225 balls from the first frame, then the 75 new ones.
+    assert_eq!(emitted.len(), 300);
+    assert!(
+        emitted[..225].iter().all(|&e| e == 2 * photons_per_frame),
+        "{emitted:?}"
+    );
+    assert!(
+        emitted[225..].iter().all(|&e| e == photons_per_frame),
+        "{emitted:?}"
+    );
+    // Records come oldest first.
+    let oldest: Vec<[f32; 3]> = producer
+        .balls()
+        .take(100)
+        .map(|b| b.query.position)
+        .collect();
+    let got: Vec<[f32; 3]> = second.batch.queries.iter().map(|q| q.position).collect();
+    assert_eq!(oldest, got);
+    let mut bad = SppcProducer::default();
+    bad.alpha = 0.0;
+    assert!(bad.validate().is_err());
+    bad.alpha = 0.7;
+    bad.initial_radius = f32::NAN;
+    assert!(bad.validate().unwrap_err().contains("initial_radius"));
+}
+
+/// Runs `f` on a pool of `threads` threads.
+fn on_threads<R: Send>(threads: usize, f: impl FnOnce() -> R + Send) -> R {
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .unwrap()
+        .install(f)
+}
+
+#[test]
+fn deterministic_whatever_the_thread_count_and_within_budget() {
+    let scene = enclosure();
+    let starts = tiles(&scene, 1000);
+    let run = |threads: usize| {
+        on_threads(threads, || {
+            with_ctx(&scene, &starts, |ctx| {
+                let bt = BidirectionalProducer::default().produce(ctx, 2500, 7).batch;
+                let lt = LightProducer {
+                    surface_balance: 0.2,
+                    camera_balance: 0.2,
+                }
+                .produce(ctx, 2500, 7)
+                .batch;
+                let mut sppc = sppc(1500, 0.25, 4.0);
+                let s1 = sppc.produce(ctx, 777, 7).batch;
+                let s2 = sppc.produce(ctx, 777, 8).batch;
+                (bt, lt, s1, s2)
+            })
+        })
+    };
+    let one = run(1);
+    let two = run(2);
+    for (name, a, b) in [
+        ("bt", &one.0, &two.0),
+        ("lt", &one.1, &two.1),
+        ("sppc 1", &one.2, &two.2),
+        ("sppc 2", &one.3, &two.3),
+    ] {
+        assert_eq!(
+            a.targets, b.targets,
+            "{name}: targets differ between 1 and 2 threads"
+        );
+        assert_eq!(
+            a.queries, b.queries,
+            "{name}: queries differ between 1 and 2 threads"
+        );
+        assert!(!a.targets.is_empty());
+        assert!(
+            a.targets
+                .iter()
+                .flatten()
+                .all(|v| v.is_finite() && *v >= 0.0)
+        );
+    }
+    assert_eq!(one.0.targets.len(), 2500);
+    assert_eq!(one.1.targets.len(), 2500);
+    assert_eq!(one.2.targets.len(), 777);
+    assert_eq!(one.3.targets.len(), 777);
+    // Small budgets are respected exactly, and a zero budget gives nothing.
+    with_ctx(&scene, &starts, |ctx| {
+        for budget in [0, 1, 37] {
+            assert_eq!(
+                BidirectionalProducer::default()
+                    .produce(ctx, budget, 1)
+                    .batch
+                    .targets
+                    .len(),
+                budget
+            );
+            assert_eq!(
+                LightProducer::default()
+                    .produce(ctx, budget, 1)
+                    .batch
+                    .targets
+                    .len(),
+                budget
+            );
+            assert_eq!(
+                SppcProducer::default()
+                    .produce(ctx, budget, 1)
+                    .batch
+                    .targets
+                    .len(),
+                budget
+            );
+        }
+    });
+}
