@@ -33,3 +33,9 @@ for scene in cornell-box caustics ajar; do
     done
   done
 done
+# Caustics, termination study: at the first vertex or the first diffuse vertex the cache's own
+# caustic (what SPPC's photons carry) shows; the spread heuristic never ends at the primary hit.
+"$nrc" compare --scene scenes/caustics.gltf \
+  --methods nrc-pt-first,nrc-sppc-first,nrc-bt-first,nrc-lt-first,nrc-pt-diffuse,nrc-sppc-diffuse \
+  --equal-spp 1 --width "$W" --height "$H" --runs "$RUNS" --train-frames "$FRAMES" --records 16384 \
+  --resolution 256 --reference-spp 4096 --out "$out-extra/caustics-first/equal-spp"
