@@ -74,14 +74,23 @@ impl RadianceCacheArgs {
     }
 
     /// The settings of cache methods, checked; `print` reports the device chosen.
-    pub fn method_settings(&self, train_frames: u32, seed: u64, print: bool) -> Result<CacheMethodSettings> {
+    pub fn method_settings(
+        &self,
+        train_frames: u32,
+        seed: u64,
+        print: bool,
+    ) -> Result<CacheMethodSettings> {
         if self.resolution == 0 || self.resolution > 1 << 16 {
             bail!("--resolution must be in 1..=65536, got {}", self.resolution);
         }
         if self.records == 0 || self.batch == 0 {
             bail!("--records and --batch must be at least 1");
         }
-        let device = if print { self.device.resolve_and_print() } else { self.device.resolve().0 };
+        let device = if print {
+            self.device.resolve_and_print()
+        } else {
+            self.device.resolve().0
+        };
         let mut s = CacheMethodSettings::new(self.config()?, device);
         s.resolution = self.resolution;
         s.records_per_frame = self.records;

@@ -23,12 +23,12 @@ use nrc_eval::plot::plot_error_vs_time;
 use nrc_eval::png_output::{ColorMap, Scale, write_false_color_png};
 use nrc_eval::sweep::time_to_error_table;
 use nrc_eval::{
-    BiasVarianceAccumulator, ErrorMetrics, HdrFlipParams, ImageView, Report, ReportRow, ScalarImage, SweepPoint,
-    SweepSeries, hdr_flip, write_report,
+    BiasVarianceAccumulator, ErrorMetrics, HdrFlipParams, ImageView, Report, ReportRow,
+    ScalarImage, SweepPoint, SweepSeries, hdr_flip, write_report,
 };
 use nrc_render::methods::{Budget, Frame, FrameRequest, MethodSettings, pass_seed, render_frame};
-use nrc_train::methods::MethodSpec;
 use nrc_scene::{Image, Scene};
+use nrc_train::methods::MethodSpec;
 use serde::{Deserialize, Serialize};
 
 use crate::reference::{self, CacheArgs, DepthArgs, Reference, ReferenceRequest};
@@ -247,7 +247,11 @@ fn mean_metrics(ms: &[ErrorMetrics]) -> ErrorMetrics {
         mse: avg(|m| m.mse),
         rel_mse: avg(|m| m.rel_mse),
         mape: avg(|m| m.mape),
-        flip: ms.iter().map(|m| m.flip).sum::<Option<f64>>().map(|s| s / n),
+        flip: ms
+            .iter()
+            .map(|m| m.flip)
+            .sum::<Option<f64>>()
+            .map(|s| s / n),
     }
 }
 
@@ -260,7 +264,10 @@ fn validate(args: &CompareArgs) -> Result<Budget> {
         args.height
     );
     ensure!(args.runs >= 1, "--runs must be at least 1");
-    ensure!(args.exposure.is_finite(), "--exposure must be a finite number");
+    ensure!(
+        args.exposure.is_finite(),
+        "--exposure must be a finite number"
+    );
     ensure!(
         (1..=16).contains(&args.sweep_steps),
         "--sweep-steps must be between 1 and 16, got {}",
@@ -318,7 +325,11 @@ fn compare(args: &CompareArgs, budget: Budget, scene: &Scene) -> Result<()> {
     };
     eprintln!(
         "reference: {} {}",
-        if reference.reused { "reused" } else { "rendered" },
+        if reference.reused {
+            "reused"
+        } else {
+            "rendered"
+        },
         reference.location.display()
     );
     let Reference {
@@ -339,8 +350,13 @@ fn compare(args: &CompareArgs, budget: Budget, scene: &Scene) -> Result<()> {
         tracer: args.depth.tracer(),
     };
     let emitter_mask = args.exclude_emitters.then(|| emitter_pixels(scene, w, h));
-    let any_cache = args.methods.iter().any(|m| matches!(m, MethodSpec::Cache(_)));
-    let mut cache_settings = args.model.method_settings(args.train_frames, args.seed, any_cache)?;
+    let any_cache = args
+        .methods
+        .iter()
+        .any(|m| matches!(m, MethodSpec::Cache(_)));
+    let mut cache_settings = args
+        .model
+        .method_settings(args.train_frames, args.seed, any_cache)?;
     cache_settings.online = !args.frozen;
     let steps = if args.sweep { args.sweep_steps } else { 1 };
     let total = args.methods.len() as u64 * (args.runs + steps - 1) as u64;
@@ -363,7 +379,9 @@ fn compare(args: &CompareArgs, budget: Budget, scene: &Scene) -> Result<()> {
     let mut report = Report::new(format!("{scene_name}: {mode}"), w as usize, h as usize);
     if let Some(m) = &emitter_mask {
         let n = m.iter().filter(|x| **x).count();
-        eprintln!("excluding {n} pixels that see an emitter (and their neighbours) from the errors");
+        eprintln!(
+            "excluding {n} pixels that see an emitter (and their neighbours) from the errors"
+        );
         report.notes.push(format!(
             "Errors exclude the {n} pixels that see an emitter or touch one that does (their error is set to zero; means are still over all pixels)."
         ));
@@ -410,7 +428,15 @@ fn compare(args: &CompareArgs, budget: Budget, scene: &Scene) -> Result<()> {
             if args.runs >= 2 {
                 acc.add(&ImageView::of_scene_image(&name, &frame.image)?)?;
             }
-            runs.push(record(&name, Some(r), (r == 0).then_some(0), seed, budget, &frame, m));
+            runs.push(record(
+                &name,
+                Some(r),
+                (r == 0).then_some(0),
+                seed,
+                budget,
+                &frame,
+                m,
+            ));
             metrics.push(m);
             time_ms += frame.elapsed.as_secs_f64() * 1e3;
             spp += frame.samples_per_pixel as f64;
@@ -490,7 +516,8 @@ fn compare(args: &CompareArgs, budget: Budget, scene: &Scene) -> Result<()> {
         let baseline = &report.sweeps[0];
         let last = baseline.curve(Metric::RelMse).last().map(|p| p.0);
         if let Some(t) = last {
-            let table = time_to_error_table(&report.sweeps, Metric::RelMse, &baseline.method.clone(), t)?;
+            let table =
+                time_to_error_table(&report.sweeps, Metric::RelMse, &baseline.method.clone(), t)?;
             report.time_to_error.push(table);
         }
     }
@@ -501,7 +528,9 @@ fn compare(args: &CompareArgs, budget: Budget, scene: &Scene) -> Result<()> {
         args.runs
     ));
     if let Budget::Time(_) = budget {
-        report.notes.push(format!("Equal-time tolerance: {TOLERANCE}."));
+        report
+            .notes
+            .push(format!("Equal-time tolerance: {TOLERANCE}."));
     }
     if args.sweep {
         report.notes.push(format!(
@@ -510,9 +539,9 @@ fn compare(args: &CompareArgs, budget: Budget, scene: &Scene) -> Result<()> {
         ));
     }
     if invalid > 0 {
-        report
-            .notes
-            .push(format!("{invalid} samples were NaN or infinite and counted as black."));
+        report.notes.push(format!(
+            "{invalid} samples were NaN or infinite and counted as black."
+        ));
         eprintln!("warning: {invalid} samples were NaN or infinite and counted as black");
     }
 
@@ -561,7 +590,10 @@ fn write_images(
         &args.out.join(format!("{name}-relmse.png")),
         &rel_mse_map(&x, reference, REL_MSE_EPSILON)?,
         ColorMap::Viridis,
-        Scale::Log { min: 1e-4, max: 10.0 },
+        Scale::Log {
+            min: 1e-4,
+            max: 10.0,
+        },
     )?;
     if let Some(map) = flip {
         write_false_color_png(
@@ -578,14 +610,20 @@ fn write_images(
 fn emitter_pixels(scene: &Scene, w: u32, h: u32) -> Vec<bool> {
     let sees = |x: u32, y: u32| {
         (0..16).any(|k| {
-            let film = glam::Vec2::new(x as f32 + ((k % 4) as f32 + 0.5) / 4.0, y as f32 + ((k / 4) as f32 + 0.5) / 4.0);
+            let film = glam::Vec2::new(
+                x as f32 + ((k % 4) as f32 + 0.5) / 4.0,
+                y as f32 + ((k / 4) as f32 + 0.5) / 4.0,
+            );
             let ray = scene.camera.generate_ray(film, w, h);
-            scene
-                .intersect(&ray)
-                .is_some_and(|hit| scene.emission(&scene.interaction(&ray, &hit)) != glam::Vec3::ZERO)
+            scene.intersect(&ray).is_some_and(|hit| {
+                scene.emission(&scene.interaction(&ray, &hit)) != glam::Vec3::ZERO
+            })
         })
     };
-    let direct: Vec<bool> = (0..h).flat_map(|y| (0..w).map(move |x| (x, y))).map(|(x, y)| sees(x, y)).collect();
+    let direct: Vec<bool> = (0..h)
+        .flat_map(|y| (0..w).map(move |x| (x, y)))
+        .map(|(x, y)| sees(x, y))
+        .collect();
     let (wi, hi) = (w as i64, h as i64);
     (0..hi)
         .flat_map(|y| (0..wi).map(move |x| (x, y)))

@@ -224,7 +224,11 @@ use nrc_scene::gltf_load::percent_decode;
 /// The JSON document of a `.gltf` file, or the JSON chunk of a `.glb` container.
 fn gltf_json(path: &Path, bytes: &[u8]) -> Result<serde_json::Value> {
     let json = if bytes.starts_with(b"glTF") {
-        ensure!(bytes.len() >= 20, "{}: truncated .glb header", path.display());
+        ensure!(
+            bytes.len() >= 20,
+            "{}: truncated .glb header",
+            path.display()
+        );
         let len = u32::from_le_bytes(bytes[12..16].try_into().expect("4 bytes")) as usize;
         ensure!(
             &bytes[16..20] == b"JSON",
@@ -242,7 +246,8 @@ fn gltf_json(path: &Path, bytes: &[u8]) -> Result<serde_json::Value> {
 
 /// SHA-256 (hex) of the scene file and of every external buffer and image it names.
 pub fn scene_content_hash(path: &Path) -> Result<String> {
-    let bytes = std::fs::read(path).with_context(|| format!("cannot read scene {}", path.display()))?;
+    let bytes =
+        std::fs::read(path).with_context(|| format!("cannot read scene {}", path.display()))?;
     let mut hasher = Sha256::new();
     let mut add = |name: &str, data: &[u8]| {
         hasher.update((name.len() as u64).to_le_bytes());
@@ -265,8 +270,13 @@ pub fn scene_content_hash(path: &Path) -> Result<String> {
                 continue; // Embedded: already hashed with the scene file.
             }
             let file = base.join(percent_decode(uri));
-            let data = std::fs::read(&file)
-                .with_context(|| format!("cannot read {} (named by scene {})", file.display(), path.display()))?;
+            let data = std::fs::read(&file).with_context(|| {
+                format!(
+                    "cannot read {} (named by scene {})",
+                    file.display(),
+                    path.display()
+                )
+            })?;
             add(uri, &data);
         }
     }
@@ -280,7 +290,14 @@ fn hex(bytes: &[u8]) -> String {
 /// The key of a request, given the scene's content hash.
 fn request_key(req: &ReferenceRequest<'_>, scene_content: &str) -> String {
     let c = &req.scene.camera;
-    let bits = |v: Vec3| format!("{:08x},{:08x},{:08x}", v.x.to_bits(), v.y.to_bits(), v.z.to_bits());
+    let bits = |v: Vec3| {
+        format!(
+            "{:08x},{:08x},{:08x}",
+            v.x.to_bits(),
+            v.y.to_bits(),
+            v.z.to_bits()
+        )
+    };
     let text = format!(
         "{FORMAT}\nscene {scene_content}\ncamera {} {} {} {:08x}\nsize {}x{}\nspp {}\nseed {}\nmax_depth {}\nrr_depth {}\nbackground {}\n",
         bits(c.position),
@@ -361,7 +378,8 @@ pub fn obtain(req: &ReferenceRequest<'_>, cache_dir: &Path, force: bool) -> Resu
         return Ok(Reference { reused: true, ..r });
     }
 
-    std::fs::create_dir_all(&dir).with_context(|| format!("cannot create reference folder {}", dir.display()))?;
+    std::fs::create_dir_all(&dir)
+        .with_context(|| format!("cannot create reference folder {}", dir.display()))?;
     // An earlier entry is invalid from here on: its sidecar goes first.
     match std::fs::remove_file(dir.join(META_FILE)) {
         Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
@@ -422,8 +440,12 @@ pub fn obtain(req: &ReferenceRequest<'_>, cache_dir: &Path, force: bool) -> Resu
 
 /// Reads one EXR of a reference and checks its size and values.
 fn read_checked(path: &Path, width: u32, height: u32, what: &str) -> Result<Image> {
-    let image = Image::read_exr(path)
-        .map_err(|e| anyhow::anyhow!("reference {what} {} is unreadable or corrupt: {e}", path.display()))?;
+    let image = Image::read_exr(path).map_err(|e| {
+        anyhow::anyhow!(
+            "reference {what} {} is unreadable or corrupt: {e}",
+            path.display()
+        )
+    })?;
     ensure!(
         image.width == width as usize && image.height == height as usize,
         "reference {what} {} is {}x{}, but its settings say {width}x{height}",
@@ -467,8 +489,15 @@ pub fn load_entry(dir: &Path) -> Result<Reference> {
         meta.format
     );
     let hint = |e: anyhow::Error| e.context(format!("delete {} to render it again", dir.display()));
-    let mean = read_checked(&dir.join(MEAN_FILE), meta.width, meta.height, "image").map_err(hint)?;
-    let variance = read_checked(&dir.join(VARIANCE_FILE), meta.width, meta.height, "variance").map_err(hint)?;
+    let mean =
+        read_checked(&dir.join(MEAN_FILE), meta.width, meta.height, "image").map_err(hint)?;
+    let variance = read_checked(
+        &dir.join(VARIANCE_FILE),
+        meta.width,
+        meta.height,
+        "variance",
+    )
+    .map_err(hint)?;
     Ok(Reference {
         mean,
         variance: Some(variance),
@@ -484,8 +513,9 @@ pub fn load_given(path: &Path, width: u32, height: u32) -> Result<Reference> {
     let r = if path.is_dir() {
         load_entry(path)?
     } else {
-        let mean = Image::read_exr(path)
-            .map_err(|e| anyhow::anyhow!("reference {} is unreadable or corrupt: {e}", path.display()))?;
+        let mean = Image::read_exr(path).map_err(|e| {
+            anyhow::anyhow!("reference {} is unreadable or corrupt: {e}", path.display())
+        })?;
         Reference {
             mean,
             variance: None,

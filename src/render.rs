@@ -121,7 +121,11 @@ pub struct RenderArgs {
 
 /// Renders from a cache snapshot: cache-terminated paths at `spp`, NEE per --strategy
 /// (MIS unless `bsdf`).
-fn render_cached(args: &RenderArgs, snapshot: &std::path::Path, scene: &nrc_scene::Scene) -> Result<nrc_scene::Image> {
+fn render_cached(
+    args: &RenderArgs,
+    snapshot: &std::path::Path,
+    scene: &nrc_scene::Scene,
+) -> Result<nrc_scene::Image> {
     let cache = nrc_cache::RadianceCache::load(snapshot, args.device.resolve_and_print())
         .with_context(|| format!("cannot load the cache snapshot {}", snapshot.display()))?;
     let tracer = args.tracer.tracer();
@@ -135,9 +139,22 @@ fn render_cached(args: &RenderArgs, snapshot: &std::path::Path, scene: &nrc_scen
     };
     let pool = thread_pool(args.threads)?;
     let start = std::time::Instant::now();
-    let out = pool.install(|| renderer.render(scene, &scene.camera, &cache, args.width, args.height, args.spp, args.seed));
+    let out = pool.install(|| {
+        renderer.render(
+            scene,
+            &scene.camera,
+            &cache,
+            args.width,
+            args.height,
+            args.spp,
+            args.seed,
+        )
+    });
     if out.stats.invalid_samples > 0 {
-        eprintln!("warning: {} samples were NaN or infinite and counted as black", out.stats.invalid_samples);
+        eprintln!(
+            "warning: {} samples were NaN or infinite and counted as black",
+            out.stats.invalid_samples
+        );
     }
     println!(
         "rendered {}x{} at {} spp from the cache {} in {:.3} s ({} cache queries, {:.1} ms in the cache)",

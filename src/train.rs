@@ -107,23 +107,35 @@ fn camera_path(path: Option<&Path>, base: &Camera, frames: u32) -> Result<Vec<Ca
     let Some(path) = path else {
         return Ok(vec![*base; frames as usize]);
     };
-    let text = std::fs::read_to_string(path).with_context(|| format!("cannot read camera path {}", path.display()))?;
-    let keys: Vec<Keyframe> = serde_json::from_str(&text).with_context(|| format!("camera path {}", path.display()))?;
+    let text = std::fs::read_to_string(path)
+        .with_context(|| format!("cannot read camera path {}", path.display()))?;
+    let keys: Vec<Keyframe> =
+        serde_json::from_str(&text).with_context(|| format!("camera path {}", path.display()))?;
     if keys.is_empty() {
         bail!("camera path {}: no keyframes", path.display());
     }
     let v = |a: [f32; 3]| Vec3::from_array(a);
     (0..frames)
         .map(|f| {
-            let t = if frames > 1 { f as f32 / (frames - 1) as f32 } else { 0.0 } * (keys.len() - 1) as f32;
+            let t = if frames > 1 {
+                f as f32 / (frames - 1) as f32
+            } else {
+                0.0
+            } * (keys.len() - 1) as f32;
             let i = (t.floor() as usize).min(keys.len() - 1);
             let j = (i + 1).min(keys.len() - 1);
             let s = t - i as f32;
             let (a, b) = (&keys[i], &keys[j]);
             let up = v(a.up.unwrap_or([0.0, 1.0, 0.0])).lerp(v(b.up.unwrap_or([0.0, 1.0, 0.0])), s);
-            let fov = a.fov_y.unwrap_or(base.fov_y.to_degrees()) * (1.0 - s) + b.fov_y.unwrap_or(base.fov_y.to_degrees()) * s;
-            Camera::look_at(v(a.position).lerp(v(b.position), s), v(a.target).lerp(v(b.target), s), up, fov)
-                .map_err(|e| anyhow::anyhow!("camera path {}, frame {f}: {e}", path.display()))
+            let fov = a.fov_y.unwrap_or(base.fov_y.to_degrees()) * (1.0 - s)
+                + b.fov_y.unwrap_or(base.fov_y.to_degrees()) * s;
+            Camera::look_at(
+                v(a.position).lerp(v(b.position), s),
+                v(a.target).lerp(v(b.target), s),
+                up,
+                fov,
+            )
+            .map_err(|e| anyhow::anyhow!("camera path {}, frame {f}: {e}", path.display()))
         })
         .collect()
 }
@@ -157,7 +169,8 @@ pub fn write_stats(path: &Path, stats: &[FrameStats]) -> Result<()> {
         }
         s.into_bytes()
     };
-    nrc_eval::atomic::atomic_write(path, &bytes).with_context(|| format!("cannot write statistics {}", path.display()))
+    nrc_eval::atomic::atomic_write(path, &bytes)
+        .with_context(|| format!("cannot write statistics {}", path.display()))
 }
 
 /// Runs `nrc train`.
@@ -175,7 +188,10 @@ pub fn run(args: &TrainArgs) -> Result<()> {
         bail!("--spp must be at least 1");
     }
     if !(0.0..=1.0).contains(&args.from_terminations) {
-        bail!("--from-terminations must be in [0, 1], got {}", args.from_terminations);
+        bail!(
+            "--from-terminations must be in [0, 1], got {}",
+            args.from_terminations
+        );
     }
     let scene: Scene = args.scene.load()?;
     for w in scene.warnings() {
@@ -188,13 +204,20 @@ pub fn run(args: &TrainArgs) -> Result<()> {
     // Output folders exist before the run, not only at its end.
     for file in args.snapshot.iter().chain(&args.stats) {
         if let Some(parent) = file.parent().filter(|p| !p.as_os_str().is_empty()) {
-            std::fs::create_dir_all(parent).with_context(|| format!("cannot create {}", parent.display()))?;
+            std::fs::create_dir_all(parent)
+                .with_context(|| format!("cannot create {}", parent.display()))?;
         }
     }
     let settings = args.cache.method_settings(0, args.seed, true)?;
     let tracer = args.tracer.tracer();
-    let mut trainer = nrc_train::methods::scene_trainer(&scene, args.producer.clone(), args.termination, &settings, tracer)
-        .map_err(anyhow::Error::msg)?;
+    let mut trainer = nrc_train::methods::scene_trainer(
+        &scene,
+        args.producer.clone(),
+        args.termination,
+        &settings,
+        tracer,
+    )
+    .map_err(anyhow::Error::msg)?;
     trainer.settings.renderer.nee = !args.no_nee;
     trainer.settings.spp = args.spp;
     trainer.settings.from_terminations = args.from_terminations;
@@ -213,7 +236,8 @@ pub fn run(args: &TrainArgs) -> Result<()> {
             if let (Some(dir), Some(out)) = (&args.frames_out, &out)
                 && (f as u32 % args.every == 0 || last)
             {
-                out.image.write_exr(&dir.join(format!("frame-{f:05}.exr")))?;
+                out.image
+                    .write_exr(&dir.join(format!("frame-{f:05}.exr")))?;
             }
             bar.set_message(format!(
                 "loss {:.4}, {:.0} ms/frame",
@@ -234,7 +258,10 @@ pub fn run(args: &TrainArgs) -> Result<()> {
     }
     let n = all.len() as f64;
     let mean = |f: fn(&FrameStats) -> f64| all.iter().map(f).sum::<f64>() / n;
-    let dropped: usize = all.iter().map(|s| s.dropped_nonfinite + s.dropped_absurd).sum();
+    let dropped: usize = all
+        .iter()
+        .map(|s| s.dropped_nonfinite + s.dropped_absurd)
+        .sum();
     println!(
         "trained {} frames of {} ({} records/frame): produce {:.1} ms, train {:.1} ms, infer {:.1} ms per frame; final loss {:.5}; {} records dropped",
         all.len(),

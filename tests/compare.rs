@@ -47,13 +47,19 @@ fn assert_clean_error(out: &Output, needles: &[&str]) {
     assert_eq!(lines.len(), 1, "expected one error line, got: {err}");
     assert!(lines[0].starts_with("error: "), "not an error line: {err}");
     for n in needles {
-        assert!(lines[0].contains(n), "error line does not name `{n}`: {err}");
+        assert!(
+            lines[0].contains(n),
+            "error line does not name `{n}`: {err}"
+        );
     }
 }
 
 /// The one cache entry folder in `cache`.
 fn entries(cache: &Path) -> Vec<PathBuf> {
-    let mut v: Vec<PathBuf> = std::fs::read_dir(cache).unwrap().map(|e| e.unwrap().path()).collect();
+    let mut v: Vec<PathBuf> = std::fs::read_dir(cache)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .collect();
     v.sort();
     v
 }
@@ -145,14 +151,20 @@ fn equal_spp_report_and_error_falls_with_spp() {
     // Report files.
     let report = nrc_eval::report::read_report_json(&out.join("report.json")).unwrap();
     let md = std::fs::read_to_string(out.join("report.md")).unwrap();
-    assert!(md.contains("| method | time/frame (ms) | spp | MSE |"), "{md}");
+    assert!(
+        md.contains("| method | time/frame (ms) | spp | MSE |"),
+        "{md}"
+    );
     let names: Vec<&str> = report.rows.iter().map(|r| r.method.as_str()).collect();
     assert_eq!(names, ["pt-1spp", "pt-4spp", "pt-16spp"]);
     assert_eq!((report.width, report.height), (32, 32));
     for (row, spp) in report.rows.iter().zip([1.0, 4.0, 16.0]) {
         assert_eq!(row.samples_per_pixel, spp);
         assert!(row.time_per_frame_ms > 0.0);
-        assert!(row.metrics.flip.is_some_and(|f| f > 0.0 && f < 1.0), "{row:?}");
+        assert!(
+            row.metrics.flip.is_some_and(|f| f > 0.0 && f < 1.0),
+            "{row:?}"
+        );
         let bv = row.bias_variance.expect("bias and variance from the runs");
         assert_eq!(bv.renders, RUNS as usize);
         assert!(bv.variance > 0.0);
@@ -234,12 +246,22 @@ fn equal_spp_report_and_error_falls_with_spp() {
     assert!(m1 > m4 && m4 > m16, "MSE {m1}, {m4}, {m16}");
     // A clear margin: the drop from 1 to 16 spp is over 3 standard errors (p < 0.0014 if
     // the MSE did not fall).
-    assert!(m1 - m16 > 3.0 * se1.hypot(se16), "{m1} ± {se1} vs {m16} ± {se16}");
+    assert!(
+        m1 - m16 > 3.0 * se1.hypot(se16),
+        "{m1} ± {se1} vs {m16} ± {se16}"
+    );
     // The expected ratio: S from 1 spp and from 16 spp agree, |z| < 4.
-    let v = ref_var.data.iter().map(|p| p.element_sum() as f64).sum::<f64>() / (3 * ref_var.data.len()) as f64;
+    let v = ref_var
+        .data
+        .iter()
+        .map(|p| p.element_sum() as f64)
+        .sum::<f64>()
+        / (3 * ref_var.data.len()) as f64;
     let (s1, s16) = (m1 - v, 16.0 * (m16 - v));
     let z = (s1 - s16) / se1.hypot(16.0 * se16);
-    eprintln!("path variance S: from 1 spp {s1:.4}, from 16 spp {s16:.4}, reference noise {v:.2e}, z {z:.2}");
+    eprintln!(
+        "path variance S: from 1 spp {s1:.4}, from 16 spp {s16:.4}, reference noise {v:.2e}, z {z:.2}"
+    );
     assert!(
         z.abs() < 4.0,
         "path variance from 1 spp {s1} ± {se1}, from 16 spp {s16} ± {}: z = {z}",
@@ -418,7 +440,14 @@ fn bad_references_and_arguments_are_clear_errors() {
         &["is 16x16 pixels", "renders 20x16"],
     );
     // The right size works, from the folder and from its bare EXR.
-    assert_ok(&compare(&["--width", "16", "--height", "16", "--reference", entry_s]));
+    assert_ok(&compare(&[
+        "--width",
+        "16",
+        "--height",
+        "16",
+        "--reference",
+        entry_s,
+    ]));
     let mean = entry.join("mean.exr");
     assert_ok(&compare(&[
         "--width",
@@ -505,9 +534,20 @@ fn bad_references_and_arguments_are_clear_errors() {
         ]),
         &["--equal-time"],
     );
-    assert_clean_error(&compare(&["--methods", "pt-1spp,pt-1spp"]), &["listed twice"]);
     assert_clean_error(
-        &nrc(&["reference", "--scene", &scene, "--spp", "1", "--cache-dir", c]),
+        &compare(&["--methods", "pt-1spp,pt-1spp"]),
+        &["listed twice"],
+    );
+    assert_clean_error(
+        &nrc(&[
+            "reference",
+            "--scene",
+            &scene,
+            "--spp",
+            "1",
+            "--cache-dir",
+            c,
+        ]),
         &["at least 2 samples"],
     );
 }
@@ -522,20 +562,41 @@ fn excluding_emitters_removes_their_error() {
     let run = |name: &str, extra: &[&str]| {
         let out = dir.path().join(name);
         let mut args = vec![
-            "compare", "--scene", &scene, "--methods", "pt-1spp", "--equal-spp", "1", "--width", "32",
-            "--height", "32", "--runs", "4", "--reference-spp", "64", "--no-flip", "--cache-dir",
-            cache.to_str().unwrap(), "--out", out.to_str().unwrap(),
+            "compare",
+            "--scene",
+            &scene,
+            "--methods",
+            "pt-1spp",
+            "--equal-spp",
+            "1",
+            "--width",
+            "32",
+            "--height",
+            "32",
+            "--runs",
+            "4",
+            "--reference-spp",
+            "64",
+            "--no-flip",
+            "--cache-dir",
+            cache.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
         ];
         args.extend_from_slice(extra);
         let o = nrc(&args);
         assert_ok(&o);
         let report: serde_json::Value =
-            serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+            serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap())
+                .unwrap();
         let mse = report["rows"][0]["mse"].as_f64().unwrap();
         (mse, std::fs::read_to_string(out.join("report.md")).unwrap())
     };
     let (all, _) = run("all", &[]);
     let (masked, md) = run("masked", &["--exclude-emitters"]);
-    assert!(masked < 0.5 * all, "MSE {masked} with the emitters excluded, {all} without");
+    assert!(
+        masked < 0.5 * all,
+        "MSE {masked} with the emitters excluded, {all} without"
+    );
     assert!(md.contains("see an emitter"), "{md}");
 }

@@ -24,7 +24,11 @@ fn assert_error(out: &Output, needle: &str) {
     let err = text(&out.stderr);
     assert!(!out.status.success(), "succeeded: {err}");
     assert!(!err.contains("panicked"), "panic: {err}");
-    assert!(err.lines().any(|l| l.starts_with("error: ") && l.contains(needle)), "{err}");
+    assert!(
+        err.lines()
+            .any(|l| l.starts_with("error: ") && l.contains(needle)),
+        "{err}"
+    );
 }
 
 #[test]
@@ -33,12 +37,36 @@ fn train_then_render_from_the_snapshot() {
     let p = |n: &str| dir.path().join(n).to_str().unwrap().to_string();
     let scene = cornell();
     let out = nrc(&[
-        "train", "--scene", scene.to_str().unwrap(), "--frames", "3", "--width", "32", "--height", "24",
-        "--records", "2048", "--batch", "1024", "--snapshot", &p("c.nrc"), "--stats", &p("stats.csv"),
-        "--frames-out", &p("frames"), "--every", "2", "--producer", "mix:pt-sl=0.5,sppc=0.5",
+        "train",
+        "--scene",
+        scene.to_str().unwrap(),
+        "--frames",
+        "3",
+        "--width",
+        "32",
+        "--height",
+        "24",
+        "--records",
+        "2048",
+        "--batch",
+        "1024",
+        "--snapshot",
+        &p("c.nrc"),
+        "--stats",
+        &p("stats.csv"),
+        "--frames-out",
+        &p("frames"),
+        "--every",
+        "2",
+        "--producer",
+        "mix:pt-sl=0.5,sppc=0.5",
     ]);
     assert!(out.status.success(), "{}", text(&out.stderr));
-    assert!(text(&out.stdout).contains("trained 3 frames"), "{}", text(&out.stdout));
+    assert!(
+        text(&out.stdout).contains("trained 3 frames"),
+        "{}",
+        text(&out.stdout)
+    );
     // Frames 0 and 2 (every 2nd, and the last).
     let mut frames: Vec<String> = std::fs::read_dir(dir.path().join("frames"))
         .unwrap()
@@ -60,8 +88,21 @@ fn train_then_render_from_the_snapshot() {
     // Two renders from the snapshot are identical; a different seed differs.
     let render = |out: &str, seed: &str| {
         let o = nrc(&[
-            "render", "--scene", scene.to_str().unwrap(), "--cache", &p("c.nrc"), "--width", "32", "--height",
-            "24", "--spp", "2", "--seed", seed, "--out", &p(out),
+            "render",
+            "--scene",
+            scene.to_str().unwrap(),
+            "--cache",
+            &p("c.nrc"),
+            "--width",
+            "32",
+            "--height",
+            "24",
+            "--spp",
+            "2",
+            "--seed",
+            seed,
+            "--out",
+            &p(out),
         ]);
         assert!(o.status.success(), "{}", text(&o.stderr));
         std::fs::read(p(out)).unwrap()
@@ -74,8 +115,17 @@ fn train_then_render_from_the_snapshot() {
     let bytes = std::fs::read(p("c.nrc")).unwrap();
     std::fs::write(p("t.nrc"), &bytes[..bytes.len() / 2]).unwrap();
     let o = nrc(&[
-        "render", "--scene", scene.to_str().unwrap(), "--cache", &p("t.nrc"), "--width", "8", "--height", "8",
-        "--out", &p("t.exr"),
+        "render",
+        "--scene",
+        scene.to_str().unwrap(),
+        "--cache",
+        &p("t.nrc"),
+        "--width",
+        "8",
+        "--height",
+        "8",
+        "--out",
+        &p("t.exr"),
     ]);
     assert_error(&o, "t.nrc");
 }

@@ -83,7 +83,9 @@ impl FromStr for MethodSpec {
         let spp = parts
             .next()
             .and_then(|p| p.strip_suffix("spp"))
-            .ok_or_else(|| err("the path tracer's name needs its samples per pixel, e.g. pt-16spp"))?;
+            .ok_or_else(|| {
+                err("the path tracer's name needs its samples per pixel, e.g. pt-16spp")
+            })?;
         let spp: u32 = spp
             .parse()
             .map_err(|_| err("samples per pixel must be a whole number, e.g. pt-16spp"))?;
@@ -93,7 +95,11 @@ impl FromStr for MethodSpec {
         let nee = match parts.next() {
             None | Some("nee") => true,
             Some("nonee") => false,
-            Some(_) => return Err(err("the only path tracer options are -nee (default) and -nonee")),
+            Some(_) => {
+                return Err(err(
+                    "the only path tracer options are -nee (default) and -nonee",
+                ));
+            }
         };
         if parts.next().is_some() {
             return Err(err("too many parts"));
@@ -159,13 +165,26 @@ pub trait Method: Send {
 
     /// Gets ready to render `width × height` frames from `camera` (cache methods train here);
     /// called once, untimed, before the first measured frame. An error names what is wrong.
-    fn prepare(&mut self, _scene: &Scene, _camera: &Camera, _width: u32, _height: u32) -> Result<(), String> {
+    fn prepare(
+        &mut self,
+        _scene: &Scene,
+        _camera: &Camera,
+        _width: u32,
+        _height: u32,
+    ) -> Result<(), String> {
         Ok(())
     }
 
     /// Renders one pass of `width × height` pixels from `camera`; `seed` chooses the random
     /// streams, so passes with different seeds are independent estimates.
-    fn render_pass(&mut self, scene: &Scene, camera: &Camera, width: u32, height: u32, seed: u64) -> Pass;
+    fn render_pass(
+        &mut self,
+        scene: &Scene,
+        camera: &Camera,
+        width: u32,
+        height: u32,
+        seed: u64,
+    ) -> Pass;
 }
 
 /// The reference path tracer as a method.
@@ -185,7 +204,14 @@ impl Method for PathTracerMethod {
         self.spp
     }
 
-    fn render_pass(&mut self, scene: &Scene, camera: &Camera, width: u32, height: u32, seed: u64) -> Pass {
+    fn render_pass(
+        &mut self,
+        scene: &Scene,
+        camera: &Camera,
+        width: u32,
+        height: u32,
+        seed: u64,
+    ) -> Pass {
         let settings = RenderSettings {
             width,
             height,
@@ -272,7 +298,9 @@ pub fn render_frame(
     }
     match request.budget {
         Budget::Passes(0) => return Err(BudgetError("a frame needs at least one pass".into())),
-        Budget::Time(t) if t.is_zero() => return Err(BudgetError("the time budget must be positive".into())),
+        Budget::Time(t) if t.is_zero() => {
+            return Err(BudgetError("the time budget must be positive".into()));
+        }
         _ => {}
     }
     let start = Instant::now();
@@ -323,13 +351,19 @@ mod tests {
         for (name, spec) in [
             ("pt-1spp", MethodSpec::PathTracer { spp: 1, nee: true }),
             ("pt-16spp", MethodSpec::PathTracer { spp: 16, nee: true }),
-            ("pt-4spp-nonee", MethodSpec::PathTracer { spp: 4, nee: false }),
+            (
+                "pt-4spp-nonee",
+                MethodSpec::PathTracer { spp: 4, nee: false },
+            ),
         ] {
             let parsed: MethodSpec = name.parse().unwrap();
             assert_eq!(parsed, spec);
             assert_eq!(parsed.to_string(), name);
         }
-        assert_eq!("pt-8spp-nee".parse::<MethodSpec>().unwrap().to_string(), "pt-8spp");
+        assert_eq!(
+            "pt-8spp-nee".parse::<MethodSpec>().unwrap().to_string(),
+            "pt-8spp"
+        );
         for bad in [
             "",
             "pt",

@@ -129,10 +129,20 @@ impl PathTracer {
             // Emission found by the ray.
             let le = scene.emission(&si);
             if le != Vec3::ZERO {
-                let weight = if self.strategy == LightStrategy::LightOnly && use_nee && !prev_delta && scene.light_pdf_area(si.tri) > 0.0 {
+                let weight = if self.strategy == LightStrategy::LightOnly
+                    && use_nee
+                    && !prev_delta
+                    && scene.light_pdf_area(si.tri) > 0.0
+                {
                     0.0
                 } else {
-                    emission_mis_weight(scene, &si, hit.t * ray.d.length(), prev_pdf, prev_delta || !use_nee)
+                    emission_mis_weight(
+                        scene,
+                        &si,
+                        hit.t * ray.d.length(),
+                        prev_pdf,
+                        prev_delta || !use_nee,
+                    )
                 };
                 radiance += throughput * le * weight;
             }
@@ -149,7 +159,8 @@ impl PathTracer {
             // Next-event estimation: one point on an emitter, chosen by power.
             if use_nee && !bsdf.is_delta() {
                 let mis = self.strategy == LightStrategy::Mis;
-                radiance += throughput * next_event(scene, &si, &bsdf, &frame, wo, mis, sampler, stats);
+                radiance +=
+                    throughput * next_event(scene, &si, &bsdf, &frame, wo, mis, sampler, stats);
             } else {
                 // Keep the random stream aligned whatever the strategy.
                 sampler.next_1d();

@@ -46,7 +46,9 @@ impl Camera {
         fov_y_degrees: f32,
     ) -> Result<Self, CameraError> {
         if !(position.is_finite() && target.is_finite() && up.is_finite()) {
-            return Err(CameraError("camera position, target and up must be finite".into()));
+            return Err(CameraError(
+                "camera position, target and up must be finite".into(),
+            ));
         }
         if !(fov_y_degrees > 0.0 && fov_y_degrees < 180.0) {
             return Err(CameraError(format!(
@@ -115,9 +117,8 @@ impl Camera {
         let tan_half = (0.5 * self.fov_y).tan();
         let ndc_x = 2.0 * film.x / width as f32 - 1.0;
         let ndc_y = 1.0 - 2.0 * film.y / height as f32;
-        let d = self.forward
-            + self.right * (ndc_x * tan_half * aspect)
-            + self.up * (ndc_y * tan_half);
+        let d =
+            self.forward + self.right * (ndc_x * tan_half * aspect) + self.up * (ndc_y * tan_half);
         Ray::new(self.position, d.normalize())
     }
 }

@@ -8,7 +8,10 @@ use std::path::PathBuf;
 pub enum SceneError {
     /// A file could not be read or written.
     #[error("{}: {source}", path.display())]
-    Io { path: PathBuf, source: std::io::Error },
+    Io {
+        path: PathBuf,
+        source: std::io::Error,
+    },
 
     /// The glTF document itself is malformed: invalid JSON, a truncated or corrupt `.glb`
     /// container, or a document that fails glTF validation.

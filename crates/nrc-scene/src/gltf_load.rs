@@ -222,7 +222,10 @@ impl Loader<'_> {
                 gltf::buffer::Source::Uri(uri) => {
                     let file = self.base.join(percent_decode(uri));
                     std::fs::read(&file).map_err(|e| {
-                        err(uri, format!("cannot read buffer file {}: {e}", file.display()))
+                        err(
+                            uri,
+                            format!("cannot read buffer file {}: {e}", file.display()),
+                        )
                     })?
                 }
             };
@@ -262,7 +265,10 @@ impl Loader<'_> {
         desc.materials.push(Material::default());
 
         // Walk the node hierarchy of the default scene (or the first, or every root node).
-        let roots: Vec<gltf::Node> = match document.default_scene().or_else(|| document.scenes().next()) {
+        let roots: Vec<gltf::Node> = match document
+            .default_scene()
+            .or_else(|| document.scenes().next())
+        {
             Some(s) => s.nodes().collect(),
             None => {
                 let mut is_child = vec![false; document.nodes().len()];
@@ -274,8 +280,11 @@ impl Loader<'_> {
                 document.nodes().filter(|n| !is_child[n.index()]).collect()
             }
         };
-        let mut stack: Vec<(gltf::Node, Mat4, usize)> =
-            roots.into_iter().rev().map(|n| (n, Mat4::IDENTITY, 0)).collect();
+        let mut stack: Vec<(gltf::Node, Mat4, usize)> = roots
+            .into_iter()
+            .rev()
+            .map(|n| (n, Mat4::IDENTITY, 0))
+            .collect();
         let mut has_normals = false;
         let mut has_uvs = false;
         let mut vertex_normals: Vec<Option<Vec3>> = Vec::new();
@@ -289,7 +298,9 @@ impl Loader<'_> {
             if !world.is_finite() {
                 return Err(self.invalid(format!(
                     "node {} has a non-finite transform",
-                    node.name().map(str::to_string).unwrap_or_else(|| format!("#{}", node.index()))
+                    node.name()
+                        .map(str::to_string)
+                        .unwrap_or_else(|| format!("#{}", node.index()))
                 )));
             }
             if let Some(cam) = node.camera()
@@ -327,7 +338,10 @@ impl Loader<'_> {
             }
         }
         if has_normals {
-            desc.normals = vertex_normals.iter().map(|n| n.unwrap_or(Vec3::ZERO)).collect();
+            desc.normals = vertex_normals
+                .iter()
+                .map(|n| n.unwrap_or(Vec3::ZERO))
+                .collect();
         }
         if has_uvs {
             desc.uvs = vertex_uvs.iter().map(|t| t.unwrap_or(Vec2::ZERO)).collect();
@@ -351,7 +365,10 @@ impl Loader<'_> {
         has_uvs: &mut bool,
     ) -> Result<()> {
         let mode = prim.mode();
-        if !matches!(mode, Mode::Triangles | Mode::TriangleStrip | Mode::TriangleFan) {
+        if !matches!(
+            mode,
+            Mode::Triangles | Mode::TriangleStrip | Mode::TriangleFan
+        ) {
             self.warn(format!(
                 "mesh `{}`: skipping a primitive of mode {mode:?} (only triangles are rendered)",
                 mesh.name().unwrap_or("")
@@ -362,10 +379,16 @@ impl Loader<'_> {
         let reader = prim.reader(|b| buffers.get(b.index()).map(|d| d.0.as_slice()));
 
         // Check accessor types and sizes first: the gltf readers assume them.
-        let pos_acc = prim.get(&gltf::Semantic::Positions).ok_or_else(|| {
-            self.mesh_error(mesh, "primitive has no POSITION attribute".into())
-        })?;
-        self.check_accessor(mesh, &pos_acc, "POSITION", &[DataType::F32], &[Dimensions::Vec3])?;
+        let pos_acc = prim
+            .get(&gltf::Semantic::Positions)
+            .ok_or_else(|| self.mesh_error(mesh, "primitive has no POSITION attribute".into()))?;
+        self.check_accessor(
+            mesh,
+            &pos_acc,
+            "POSITION",
+            &[DataType::F32],
+            &[Dimensions::Vec3],
+        )?;
         let n_vertices = pos_acc.count();
         let normal_acc = prim.get(&gltf::Semantic::Normals);
         if let Some(a) = &normal_acc {
@@ -461,7 +484,10 @@ impl Loader<'_> {
                         indices.len()
                     ));
                 }
-                indices.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect()
+                indices
+                    .chunks_exact(3)
+                    .map(|c| [c[0], c[1], c[2]])
+                    .collect()
             }
             // Strips alternate winding so that every triangle keeps the first one's.
             Mode::TriangleStrip => (0..indices.len().saturating_sub(2))
@@ -482,7 +508,11 @@ impl Loader<'_> {
         // (negative determinant) flips the winding, which glTF says defines the front face.
         let m3 = Mat3::from_mat4(*world);
         let det = m3.determinant();
-        let normal_matrix = if det != 0.0 { m3.inverse().transpose() } else { Mat3::ZERO };
+        let normal_matrix = if det != 0.0 {
+            m3.inverse().transpose()
+        } else {
+            Mat3::ZERO
+        };
         let base = desc.positions.len() as u32;
         for p in &positions {
             let q = world.transform_point3(*p);
@@ -511,7 +541,10 @@ impl Loader<'_> {
             }
             None => vertex_uvs.extend(std::iter::repeat_n(None, n_vertices)),
         }
-        let material = prim.material().index().map_or(default_material, |i| i as u32);
+        let material = prim
+            .material()
+            .index()
+            .map_or(default_material, |i| i as u32);
         let mesh_id = desc.mesh_names.len() as u32;
         desc.mesh_names.push(
             mesh.name()
@@ -568,7 +601,8 @@ impl Loader<'_> {
             base_color_texture: self.texture_ref(pbr.base_color_texture(), true)?,
             metallic: pbr.metallic_factor(),
             roughness: pbr.roughness_factor(),
-            metallic_roughness_texture: self.texture_ref(pbr.metallic_roughness_texture(), false)?,
+            metallic_roughness_texture: self
+                .texture_ref(pbr.metallic_roughness_texture(), false)?,
             emissive: Vec3::from(m.emissive_factor()) * m.emissive_strength().unwrap_or(1.0),
             emissive_texture: self.texture_ref(m.emissive_texture(), true)?,
             double_sided: m.double_sided(),
@@ -590,9 +624,15 @@ impl Loader<'_> {
         let finite = out.base_color.is_finite()
             && out.emissive.is_finite()
             && out.specular_color.is_finite()
-            && [out.metallic, out.roughness, out.transmission, out.specular, out.ior]
-                .iter()
-                .all(|v| v.is_finite());
+            && [
+                out.metallic,
+                out.roughness,
+                out.transmission,
+                out.specular,
+                out.ior,
+            ]
+            .iter()
+            .all(|v| v.is_finite());
         if !finite {
             return Err(self.invalid(format!("material `{name}` has a non-finite parameter")));
         }
@@ -691,9 +731,14 @@ impl Loader<'_> {
             self.images.insert(index, data);
         }
         let data = &self.images[&index];
-        let texels = image_texels(data, srgb).ok_or_else(|| err("unsupported pixel format".into()))?;
-        let mut texture = Texture::new(data.width, data.height, texels)
-            .ok_or_else(|| err(format!("image of size {}×{} is unusable", data.width, data.height)))?;
+        let texels =
+            image_texels(data, srgb).ok_or_else(|| err("unsupported pixel format".into()))?;
+        let mut texture = Texture::new(data.width, data.height, texels).ok_or_else(|| {
+            err(format!(
+                "image of size {}×{} is unusable",
+                data.width, data.height
+            ))
+        })?;
         let sampler = tex.sampler();
         let wrap = |w: gltf::texture::WrappingMode| match w {
             gltf::texture::WrappingMode::ClampToEdge => WrapMode::ClampToEdge,
@@ -727,7 +772,10 @@ fn image_texels(data: &gltf::image::Data, srgb: bool) -> Option<Vec<Vec4>> {
     if data.pixels.len() < n * channels * bytes_per {
         return None;
     }
-    let is_float = matches!(data.format, Format::R32G32B32FLOAT | Format::R32G32B32A32FLOAT);
+    let is_float = matches!(
+        data.format,
+        Format::R32G32B32FLOAT | Format::R32G32B32A32FLOAT
+    );
     let value = |i: usize| -> f32 {
         let o = i * bytes_per;
         match bytes_per {

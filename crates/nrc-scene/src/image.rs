@@ -213,7 +213,11 @@ mod tests {
         let img = Image::from_data(
             3,
             1,
-            vec![Vec3::ZERO, Vec3::new(f32::NAN, -1.0, f32::INFINITY), Vec3::splat(1e9)],
+            vec![
+                Vec3::ZERO,
+                Vec3::new(f32::NAN, -1.0, f32::INFINITY),
+                Vec3::splat(1e9),
+            ],
         )
         .unwrap();
         assert_eq!(img.to_srgb8(0.0), vec![0, 0, 0, 0, 0, 0, 255, 255, 255]);

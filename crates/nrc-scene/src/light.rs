@@ -64,7 +64,9 @@ impl LightSampler {
         let mut lights: Vec<(u32, f32, f32)> = emitters
             .iter()
             .copied()
-            .filter(|&(_, area, power)| area > 0.0 && power > 0.0 && area.is_finite() && power.is_finite())
+            .filter(|&(_, area, power)| {
+                area > 0.0 && power > 0.0 && area.is_finite() && power.is_finite()
+            })
             .collect();
         lights.sort_by_key(|l| l.0);
         lights.dedup_by_key(|l| l.0);
@@ -115,7 +117,10 @@ impl LightSampler {
         if self.tris.is_empty() {
             return None;
         }
-        let i = self.cdf.partition_point(|&c| c <= u).min(self.tris.len() - 1);
+        let i = self
+            .cdf
+            .partition_point(|&c| c <= u)
+            .min(self.tris.len() - 1);
         Some((self.tris[i], self.pmf[i]))
     }
 

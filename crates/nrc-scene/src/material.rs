@@ -104,7 +104,10 @@ impl Material {
         if !self.is_emissive() {
             return Vec3::ZERO;
         }
-        self.emissive * lookup(textures, &self.emissive_texture, uv).truncate().max(Vec3::ZERO)
+        self.emissive
+            * lookup(textures, &self.emissive_texture, uv)
+                .truncate()
+                .max(Vec3::ZERO)
     }
 
     /// Whether a surface with geometric normal `ng` emits toward direction `w` (pointing

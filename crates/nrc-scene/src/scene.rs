@@ -105,16 +105,29 @@ impl fmt::Display for SceneSummary {
         writeln!(f, "scene:      {}", self.source.display())?;
         writeln!(f, "triangles:  {}", self.triangles)?;
         if self.degenerate_dropped > 0 {
-            writeln!(f, "dropped:    {} degenerate (zero-area) triangles", self.degenerate_dropped)?;
+            writeln!(
+                f,
+                "dropped:    {} degenerate (zero-area) triangles",
+                self.degenerate_dropped
+            )?;
         }
         writeln!(f, "materials:  {}", self.materials)?;
         writeln!(f, "textures:   {}", self.textures)?;
         writeln!(f, "lights:     {} emissive triangles", self.lights)?;
-        writeln!(f, "bounds:     min {} max {}", v(self.bounds.min), v(self.bounds.max))?;
+        writeln!(
+            f,
+            "bounds:     min {} max {}",
+            v(self.bounds.min),
+            v(self.bounds.max)
+        )?;
         writeln!(
             f,
             "camera:     {} position {} forward {} up {} fov_y {:.2}°",
-            if self.camera_from_file { "from file," } else { "default (frames bounds)," },
+            if self.camera_from_file {
+                "from file,"
+            } else {
+                "default (frames bounds),"
+            },
             v(self.camera.position),
             v(self.camera.forward),
             v(self.camera.up),
@@ -160,7 +173,9 @@ impl Scene {
             return Err(invalid("normals and positions differ in count".into()));
         }
         if !uvs.is_empty() && uvs.len() != positions.len() {
-            return Err(invalid("texture coordinates and positions differ in count".into()));
+            return Err(invalid(
+                "texture coordinates and positions differ in count".into(),
+            ));
         }
         if triangle_materials.len() != triangles.len() {
             return Err(invalid("every triangle needs a material index".into()));
@@ -212,7 +227,9 @@ impl Scene {
                 });
             }
             if material as usize >= materials.len() {
-                return Err(invalid(format!("triangle {i} refers to missing material {material}")));
+                return Err(invalid(format!(
+                    "triangle {i} refers to missing material {material}"
+                )));
             }
             let p = v.map(|k| positions[k as usize]);
             if !p.iter().all(|q| q.is_finite()) {
@@ -440,7 +457,9 @@ impl Scene {
 
     /// World-space vertices of triangle `tri`.
     pub fn triangle_vertices(&self, tri: u32) -> [Vec3; 3] {
-        self.tris[tri as usize].v.map(|k| self.positions[k as usize])
+        self.tris[tri as usize]
+            .v
+            .map(|k| self.positions[k as usize])
     }
 
     /// Unit geometric normal of triangle `tri`.

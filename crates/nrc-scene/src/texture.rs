@@ -24,7 +24,11 @@ impl WrapMode {
             WrapMode::ClampToEdge => i.clamp(0, n - 1),
             WrapMode::MirroredRepeat => {
                 let period = i.rem_euclid(2 * n);
-                if period < n { period } else { 2 * n - 1 - period }
+                if period < n {
+                    period
+                } else {
+                    2 * n - 1 - period
+                }
             }
         };
         j as usize

@@ -76,7 +76,11 @@ fn random_surface_point(scene: &Scene, rng: &mut Pcg64Mcg) -> (Vec3, Vec3, u32) 
     let tri = rng.random_range(0..scene.triangle_count() as u32);
     let (b1, b2) = sample_uniform_triangle(Vec2::new(rng.random(), rng.random()));
     let [a, b, c] = scene.triangle_vertices(tri);
-    (a * (1.0 - b1 - b2) + b * b1 + c * b2, scene.triangle_normal(tri), tri)
+    (
+        a * (1.0 - b1 - b2) + b * b1 + c * b2,
+        scene.triangle_normal(tri),
+        tri,
+    )
 }
 
 #[test]
@@ -133,7 +137,8 @@ fn bvh_agrees_with_brute_force_on_every_scene() {
                     assert!(ids.contains(&h.tri), "{}: wrong triangle", file.display());
                     let p = scene.interaction(&ray, &h).p;
                     assert!(
-                        (p - ray.at(h.t)).length() <= 1e-4 * (1.0 + h.t + ray.o.abs().max_element()),
+                        (p - ray.at(h.t)).length()
+                            <= 1e-4 * (1.0 + h.t + ray.o.abs().max_element()),
                         "barycentrics of the hit do not reproduce its point"
                     );
                     // A planar triangle cannot be hit again by a ray leaving it: such a
@@ -149,7 +154,12 @@ fn bvh_agrees_with_brute_force_on_every_scene() {
                 ),
             }
             let occ = scene.occluded(&ray);
-            assert_eq!(occ, expected.is_some(), "{}: occlusion differs for {ray:?}", file.display());
+            assert_eq!(
+                occ,
+                expected.is_some(),
+                "{}: occlusion differs for {ray:?}",
+                file.display()
+            );
             occluded += occ as usize;
         }
         println!(
@@ -157,6 +167,9 @@ fn bvh_agrees_with_brute_force_on_every_scene() {
             file.display(),
             scene.triangle_count()
         );
-        assert!(hits > 0 && hits < checked, "the rays exercise hits and misses");
+        assert!(
+            hits > 0 && hits < checked,
+            "the rays exercise hits and misses"
+        );
     }
 }

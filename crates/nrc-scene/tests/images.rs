@@ -37,7 +37,11 @@ fn exr_round_trip_is_bit_exact() {
         }
     }
     // Only the file itself is left: the temporary was renamed.
-    let names: Vec<_> = std::fs::read_dir(dir.path()).unwrap().flatten().map(|e| e.file_name()).collect();
+    let names: Vec<_> = std::fs::read_dir(dir.path())
+        .unwrap()
+        .flatten()
+        .map(|e| e.file_name())
+        .collect();
     assert_eq!(names, vec![std::ffi::OsString::from("frame.exr")]);
     // Overwriting works too.
     Image::new(2, 2).write_exr(&path).unwrap();
@@ -48,13 +52,33 @@ fn exr_round_trip_is_bit_exact() {
 fn exr_errors_name_the_file() {
     let dir = tempfile::tempdir().unwrap();
     let missing = dir.path().join("nothing_here.exr");
-    assert!(Image::read_exr(&missing).unwrap_err().to_string().contains("nothing_here.exr"));
+    assert!(
+        Image::read_exr(&missing)
+            .unwrap_err()
+            .to_string()
+            .contains("nothing_here.exr")
+    );
     let garbage = dir.path().join("garbage.exr");
     std::fs::write(&garbage, b"definitely not an OpenEXR file").unwrap();
-    assert!(Image::read_exr(&garbage).unwrap_err().to_string().contains("garbage.exr"));
+    assert!(
+        Image::read_exr(&garbage)
+            .unwrap_err()
+            .to_string()
+            .contains("garbage.exr")
+    );
     let no_dir = dir.path().join("no/such/folder/out.exr");
-    assert!(Image::new(1, 1).write_exr(&no_dir).unwrap_err().to_string().contains("out.exr"));
-    assert!(Image::new(0, 0).write_exr(&dir.path().join("empty.exr")).is_err());
+    assert!(
+        Image::new(1, 1)
+            .write_exr(&no_dir)
+            .unwrap_err()
+            .to_string()
+            .contains("out.exr")
+    );
+    assert!(
+        Image::new(0, 0)
+            .write_exr(&dir.path().join("empty.exr"))
+            .is_err()
+    );
 }
 
 #[test]
@@ -75,7 +99,11 @@ fn png_preview_is_valid() {
     assert_eq!(info.bit_depth, png::BitDepth::Eight);
     let px = |x: usize, y: usize| &buf[(y * 5 + x) * 3..(y * 5 + x) * 3 + 3];
     assert_eq!(px(0, 0), [0, 0, 0]);
-    assert!(px(1, 0)[0] > 40 && px(1, 0)[0] < 200, "mid grey stays mid grey: {:?}", px(1, 0));
+    assert!(
+        px(1, 0)[0] > 40 && px(1, 0)[0] < 200,
+        "mid grey stays mid grey: {:?}",
+        px(1, 0)
+    );
     assert_eq!(px(2, 0), [255, 255, 255]);
     assert!(px(3, 2)[0] > 150 && px(3, 2)[1] == 0 && px(3, 2)[2] == 0);
     // Exposure brightens monotonically.

@@ -47,7 +47,8 @@ fn light_scene() -> Scene {
         let s = 0.2 + 0.15 * i as f32;
         let base = desc.positions.len() as u32;
         let o = Vec3::new(i as f32 * 2.0, 1.0 + (i % 3) as f32, 0.3 * i as f32);
-        desc.positions.extend([o, o + Vec3::X * s, o + Vec3::new(0.3, 0.2, 1.0) * s]);
+        desc.positions
+            .extend([o, o + Vec3::X * s, o + Vec3::new(0.3, 0.2, 1.0) * s]);
         desc.triangles.push([base, base + 1, base + 2]);
         materials.push(Material {
             name: format!("light{i}"),
@@ -75,7 +76,10 @@ fn selection_frequencies_follow_power() {
     let total: f64 = lights.iter().map(|&t| power(&scene, t)).sum();
     let probs: Vec<f64> = lights.iter().map(|&t| power(&scene, t) / total).collect();
     for (&t, &p) in lights.iter().zip(&probs) {
-        assert!((scene.lights().pmf(t) as f64 - p).abs() < 1e-6, "pmf ∝ power");
+        assert!(
+            (scene.lights().pmf(t) as f64 - p).abs() < 1e-6,
+            "pmf ∝ power"
+        );
     }
     let mut rng = Pcg64Mcg::seed_from_u64(11);
     let mut counts = vec![0u64; lights.len()];
@@ -114,8 +118,14 @@ fn points_are_uniform_on_the_triangle() {
         let b1 = (d22 * dq1 - d12 * dq2) / det;
         let b2 = (d11 * dq2 - d12 * dq1) / det;
         let b0 = 1.0 - b1 - b2;
-        assert!(b0 > -1e-5 && b1 > -1e-5 && b2 > -1e-5, "point off the triangle");
-        assert!((s.p - a).dot(s.n).abs() < 1e-5 * (b - a).length(), "point off the plane");
+        assert!(
+            b0 > -1e-5 && b1 > -1e-5 && b2 > -1e-5,
+            "point off the triangle"
+        );
+        assert!(
+            (s.p - a).dot(s.n).abs() < 1e-5 * (b - a).length(),
+            "point off the plane"
+        );
         let k = if b0 > 0.5 {
             0
         } else if b1 > 0.5 {

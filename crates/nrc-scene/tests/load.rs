@@ -56,16 +56,26 @@ fn cornell_box_glb() {
     println!("{}", scene.summary());
     assert!(!scene.camera_from_file(), "this file has no camera");
     assert!(scene.triangle_count() >= 30);
-    assert!(scene.light_count() > 0, "the ceiling light must be an area light");
+    assert!(
+        scene.light_count() > 0,
+        "the ceiling light must be an area light"
+    );
     // KHR_materials_emissive_strength = 30 is applied to the emitter.
     let light = scene.lights().triangles()[0];
     let m = &scene.materials()[scene.triangle_material(light) as usize];
-    assert!(m.emissive.max_element() >= 29.0, "emissive strength applied: {:?}", m.emissive);
+    assert!(
+        m.emissive.max_element() >= 29.0,
+        "emissive strength applied: {:?}",
+        m.emissive
+    );
     // KHR_materials_specular factor 0: purely diffuse surfaces.
     assert!(scene.materials().iter().any(|m| m.specular == 0.0));
     // The default camera sees the box.
     let hits = check_camera_rays(&scene);
-    assert!(hits > 32 * 24 / 4, "default camera frames the scene: {hits} hits");
+    assert!(
+        hits > 32 * 24 / 4,
+        "default camera frames the scene: {hits} hits"
+    );
     // Sampled light points lie on their triangles and face into the box.
     let s = scene.sample_light(0.5, Vec2::new(0.3, 0.6)).unwrap();
     assert!(s.pdf_area > 0.0 && s.le.max_element() > 0.0);
@@ -108,7 +118,12 @@ fn project_scenes_load() {
     for entry in std::fs::read_dir(&dir).into_iter().flatten().flatten() {
         let p = entry.path();
         let files: Vec<PathBuf> = if p.is_dir() {
-            std::fs::read_dir(&p).into_iter().flatten().flatten().map(|e| e.path()).collect()
+            std::fs::read_dir(&p)
+                .into_iter()
+                .flatten()
+                .flatten()
+                .map(|e| e.path())
+                .collect()
         } else {
             vec![p]
         };
@@ -116,7 +131,11 @@ fn project_scenes_load() {
             if matches!(f.extension().and_then(|e| e.to_str()), Some("gltf" | "glb")) {
                 let scene = load(&f);
                 println!("{}", scene.summary());
-                assert!(scene.camera_from_file(), "{}: shipped scenes have a camera", f.display());
+                assert!(
+                    scene.camera_from_file(),
+                    "{}: shipped scenes have a camera",
+                    f.display()
+                );
                 assert!(check_camera_rays(&scene) > 0);
                 n += 1;
             }
@@ -145,11 +164,26 @@ fn textures_extensions_and_transforms() {
     use nrc_scene::texture::srgb_to_linear;
     let dir = tempfile::tempdir().unwrap();
     // 2×1 textures: texel 0 covers u < 0.5.
-    std::fs::write(dir.path().join("base.png"), png_rgb(2, 1, &[128, 0, 255, 255, 255, 255])).unwrap();
-    std::fs::write(dir.path().join("mr.png"), png_rgb(2, 1, &[0, 64, 191, 0, 255, 255])).unwrap();
-    std::fs::write(dir.path().join("emit.png"), png_rgb(2, 1, &[255, 128, 0, 0, 0, 0])).unwrap();
+    std::fs::write(
+        dir.path().join("base.png"),
+        png_rgb(2, 1, &[128, 0, 255, 255, 255, 255]),
+    )
+    .unwrap();
+    std::fs::write(
+        dir.path().join("mr.png"),
+        png_rgb(2, 1, &[0, 64, 191, 0, 255, 255]),
+    )
+    .unwrap();
+    std::fs::write(
+        dir.path().join("emit.png"),
+        png_rgb(2, 1, &[255, 128, 0, 0, 0, 0]),
+    )
+    .unwrap();
     let mut bin: Vec<u8> = Vec::new();
-    let f32s = |v: &[f32], bin: &mut Vec<u8>| v.iter().for_each(|x| bin.extend_from_slice(&x.to_le_bytes()));
+    let f32s = |v: &[f32], bin: &mut Vec<u8>| {
+        v.iter()
+            .for_each(|x| bin.extend_from_slice(&x.to_le_bytes()))
+    };
     f32s(&[0., 0., 0., 1., 0., 0., 1., 1., 0., 0., 1., 0.], &mut bin); // positions, 48 B
     let s = std::f32::consts::FRAC_1_SQRT_2;
     f32s(&[0., s, s, 0., s, s, 0., s, s, 0., s, s], &mut bin); // normals, 48 B
@@ -220,12 +254,26 @@ fn textures_extensions_and_transforms() {
     assert!((si.uv - Vec2::new(0.25, 0.5)).length() < 1e-5);
     assert!((si.ng - Vec3::Z).length() < 1e-6);
     // Normals transform by the inverse transpose: (0, 1, 1) under scale (1, 4, 1) → (0, ¼, 1).
-    assert!((si.ns - Vec3::new(0.0, 0.25, 1.0).normalize()).length() < 1e-5, "{:?}", si.ns);
+    assert!(
+        (si.ns - Vec3::new(0.0, 0.25, 1.0).normalize()).length() < 1e-5,
+        "{:?}",
+        si.ns
+    );
     let pbr = scene.pbr(&si);
     let expect_base = Vec3::new(0.5 * srgb_to_linear(128.0 / 255.0), 0.0, 1.0);
-    assert!((pbr.base_color - expect_base).length() < 1e-5, "{:?}", pbr.base_color);
-    assert!((pbr.roughness - 0.5 * 64.0 / 255.0).abs() < 1e-5, "G channel is roughness");
-    assert!((pbr.metallic - 191.0 / 255.0).abs() < 1e-5, "B channel is metallic");
+    assert!(
+        (pbr.base_color - expect_base).length() < 1e-5,
+        "{:?}",
+        pbr.base_color
+    );
+    assert!(
+        (pbr.roughness - 0.5 * 64.0 / 255.0).abs() < 1e-5,
+        "G channel is roughness"
+    );
+    assert!(
+        (pbr.metallic - 191.0 / 255.0).abs() < 1e-5,
+        "B channel is metallic"
+    );
     assert!((pbr.transmission - 0.7).abs() < 1e-6);
     assert!((pbr.ior - 1.33).abs() < 1e-6);
     assert!((pbr.specular - 0.5).abs() < 1e-6);

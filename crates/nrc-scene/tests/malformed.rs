@@ -9,7 +9,13 @@ use rand_pcg::Pcg64Mcg;
 
 /// A glTF document with one mesh named `mesh_name` (positions, u16 indices) whose data
 /// lives in buffer 0, plus `extra` top-level JSON members (each ending with a comma).
-fn document(mesh_name: &str, positions: &[[f32; 3]], indices: &[u16], buffer_uri: Option<&str>, extra: &str) -> (String, Vec<u8>) {
+fn document(
+    mesh_name: &str,
+    positions: &[[f32; 3]],
+    indices: &[u16],
+    buffer_uri: Option<&str>,
+    extra: &str,
+) -> (String, Vec<u8>) {
     let mut bin = Vec::new();
     for p in positions {
         for c in p {
@@ -24,7 +30,9 @@ fn document(mesh_name: &str, positions: &[[f32; 3]], indices: &[u16], buffer_uri
     while !bin.len().is_multiple_of(4) {
         bin.push(0);
     }
-    let uri = buffer_uri.map(|u| format!(r#""uri": "{u}","#)).unwrap_or_default();
+    let uri = buffer_uri
+        .map(|u| format!(r#""uri": "{u}","#))
+        .unwrap_or_default();
     let json = format!(
         r#"{{
   {extra}
@@ -74,7 +82,12 @@ fn glb(json: &str, bin: &[u8]) -> Vec<u8> {
     out
 }
 
-const QUAD: [[f32; 3]; 4] = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0]];
+const QUAD: [[f32; 3]; 4] = [
+    [0.0, 0.0, 0.0],
+    [1.0, 0.0, 0.0],
+    [1.0, 1.0, 0.0],
+    [0.0, 1.0, 0.0],
+];
 const QUAD_INDICES: [u16; 6] = [0, 1, 2, 0, 2, 3];
 
 fn write(dir: &Path, name: &str, bytes: &[u8]) -> PathBuf {
@@ -92,7 +105,10 @@ fn error_of(path: &Path) -> String {
 
 fn assert_mentions(message: &str, parts: &[&str]) {
     for p in parts {
-        assert!(message.contains(p), "error `{message}` does not mention `{p}`");
+        assert!(
+            message.contains(p),
+            "error `{message}` does not mention `{p}`"
+        );
     }
 }
 
@@ -126,14 +142,21 @@ fn truncated_glb() {
     // Every possible truncation is an error, none a panic.
     for len in 0..full.len() {
         let p = write(dir.path(), "any.glb", &full[..len]);
-        assert!(Scene::load(&p).is_err(), "truncated at {len} bytes but loaded");
+        assert!(
+            Scene::load(&p).is_err(),
+            "truncated at {len} bytes but loaded"
+        );
     }
 }
 
 #[test]
 fn invalid_json() {
     let dir = tempfile::tempdir().unwrap();
-    let p = write(dir.path(), "broken.gltf", br#"{"asset": {"version": "2.0"}, "meshes": [ }"#);
+    let p = write(
+        dir.path(),
+        "broken.gltf",
+        br#"{"asset": {"version": "2.0"}, "meshes": [ }"#,
+    );
     assert_mentions(&error_of(&p), &["broken.gltf", "invalid JSON"]);
     let p = write(dir.path(), "empty.gltf", b"");
     assert_mentions(&error_of(&p), &["empty.gltf", "invalid JSON"]);
@@ -196,14 +219,23 @@ fn unsupported_required_extension() {
     let p = write(dir.path(), "draco.glb", &glb(&json, &bin));
     let e = Scene::load(&p).unwrap_err();
     assert!(matches!(e, SceneError::UnsupportedExtension { .. }));
-    assert_mentions(&e.to_string(), &["draco.glb", "KHR_draco_mesh_compression", "required"]);
+    assert_mentions(
+        &e.to_string(),
+        &["draco.glb", "KHR_draco_mesh_compression", "required"],
+    );
     // Merely used, unknown extensions are ignored with a warning.
     let ext = r#""extensionsUsed": ["EXT_made_up_extension"],"#;
     let (json, bin) = document("quad", &QUAD, &QUAD_INDICES, None, ext);
     let scene = Scene::load(&write(dir.path(), "used.glb", &glb(&json, &bin))).unwrap();
-    assert!(scene.warnings().iter().any(|w| w.contains("EXT_made_up_extension")));
+    assert!(
+        scene
+            .warnings()
+            .iter()
+            .any(|w| w.contains("EXT_made_up_extension"))
+    );
     // Supported extensions may be required.
-    let ext = r#""extensionsUsed": ["KHR_materials_ior"], "extensionsRequired": ["KHR_materials_ior"],"#;
+    let ext =
+        r#""extensionsUsed": ["KHR_materials_ior"], "extensionsRequired": ["KHR_materials_ior"],"#;
     let (json, bin) = document("quad", &QUAD, &QUAD_INDICES, None, ext);
     assert!(Scene::load(&write(dir.path(), "ior.glb", &glb(&json, &bin))).is_ok());
 }
@@ -221,7 +253,11 @@ fn wrong_accessor_type() {
     let dir = tempfile::tempdir().unwrap();
     let (json, bin) = document("typed", &QUAD, &QUAD_INDICES, None, "");
     // POSITION declared as VEC2.
-    let json = json.replacen(r#""count": 4, "type": "VEC3""#, r#""count": 4, "type": "VEC2""#, 1);
+    let json = json.replacen(
+        r#""count": 4, "type": "VEC3""#,
+        r#""count": 4, "type": "VEC2""#,
+        1,
+    );
     let msg = error_of(&write(dir.path(), "vec2.glb", &glb(&json, &bin)));
     assert_mentions(&msg, &["typed", "POSITION"]);
 }
@@ -231,7 +267,11 @@ fn accessor_outside_buffer() {
     let dir = tempfile::tempdir().unwrap();
     let (json, bin) = document("greedy", &QUAD, &QUAD_INDICES, None, "");
     // More vertices than the buffer view holds.
-    let json = json.replacen(r#""count": 4, "type": "VEC3""#, r#""count": 400, "type": "VEC3""#, 1);
+    let json = json.replacen(
+        r#""count": 4, "type": "VEC3""#,
+        r#""count": 400, "type": "VEC3""#,
+        1,
+    );
     let msg = error_of(&write(dir.path(), "big.glb", &glb(&json, &bin)));
     assert_mentions(&msg, &["big.glb"]);
 }

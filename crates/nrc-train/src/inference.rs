@@ -56,7 +56,8 @@ impl Default for Termination {
 }
 
 /// The grammar of termination names.
-pub const TERMINATION_NAMES: &str = "first, diffuse[:ROUGHNESS] (default 0.3), spread[:C] (default 0.01), bth[:K] (default 4)";
+pub const TERMINATION_NAMES: &str =
+    "first, diffuse[:ROUGHNESS] (default 0.3), spread[:C] (default 0.01), bth[:K] (default 4)";
 
 impl FromStr for Termination {
     type Err = String;
@@ -71,16 +72,24 @@ impl FromStr for Termination {
                 None => Ok(default),
                 Some(p) => match p.parse::<f32>() {
                     Ok(v) if v.is_finite() && v > 0.0 => Ok(v),
-                    _ => Err(format!("termination `{s}`: the parameter must be a positive number, got `{p}`")),
+                    _ => Err(format!(
+                        "termination `{s}`: the parameter must be a positive number, got `{p}`"
+                    )),
                 },
             }
         };
         Ok(match name {
             "first" if param.is_none() => Self::FirstVertex,
-            "diffuse" => Self::FirstDiffuse { roughness: value(0.3)? },
+            "diffuse" => Self::FirstDiffuse {
+                roughness: value(0.3)?,
+            },
             "spread" => Self::SpreadAngle { c: value(0.01)? },
             "bth" => Self::Balanced { k: value(4.0)? },
-            _ => return Err(format!("unknown termination `{s}`; known: {TERMINATION_NAMES}")),
+            _ => {
+                return Err(format!(
+                    "unknown termination `{s}`; known: {TERMINATION_NAMES}"
+                ));
+            }
         })
     }
 }
@@ -148,10 +157,18 @@ struct SamplePath {
 
 impl CacheRenderer {
     /// Whether the path ends in the cache at a vertex with `bsdf`, given the spread so far.
-    fn ends_here(&self, bsdf: &Bsdf, wo: Vec3, arrival: Option<bool>, sampler: &mut PixelSampler) -> bool {
+    fn ends_here(
+        &self,
+        bsdf: &Bsdf,
+        wo: Vec3,
+        arrival: Option<bool>,
+        sampler: &mut PixelSampler,
+    ) -> bool {
         match self.termination {
             Termination::FirstVertex => true,
-            Termination::FirstDiffuse { roughness } => !bsdf.is_delta() && bsdf.roughness() >= roughness,
+            Termination::FirstDiffuse { roughness } => {
+                !bsdf.is_delta() && bsdf.roughness() >= roughness
+            }
             // Never at a delta vertex: its radiance is a view-dependent spike the cache cannot
             // hold; the path goes on to the next vertex, where the spread (which only grows)
             // still says stop.
@@ -165,14 +182,24 @@ impl CacheRenderer {
                 let peak = Vec3::new(-wo.x, -wo.y, wo.z);
                 let p_l = k * wo.z / std::f32::consts::PI;
                 let p_b = bsdf.pdf(wo, peak);
-                let t = if p_b.is_finite() { p_l * p_l / (p_l * p_l + p_b * p_b) } else { 0.0 };
+                let t = if p_b.is_finite() {
+                    p_l * p_l / (p_l * p_l + p_b * p_b)
+                } else {
+                    0.0
+                };
                 u < t
             }
         }
     }
 
     /// Traces one camera sample until it ends in the cache or otherwise.
-    fn trace(&self, scene: &Scene, camera_pos: Vec3, mut ray: nrc_scene::Ray, sampler: &mut PixelSampler) -> SamplePath {
+    fn trace(
+        &self,
+        scene: &Scene,
+        camera_pos: Vec3,
+        mut ray: nrc_scene::Ray,
+        sampler: &mut PixelSampler,
+    ) -> SamplePath {
         let limit = if self.tracer.max_depth <= 0 {
             u32::MAX
         } else {
@@ -203,14 +230,20 @@ impl CacheRenderer {
             let dist = hit.t * ray.d.length();
             let le = scene.emission(&si);
             if le != Vec3::ZERO {
-                out.prefix += out.throughput * le * emission_mis_weight(scene, &si, dist, prev_pdf, prev_delta || !use_nee);
+                out.prefix += out.throughput
+                    * le
+                    * emission_mis_weight(scene, &si, dist, prev_pdf, prev_delta || !use_nee);
             }
             let bsdf = Bsdf::from_pbr(&scene.pbr(&si));
             let frame = Frame::from_normal(si.ns);
             let wo = frame.to_local(si.wo);
-            let arrival = spread
-                .as_mut()
-                .map(|s| s.arrive(dist * dist, (!prev_delta).then_some(prev_pdf), si.ng.dot(si.wo)));
+            let arrival = spread.as_mut().map(|s| {
+                s.arrive(
+                    dist * dist,
+                    (!prev_delta).then_some(prev_pdf),
+                    si.ng.dot(si.wo),
+                )
+            });
             if self.ends_here(&bsdf, wo, arrival, sampler) {
                 out.end = Some((
                     self.queries.query(&si, &bsdf),
@@ -225,7 +258,8 @@ impl CacheRenderer {
                 break;
             }
             if use_nee && !bsdf.is_delta() {
-                out.prefix += out.throughput * next_event(scene, &si, &bsdf, &frame, wo, true, sampler, &mut stats);
+                out.prefix += out.throughput
+                    * next_event(scene, &si, &bsdf, &frame, wo, true, sampler, &mut stats);
             }
             let u_lobe = sampler.next_1d();
             let u_dir = sampler.next_2d();
@@ -284,7 +318,11 @@ impl CacheRenderer {
         let trace_ms = t0.elapsed().as_secs_f64() * 1e3;
         let t1 = Instant::now();
         let queries: Vec<CacheQuery> = samples.iter().filter_map(|s| s.end.map(|e| e.0)).collect();
-        let predicted = if queries.is_empty() { Vec::new() } else { cache.predict(&queries) };
+        let predicted = if queries.is_empty() {
+            Vec::new()
+        } else {
+            cache.predict(&queries)
+        };
         let cache_ms = t1.elapsed().as_secs_f64() * 1e3;
         let mut predicted = predicted.into_iter();
         let mut stats = InferenceStats {
@@ -311,7 +349,8 @@ impl CacheRenderer {
             data[i / spp as usize] += l * inv;
         }
         InferenceOutput {
-            image: Image::from_data(width as usize, height as usize, data).expect("one value per pixel"),
+            image: Image::from_data(width as usize, height as usize, data)
+                .expect("one value per pixel"),
             terminations,
             stats,
         }
@@ -324,7 +363,15 @@ mod tests {
 
     #[test]
     fn termination_names_parse_and_print() {
-        for name in ["first", "diffuse", "diffuse:0.5", "spread", "spread:0.02", "bth", "bth:8"] {
+        for name in [
+            "first",
+            "diffuse",
+            "diffuse:0.5",
+            "spread",
+            "spread:0.02",
+            "bth",
+            "bth:8",
+        ] {
             assert_eq!(name.parse::<Termination>().unwrap().to_string(), name);
         }
         for bad in ["", "last", "spread:0", "spread:x", "bth:-1", "first:1"] {

@@ -14,7 +14,7 @@ use std::fmt;
 use std::str::FromStr;
 
 use nrc_cache::{CacheConfig, CacheDevice, RadianceCache};
-use nrc_render::methods::{METHOD_NAMES, MethodSettings, Pass, ParseMethodError};
+use nrc_render::methods::{METHOD_NAMES, MethodSettings, ParseMethodError, Pass};
 use nrc_render::{Method, MethodSpec as RenderSpec};
 use nrc_scene::{Camera, Scene};
 
@@ -50,24 +50,36 @@ impl FromStr for MethodSpec {
     fn from_str(s: &str) -> Result<Self, Self::Err> {
         let s = s.trim();
         let Some(rest) = s.strip_prefix("nrc-") else {
-            return s.parse::<RenderSpec>().map(Self::Render).map_err(|e| ParseMethodError {
-                name: e.name,
-                reason: format!("{} (cache methods: nrc-<producer>[-<termination>])", e.reason),
-            });
+            return s
+                .parse::<RenderSpec>()
+                .map(Self::Render)
+                .map_err(|e| ParseMethodError {
+                    name: e.name,
+                    reason: format!(
+                        "{} (cache methods: nrc-<producer>[-<termination>])",
+                        e.reason
+                    ),
+                });
         };
         let err = |reason: String| ParseMethodError {
             name: s.to_string(),
             reason,
         };
         if rest.starts_with("mix:") {
-            return Err(err("mixes are not method names; train a mix with `nrc train --producer mix:...`".into()));
+            return Err(err(
+                "mixes are not method names; train a mix with `nrc train --producer mix:...`"
+                    .into(),
+            ));
         }
         // `<producer>-<termination>` when the last part is a termination, else all producer.
         if let Some((p, t)) = rest.rsplit_once('-')
             && let Ok(termination) = t.parse::<Termination>()
         {
             let producer = p.parse::<ProducerSpec>().map_err(err)?;
-            return Ok(Self::Cache(CacheMethodSpec { producer, termination }));
+            return Ok(Self::Cache(CacheMethodSpec {
+                producer,
+                termination,
+            }));
         }
         let producer = rest.parse::<ProducerSpec>().map_err(err)?;
         Ok(Self::Cache(CacheMethodSpec {
@@ -81,7 +93,9 @@ impl fmt::Display for MethodSpec {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
             Self::Render(r) => write!(f, "{r}"),
-            Self::Cache(c) if c.termination == Termination::default() => write!(f, "nrc-{}", c.producer),
+            Self::Cache(c) if c.termination == Termination::default() => {
+                write!(f, "nrc-{}", c.producer)
+            }
             Self::Cache(c) => write!(f, "nrc-{}-{}", c.producer, c.termination),
         }
     }
@@ -183,7 +197,13 @@ pub fn scene_trainer(
 }
 
 impl CacheMethod {
-    fn trainer(&mut self, scene: &Scene, camera: &Camera, width: u32, height: u32) -> Result<&mut OnlineTrainer, String> {
+    fn trainer(
+        &mut self,
+        scene: &Scene,
+        camera: &Camera,
+        width: u32,
+        height: u32,
+    ) -> Result<&mut OnlineTrainer, String> {
         if self.trainer.is_none() {
             let mut t = scene_trainer(
                 scene,
@@ -193,7 +213,8 @@ impl CacheMethod {
                 self.method.tracer,
             )?;
             for _ in 0..self.settings.train_frames {
-                t.frame(scene, camera, width, height, false).map_err(|e| e.to_string())?;
+                t.frame(scene, camera, width, height, false)
+                    .map_err(|e| e.to_string())?;
             }
             self.trainer = Some(t);
         }
@@ -210,11 +231,24 @@ impl Method for CacheMethod {
         1
     }
 
-    fn prepare(&mut self, scene: &Scene, camera: &Camera, width: u32, height: u32) -> Result<(), String> {
+    fn prepare(
+        &mut self,
+        scene: &Scene,
+        camera: &Camera,
+        width: u32,
+        height: u32,
+    ) -> Result<(), String> {
         self.trainer(scene, camera, width, height).map(|_| ())
     }
 
-    fn render_pass(&mut self, scene: &Scene, camera: &Camera, width: u32, height: u32, seed: u64) -> Pass {
+    fn render_pass(
+        &mut self,
+        scene: &Scene,
+        camera: &Camera,
+        width: u32,
+        height: u32,
+        seed: u64,
+    ) -> Pass {
         let online = self.settings.online;
         let name = self.name.clone();
         let trainer = match self.trainer(scene, camera, width, height) {
@@ -236,7 +270,11 @@ impl Method for CacheMethod {
         if online && let Err(e) = trainer.frame(scene, camera, width, height, false) {
             eprintln!("{name}: training skipped: {e}");
         }
-        let out = trainer.settings.renderer.render(scene, camera, &trainer.cache, width, height, 1, seed);
+        let out =
+            trainer
+                .settings
+                .renderer
+                .render(scene, camera, &trainer.cache, width, height, 1, seed);
         Pass {
             image: out.image,
             invalid_samples: out.stats.invalid_samples,
@@ -250,12 +288,33 @@ mod tests {
 
     #[test]
     fn names_parse_and_print_back() {
-        for name in ["pt-4spp", "pt-1spp-nonee", "nrc-pt", "nrc-pt-sl", "nrc-bt", "nrc-lt", "nrc-sppc", "nrc-pt-first", "nrc-pt-sl-bth:8", "nrc-sppc-diffuse"] {
+        for name in [
+            "pt-4spp",
+            "pt-1spp-nonee",
+            "nrc-pt",
+            "nrc-pt-sl",
+            "nrc-bt",
+            "nrc-lt",
+            "nrc-sppc",
+            "nrc-pt-first",
+            "nrc-pt-sl-bth:8",
+            "nrc-sppc-diffuse",
+        ] {
             let spec: MethodSpec = name.parse().unwrap();
             assert_eq!(spec.to_string(), name);
         }
-        assert_eq!("nrc-pt-spread".parse::<MethodSpec>().unwrap().to_string(), "nrc-pt");
-        for bad in ["nrc-", "nrc-foo", "nrc-pt-foo", "nrc-mix:pt=1", "px-1spp", "nrc-pt-sl-spread:0"] {
+        assert_eq!(
+            "nrc-pt-spread".parse::<MethodSpec>().unwrap().to_string(),
+            "nrc-pt"
+        );
+        for bad in [
+            "nrc-",
+            "nrc-foo",
+            "nrc-pt-foo",
+            "nrc-mix:pt=1",
+            "px-1spp",
+            "nrc-pt-sl-spread:0",
+        ] {
             let e = bad.parse::<MethodSpec>().unwrap_err().to_string();
             assert!(e.contains("unknown method"), "{bad}: {e}");
         }

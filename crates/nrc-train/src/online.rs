@@ -192,7 +192,15 @@ impl OnlineTrainer {
         let mut output = None;
         if render {
             let t = Instant::now();
-            let out = s.renderer.render(scene, camera, &self.cache, width, height, s.spp, seed ^ 0x1F3D_5B79);
+            let out = s.renderer.render(
+                scene,
+                camera,
+                &self.cache,
+                width,
+                height,
+                s.spp,
+                seed ^ 0x1F3D_5B79,
+            );
             stats.infer_ms = t.elapsed().as_secs_f64() * 1e3;
             stats.inference = out.stats;
             self.previous = out.terminations.clone();

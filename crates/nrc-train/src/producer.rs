@@ -102,7 +102,11 @@ impl ProducerKind {
             "bt" => Self::Bt,
             "lt" => Self::Lt,
             "sppc" => Self::Sppc,
-            other => return Err(format!("unknown producer `{other}`; known: {PRODUCER_NAMES}")),
+            other => {
+                return Err(format!(
+                    "unknown producer `{other}`; known: {PRODUCER_NAMES}"
+                ));
+            }
         })
     }
 
@@ -204,7 +208,11 @@ impl ProducerMix {
                 ((budget as f32 * *share).round() as usize).min(left)
             };
             left -= b;
-            let p = producer.produce(ctx, b, seed ^ (i as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15));
+            let p = producer.produce(
+                ctx,
+                b,
+                seed ^ (i as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15),
+            );
             out.batch.queries.extend(p.batch.queries);
             out.batch.targets.extend(p.batch.targets);
             out.stats.add(&p.stats);
@@ -225,7 +233,16 @@ mod tests {
         let mix: ProducerSpec = "mix:pt-sl=1,sppc=3".parse().unwrap();
         assert_eq!(mix.parts.len(), 2);
         assert!((mix.parts[1].1 - 0.75).abs() < 1e-6);
-        for bad in ["", "ptx", "mix:", "mix:pt", "mix:pt=0", "mix:pt=-1", "mix:pt=x", "mix:foo=1"] {
+        for bad in [
+            "",
+            "ptx",
+            "mix:",
+            "mix:pt",
+            "mix:pt=0",
+            "mix:pt=-1",
+            "mix:pt=x",
+            "mix:foo=1",
+        ] {
             assert!(bad.parse::<ProducerSpec>().is_err(), "{bad}");
         }
     }

@@ -15,7 +15,11 @@ impl QueryMaker {
     /// surfaces on the boundary are not at the edge of the encoding) and never flat.
     pub fn new(bounds: &Aabb) -> Self {
         let ext = (bounds.max - bounds.min).max_element();
-        let pad = if ext.is_finite() && ext > 0.0 { 0.01 * ext } else { 1.0 };
+        let pad = if ext.is_finite() && ext > 0.0 {
+            0.01 * ext
+        } else {
+            1.0
+        };
         let min = bounds.min - Vec3::splat(pad);
         let max = bounds.max + Vec3::splat(pad);
         Self {

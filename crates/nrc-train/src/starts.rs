@@ -26,7 +26,13 @@ pub struct TerminationPoint {
 
 /// `n` camera rays, one per tile of a near-square tiling of the `width × height` image, each at
 /// a uniform random position in its tile (stream `seed`).
-pub fn camera_tiles(camera: &Camera, width: u32, height: u32, n: usize, seed: u64) -> Vec<StartRay> {
+pub fn camera_tiles(
+    camera: &Camera,
+    width: u32,
+    height: u32,
+    n: usize,
+    seed: u64,
+) -> Vec<StartRay> {
     if n == 0 || width == 0 || height == 0 {
         return Vec::new();
     }

@@ -58,14 +58,16 @@ impl RadianceView for PathTracedView<'_> {
                 let ray = nrc_scene::Ray::new(p + wo * offset, -wo);
                 let mut stats = nrc_render::PathStats::default();
                 // Emission at the point the ray finds is subtracted (the cache's targets exclude it).
-                let le = self
-                    .scene
-                    .intersect(&ray)
-                    .map_or(Vec3::ZERO, |hit| self.scene.emission(&self.scene.interaction(&ray, &hit)));
+                let le = self.scene.intersect(&ray).map_or(Vec3::ZERO, |hit| {
+                    self.scene.emission(&self.scene.interaction(&ray, &hit))
+                });
                 let mut sum = Vec3::ZERO;
                 for s in 0..self.samples {
                     let mut sampler = nrc_render::PixelSampler::new(self.seed, i as u64, s as u64);
-                    sum += self.tracer.radiance(self.scene, ray, &mut sampler, &mut stats) - le;
+                    sum += self
+                        .tracer
+                        .radiance(self.scene, ray, &mut sampler, &mut stats)
+                        - le;
                 }
                 (sum / self.samples.max(1) as f32).to_array()
             })

@@ -8,7 +8,12 @@ use nrc_train::methods::{CacheMethodSettings, scene_trainer};
 use nrc_train::{OnlineTrainer, ProducerSpec, Termination};
 
 fn scene(name: &str) -> Scene {
-    Scene::load(&std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes").join(name)).unwrap()
+    Scene::load(
+        &std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../../scenes")
+            .join(name),
+    )
+    .unwrap()
 }
 
 fn trainer(scene: &Scene, producer: &str, records: usize) -> OnlineTrainer {
@@ -17,7 +22,14 @@ fn trainer(scene: &Scene, producer: &str, records: usize) -> OnlineTrainer {
     s.batch_size = records / 2;
     s.resolution = 128;
     s.seed = 11;
-    scene_trainer(scene, producer.parse::<ProducerSpec>().unwrap(), Termination::default(), &s, PathTracer::default()).unwrap()
+    scene_trainer(
+        scene,
+        producer.parse::<ProducerSpec>().unwrap(),
+        Termination::default(),
+        &s,
+        PathTracer::default(),
+    )
+    .unwrap()
 }
 
 #[test]
@@ -45,9 +57,16 @@ fn online_loop_is_deterministic_and_snapshots_render_identically() {
     let loaded = RadianceCache::load(&path, CacheDevice::Cpu).unwrap();
     assert_eq!(loaded.scene_box(), a.cache.scene_box());
     let r = a.settings.renderer;
-    let before = r.render(&scene, &scene.camera, &a.cache, 24, 16, 2, 99).image;
-    let after = r.render(&scene, &scene.camera, &loaded, 24, 16, 2, 99).image;
-    assert_eq!(before.data, after.data, "a reloaded cache renders bit-identically");
+    let before = r
+        .render(&scene, &scene.camera, &a.cache, 24, 16, 2, 99)
+        .image;
+    let after = r
+        .render(&scene, &scene.camera, &loaded, 24, 16, 2, 99)
+        .image;
+    assert_eq!(
+        before.data, after.data,
+        "a reloaded cache renders bit-identically"
+    );
 }
 
 #[test]
@@ -60,16 +79,28 @@ fn a_long_run_on_caustics_stays_finite() {
             let render = f % 8 == 7;
             let (s, out) = t.frame(&scene, &scene.camera, 24, 24, render).unwrap();
             assert!(s.loss.is_finite(), "{producer} frame {f}: loss {}", s.loss);
-            assert_eq!(s.used + s.dropped_nonfinite + s.dropped_absurd, s.records, "every record used or counted");
+            assert_eq!(
+                s.used + s.dropped_nonfinite + s.dropped_absurd,
+                s.records,
+                "every record used or counted"
+            );
             records += s.records;
             dropped += s.dropped_nonfinite + s.dropped_absurd;
             if let Some(out) = out {
                 assert_eq!(out.stats.invalid_samples, 0, "{producer} frame {f}");
-                assert!(out.image.data.iter().all(|p| p.is_finite() && p.min_element() >= 0.0));
+                assert!(
+                    out.image
+                        .data
+                        .iter()
+                        .all(|p| p.is_finite() && p.min_element() >= 0.0)
+                );
             }
         }
         let (grid, mlp) = t.cache.weights();
-        assert!(grid.iter().chain(&mlp).all(|w| w.is_finite()), "{producer}: non-finite weight");
+        assert!(
+            grid.iter().chain(&mlp).all(|w| w.is_finite()),
+            "{producer}: non-finite weight"
+        );
         println!("{producer}: {records} records, {dropped} dropped, final loss finite");
     }
 }

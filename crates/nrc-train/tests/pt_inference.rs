@@ -25,7 +25,11 @@ const RHO: f32 = 0.5;
 fn enclosure() -> Scene {
     let mut b = SceneBuilder::new();
     let m = b.material(mat::emissive(Vec3::splat(RHO), Vec3::splat(LE), false));
-    b.mesh(&Mesh::cuboid(Vec3::splat(-1.0), Vec3::splat(1.0), true), m, false);
+    b.mesh(
+        &Mesh::cuboid(Vec3::splat(-1.0), Vec3::splat(1.0), true),
+        m,
+        false,
+    );
     b.camera(Vec3::new(0.2, 0.1, 0.7), Vec3::new(-0.3, -0.2, -1.0), 70.0);
     b.build()
 }
@@ -38,13 +42,21 @@ const EXACT: f32 = RHO * LE / (1.0 - RHO);
 fn mean_and_se(batch: &TrainingBatch, groups: usize) -> (f64, f64) {
     let v: Vec<f64> = batch.targets.iter().map(|t| t[1] as f64).collect();
     let size = v.len() / groups;
-    let means: Vec<f64> = (0..groups).map(|g| v[g * size..(g + 1) * size].iter().sum::<f64>() / size as f64).collect();
+    let means: Vec<f64> = (0..groups)
+        .map(|g| v[g * size..(g + 1) * size].iter().sum::<f64>() / size as f64)
+        .collect();
     let m = means.iter().sum::<f64>() / groups as f64;
     let var = means.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (groups - 1) as f64;
     (m, (var / groups as f64).sqrt())
 }
 
-fn produce(scene: &Scene, producer: &mut dyn Producer, cache: &dyn RadianceView, budget: usize, seed: u64) -> TrainingBatch {
+fn produce(
+    scene: &Scene,
+    producer: &mut dyn Producer,
+    cache: &dyn RadianceView,
+    budget: usize,
+    seed: u64,
+) -> TrainingBatch {
     let queries = QueryMaker::new(&scene.bounds());
     let starts = camera_tiles(&scene.camera, 64, 64, budget, seed);
     let ctx = ProducerContext {
@@ -72,7 +84,13 @@ fn pt_targets_are_unbiased_in_the_enclosure() {
     let scene = enclosure();
     let batch = produce(&scene, &mut PathProducer::new(false), &ZeroView, 40_000, 1);
     assert_eq!(batch.queries.len(), 40_000);
-    assert!(batch.targets.iter().flatten().all(|t| t.is_finite() && *t >= 0.0));
+    assert!(
+        batch
+            .targets
+            .iter()
+            .flatten()
+            .all(|t| t.is_finite() && *t >= 0.0)
+    );
     let (m, se) = mean_and_se(&batch, 40);
     let z = (m - EXACT as f64) / se;
     println!("pt: mean target {m:.5} ± {se:.5} (exact {EXACT}), z = {z:.2}");
@@ -89,7 +107,13 @@ fn self_learning_with_an_exact_cache_is_unbiased_and_needs_the_cache() {
     println!("pt-sl with the exact cache: {m:.5} ± {se:.5}, z = {z:.2}");
     assert!(z.abs() < 4.0, "z = {z}");
     // Self-learning paths are shorter than unbiased ones (they end in the cache) ...
-    let unbiased = produce(&scene, &mut PathProducer::new(false), &EnclosureView, 40_000, 2);
+    let unbiased = produce(
+        &scene,
+        &mut PathProducer::new(false),
+        &EnclosureView,
+        40_000,
+        2,
+    );
     let (_, se_u) = mean_and_se(&unbiased, 40);
     println!("standard error: self-learning {se:.5}, unbiased {se_u:.5}");
     // ... and with a cache that knows nothing, their targets miss the light beyond the
@@ -108,7 +132,15 @@ fn producing_is_deterministic_whatever_the_thread_count() {
             .num_threads(threads)
             .build()
             .unwrap()
-            .install(|| produce(&scene, &mut PathProducer::new(true), &EnclosureView, 5000, 9))
+            .install(|| {
+                produce(
+                    &scene,
+                    &mut PathProducer::new(true),
+                    &EnclosureView,
+                    5000,
+                    9,
+                )
+            })
     };
     assert_eq!(run(1), run(2));
 }
@@ -118,7 +150,11 @@ fn pass_means(passes: u32, mut one: impl FnMut(u64) -> nrc_scene::Image) -> (f64
     let means: Vec<f64> = (0..passes)
         .map(|p| {
             let img = one(pass_seed(77, p));
-            img.data.iter().map(|c| (c.x + c.y + c.z) as f64).sum::<f64>() / img.data.len() as f64
+            img.data
+                .iter()
+                .map(|c| (c.x + c.y + c.z) as f64)
+                .sum::<f64>()
+                / img.data.len() as f64
         })
         .collect();
     let m = means.iter().sum::<f64>() / passes as f64;
@@ -133,7 +169,13 @@ fn every_termination_with_an_exact_cache_reproduces_the_reference() {
     let tracer = PathTracer::default();
     let queries = QueryMaker::new(&scene.bounds());
     let (ref_m, ref_se) = pass_means(passes, |seed| {
-        let s = RenderSettings { width: w, height: h, spp: 4, seed, variance: false };
+        let s = RenderSettings {
+            width: w,
+            height: h,
+            spp: 4,
+            seed,
+            variance: false,
+        };
         render(&scene, &scene.camera, &tracer, &s, &|_| {}).mean
     });
     println!("reference: {ref_m:.5} ± {ref_se:.5}");
@@ -144,10 +186,23 @@ fn every_termination_with_an_exact_cache_reproduces_the_reference() {
         Termination::Balanced { k: 4.0 },
     ] {
         for nee in [true, false] {
-            let renderer = CacheRenderer { termination, nee, tracer, queries };
+            let renderer = CacheRenderer {
+                termination,
+                nee,
+                tracer,
+                queries,
+            };
             let (m, se) = pass_means(passes, |seed| {
-                let exact = PathTracedView { scene: &scene, queries, tracer, samples: 8, seed: seed ^ 0xABCD };
-                renderer.render(&scene, &scene.camera, &exact, w, h, spp, seed).image
+                let exact = PathTracedView {
+                    scene: &scene,
+                    queries,
+                    tracer,
+                    samples: 8,
+                    seed: seed ^ 0xABCD,
+                };
+                renderer
+                    .render(&scene, &scene.camera, &exact, w, h, spp, seed)
+                    .image
             });
             let z = (m - ref_m) / (se * se + ref_se * ref_se).sqrt();
             println!("{termination} (nee {nee}): {m:.5} ± {se:.5}, z = {z:.2}");
@@ -162,15 +217,29 @@ fn terminations_end_where_they_say() {
     let queries = QueryMaker::new(&scene.bounds());
     let tracer = PathTracer::default();
     let render = |termination| {
-        let r = CacheRenderer { termination, nee: true, tracer, queries };
+        let r = CacheRenderer {
+            termination,
+            nee: true,
+            tracer,
+            queries,
+        };
         r.render(&scene, &scene.camera, &EnclosureView, 16, 16, 4, 5)
     };
     // First vertex: every path ends at its primary hit; the image is exactly Le + exact.
     let first = render(Termination::FirstVertex);
     assert_eq!(first.stats.queries, 16 * 16 * 4);
-    assert!(first.image.data.iter().all(|p| (p.y - (LE + EXACT)).abs() < 1e-5));
+    assert!(
+        first
+            .image
+            .data
+            .iter()
+            .all(|p| (p.y - (LE + EXACT)).abs() < 1e-5)
+    );
     // The spread heuristic goes at least one bounce further: more rays than paths.
     let spread = render(Termination::SpreadAngle { c: 0.01 });
     assert!(spread.stats.rays > spread.stats.paths, "{:?}", spread.stats);
-    assert_eq!(spread.stats.queries, spread.stats.paths, "a closed box: every path ends in the cache");
+    assert_eq!(
+        spread.stats.queries, spread.stats.paths,
+        "a closed box: every path ends in the cache"
+    );
 }

@@ -46,8 +46,17 @@ pub fn build() -> Document {
     let cabinet = doc.add_material(Material::diffuse("cabinet", Vec3::new(0.2, 0.3, 0.5)));
     let cube = doc.add_material(Material::diffuse("red_cube", Vec3::new(0.6, 0.12, 0.08)));
     let bench = doc.add_material(Material::diffuse("bench", Vec3::new(0.35, 0.45, 0.3)));
-    let copper = doc.add_material(Material::conductor("copper", Vec3::new(0.955, 0.638, 0.538), 0.25));
-    let light = doc.add_material(Material::emitter("light", LIGHT_RADIANCE, Vec3::ZERO, false));
+    let copper = doc.add_material(Material::conductor(
+        "copper",
+        Vec3::new(0.955, 0.638, 0.538),
+        0.25,
+    ));
+    let light = doc.add_material(Material::emitter(
+        "light",
+        LIGHT_RADIANCE,
+        Vec3::ZERO,
+        false,
+    ));
 
     let (x, y, z) = (ROOM.x, ROOM.y, ROOM.z);
     let (d0, d1) = DIVIDER;
@@ -65,8 +74,18 @@ pub fn build() -> Document {
     walls.append(&cuboid([d0, 0.0, g1], [d1, y, z + T]));
     walls.append(&cuboid([d0, DOORWAY_HEIGHT, g0], [d1, y, g1]));
     doc.add_object("walls", &walls, wall, Transform::IDENTITY);
-    doc.add_object("floor", &cuboid([-T, -T, -T], [d1, 0.0, z + T]), floor, Transform::IDENTITY);
-    doc.add_object("ceiling", &cuboid([-T, y, -T], [d1, y + T, z + T]), ceiling, Transform::IDENTITY);
+    doc.add_object(
+        "floor",
+        &cuboid([-T, -T, -T], [d1, 0.0, z + T]),
+        floor,
+        Transform::IDENTITY,
+    );
+    doc.add_object(
+        "ceiling",
+        &cuboid([-T, y, -T], [d1, y + T, z + T]),
+        ceiling,
+        Transform::IDENTITY,
+    );
 
     // The room next door, closed on its three other sides, floor and ceiling.
     let mut next = Mesh::default();
@@ -81,29 +100,61 @@ pub fn build() -> Document {
     // The door: 0.88 m × 2.08 m × 0.04 m, hinged at the doorway's z = 2.0 edge inside the
     // wall's thickness, opened into the room next door (a rotation about +y turns its free
     // edge from +z towards +x).
-    let slab = cuboid([-0.02, 0.01, 0.0], [0.02, DOORWAY_HEIGHT - 0.01, g1 - g0 - 0.02]);
+    let slab = cuboid(
+        [-0.02, 0.01, 0.0],
+        [0.02, DOORWAY_HEIGHT - 0.01, g1 - g0 - 0.02],
+    );
     let hinge = Vec3::new((d0 + d1) / 2.0, 0.0, g0 + 0.005);
-    let placement = Transform { translation: hinge, rotation: Quat::from_rotation_y(DOOR_ANGLE_DEG.to_radians()), scale: 1.0 };
+    let placement = Transform {
+        translation: hinge,
+        rotation: Quat::from_rotation_y(DOOR_ANGLE_DEG.to_radians()),
+        scale: 1.0,
+    };
     doc.add_object("door", &slab, door, placement);
 
     // Furniture: a table with a red cube and a copper ball on it, a cabinet in the far
     // corner and a bench under the window-less wall. Rotations are node transforms.
-    doc.add_object("table", &cuboid([-0.6, 0.0, -0.4], [0.6, 0.75, 0.4]), table, Transform {
-        translation: Vec3::new(2.8, 0.0, 3.5),
-        rotation: Quat::from_rotation_y(12f32.to_radians()),
-        scale: 1.0,
-    });
-    doc.add_object("red_cube", &cuboid([-0.12, 0.0, -0.12], [0.12, 0.24, 0.12]), cube, Transform {
-        translation: Vec3::new(2.5, 0.75, 3.4),
-        rotation: Quat::from_rotation_y(35f32.to_radians()),
-        scale: 1.0,
-    });
-    doc.add_object("copper_ball", &Mesh::uv_sphere(1.0, 64, 32), copper, Transform {
-        scale: 0.18,
-        ..Transform::at(Vec3::new(3.15, 0.75 + 0.18, 3.65))
-    });
-    doc.add_object("cabinet", &cuboid([-0.3, 0.0, -0.25], [0.3, 1.8, 0.25]), cabinet, Transform::at(Vec3::new(4.6, 0.0, 4.7)));
-    doc.add_object("bench", &cuboid([-0.7, 0.0, -0.2], [0.7, 0.45, 0.2]), bench, Transform::at(Vec3::new(3.6, 0.0, 0.35)));
+    doc.add_object(
+        "table",
+        &cuboid([-0.6, 0.0, -0.4], [0.6, 0.75, 0.4]),
+        table,
+        Transform {
+            translation: Vec3::new(2.8, 0.0, 3.5),
+            rotation: Quat::from_rotation_y(12f32.to_radians()),
+            scale: 1.0,
+        },
+    );
+    doc.add_object(
+        "red_cube",
+        &cuboid([-0.12, 0.0, -0.12], [0.12, 0.24, 0.12]),
+        cube,
+        Transform {
+            translation: Vec3::new(2.5, 0.75, 3.4),
+            rotation: Quat::from_rotation_y(35f32.to_radians()),
+            scale: 1.0,
+        },
+    );
+    doc.add_object(
+        "copper_ball",
+        &Mesh::uv_sphere(1.0, 64, 32),
+        copper,
+        Transform {
+            scale: 0.18,
+            ..Transform::at(Vec3::new(3.15, 0.75 + 0.18, 3.65))
+        },
+    );
+    doc.add_object(
+        "cabinet",
+        &cuboid([-0.3, 0.0, -0.25], [0.3, 1.8, 0.25]),
+        cabinet,
+        Transform::at(Vec3::new(4.6, 0.0, 4.7)),
+    );
+    doc.add_object(
+        "bench",
+        &cuboid([-0.7, 0.0, -0.2], [0.7, 0.45, 0.2]),
+        bench,
+        Transform::at(Vec3::new(3.6, 0.0, 0.35)),
+    );
 
     let lamp = Mesh::quad_facing(
         [
@@ -116,6 +167,10 @@ pub fn build() -> Document {
     );
     doc.add_object("light", &lamp, light, Transform::IDENTITY);
 
-    doc.add_camera("camera", 65.0, Transform::look_at(Vec3::new(0.5, 1.5, 0.7), Vec3::new(4.5, 0.9, 3.4), Vec3::Y));
+    doc.add_camera(
+        "camera",
+        65.0,
+        Transform::look_at(Vec3::new(0.5, 1.5, 0.7), Vec3::new(4.5, 0.9, 3.4), Vec3::Y),
+    );
     doc
 }

@@ -32,30 +32,69 @@ pub const LIGHT_RADIANCE: Vec3 = Vec3::new(3000.0, 2790.0, 2550.0);
 pub fn build() -> Document {
     let mut doc = Document::default();
     let floor_material = doc.add_material(Material::diffuse("floor", Vec3::new(0.75, 0.75, 0.72)));
-    let wall_material = doc.add_material(Material::diffuse("back_wall", Vec3::new(0.55, 0.6, 0.65)));
+    let wall_material =
+        doc.add_material(Material::diffuse("back_wall", Vec3::new(0.55, 0.6, 0.65)));
     let glass = doc.add_material(Material::dielectric("glass", 0.0, IOR));
-    let light_material = doc.add_material(Material::emitter("light", LIGHT_RADIANCE, Vec3::ZERO, false));
+    let light_material = doc.add_material(Material::emitter(
+        "light",
+        LIGHT_RADIANCE,
+        Vec3::ZERO,
+        false,
+    ));
 
     let h = 4.0;
-    let floor = Mesh::quad(Vec3::new(-h, 0.0, -2.0), Vec3::new(-h, 0.0, h), Vec3::new(h, 0.0, h), Vec3::new(h, 0.0, -2.0));
-    let wall = Mesh::quad(Vec3::new(-h, 0.0, -2.0), Vec3::new(h, 0.0, -2.0), Vec3::new(h, 4.0, -2.0), Vec3::new(-h, 4.0, -2.0));
+    let floor = Mesh::quad(
+        Vec3::new(-h, 0.0, -2.0),
+        Vec3::new(-h, 0.0, h),
+        Vec3::new(h, 0.0, h),
+        Vec3::new(h, 0.0, -2.0),
+    );
+    let wall = Mesh::quad(
+        Vec3::new(-h, 0.0, -2.0),
+        Vec3::new(h, 0.0, -2.0),
+        Vec3::new(h, 4.0, -2.0),
+        Vec3::new(-h, 4.0, -2.0),
+    );
     doc.add_object("floor", &floor, floor_material, Transform::IDENTITY);
     doc.add_object("back_wall", &wall, wall_material, Transform::IDENTITY);
 
     // A finely tessellated sphere: smooth normals hide the facets in shading, and fine
     // facets keep the caustic's outline round.
     let sphere = Mesh::uv_sphere(1.0, 128, 64);
-    doc.add_object("glass_sphere", &sphere, glass, Transform { scale: SPHERE_RADIUS, ..Transform::at(SPHERE_CENTRE) });
+    doc.add_object(
+        "glass_sphere",
+        &sphere,
+        glass,
+        Transform {
+            scale: SPHERE_RADIUS,
+            ..Transform::at(SPHERE_CENTRE)
+        },
+    );
 
     // The light: a square facing the sphere's centre.
-    let (el, az) = (LIGHT_ELEVATION_DEG.to_radians(), LIGHT_AZIMUTH_DEG.to_radians());
+    let (el, az) = (
+        LIGHT_ELEVATION_DEG.to_radians(),
+        LIGHT_AZIMUTH_DEG.to_radians(),
+    );
     let to_light = Vec3::new(-el.cos() * az.cos(), el.sin(), -el.cos() * az.sin());
     let centre = SPHERE_CENTRE + LIGHT_DISTANCE * to_light;
     let u = to_light.cross(Vec3::Y).normalize() * (LIGHT_SIZE / 2.0);
     let v = u.cross(to_light).normalize() * (LIGHT_SIZE / 2.0);
-    let lamp = Mesh::quad_facing([centre - u - v, centre + u - v, centre + u + v, centre - u + v], SPHERE_CENTRE);
+    let lamp = Mesh::quad_facing(
+        [
+            centre - u - v,
+            centre + u - v,
+            centre + u + v,
+            centre - u + v,
+        ],
+        SPHERE_CENTRE,
+    );
     doc.add_object("light", &lamp, light_material, Transform::IDENTITY);
 
-    doc.add_camera("camera", 38.0, Transform::look_at(Vec3::new(0.3, 1.6, 3.2), Vec3::new(0.2, 0.3, 0.0), Vec3::Y));
+    doc.add_camera(
+        "camera",
+        38.0,
+        Transform::look_at(Vec3::new(0.3, 1.6, 3.2), Vec3::new(0.2, 0.3, 0.0), Vec3::Y),
+    );
     doc
 }

@@ -16,7 +16,10 @@ fn get<'a>(v: &'a Value, key: &str) -> Result<&'a Value> {
 }
 
 fn uint(v: &Value, key: &str) -> Result<usize> {
-    get(v, key)?.as_u64().map(|x| x as usize).ok_or_else(|| format!("`{key}` is not an unsigned integer"))
+    get(v, key)?
+        .as_u64()
+        .map(|x| x as usize)
+        .ok_or_else(|| format!("`{key}` is not an unsigned integer"))
 }
 
 fn components(kind: &str) -> Result<usize> {
@@ -40,24 +43,37 @@ impl Accessors<'_> {
         let accessor = &self.json["accessors"][index];
         let got = get(accessor, "componentType")?.as_u64().unwrap_or(0);
         if got != component_type {
-            return Err(format!("accessor {index}: componentType {got}, expected {component_type}"));
+            return Err(format!(
+                "accessor {index}: componentType {got}, expected {component_type}"
+            ));
         }
         let size = match component_type {
             5123 => 2,
             5125 | 5126 => 4,
-            other => return Err(format!("accessor {index}: unexpected componentType {other}")),
+            other => {
+                return Err(format!(
+                    "accessor {index}: unexpected componentType {other}"
+                ));
+            }
         };
         let n = components(get(accessor, "type")?.as_str().unwrap_or(""))?;
         let count = uint(accessor, "count")?;
-        let offset = accessor.get("byteOffset").and_then(Value::as_u64).unwrap_or(0) as usize;
+        let offset = accessor
+            .get("byteOffset")
+            .and_then(Value::as_u64)
+            .unwrap_or(0) as usize;
         let view = &self.json["bufferViews"][uint(accessor, "bufferView")?];
         let view_offset = view.get("byteOffset").and_then(Value::as_u64).unwrap_or(0) as usize;
         let view_length = uint(view, "byteLength")?;
         if view.get("byteStride").is_some() {
-            return Err(format!("accessor {index}: interleaved views are not written by this generator"));
+            return Err(format!(
+                "accessor {index}: interleaved views are not written by this generator"
+            ));
         }
         if !(view_offset + offset).is_multiple_of(size) {
-            return Err(format!("accessor {index}: data not aligned to its {size}-byte components"));
+            return Err(format!(
+                "accessor {index}: data not aligned to its {size}-byte components"
+            ));
         }
         if offset + count * n * size > view_length {
             return Err(format!("accessor {index}: runs past its buffer view"));
@@ -68,18 +84,32 @@ impl Accessors<'_> {
 
     fn floats(&self, index: usize) -> Result<(Vec<f32>, usize, usize)> {
         let (b, count, n) = self.bytes(index, 5126)?;
-        Ok((b.chunks_exact(4).map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect(), count, n))
+        Ok((
+            b.chunks_exact(4)
+                .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+                .collect(),
+            count,
+            n,
+        ))
     }
 
     fn indices(&self, index: usize) -> Result<Vec<u32>> {
-        let ty = self.json["accessors"][index]["componentType"].as_u64().unwrap_or(0);
+        let ty = self.json["accessors"][index]["componentType"]
+            .as_u64()
+            .unwrap_or(0);
         let (b, _, n) = self.bytes(index, ty)?;
         if n != 1 {
             return Err(format!("index accessor {index} is not SCALAR"));
         }
         Ok(match ty {
-            5123 => b.chunks_exact(2).map(|c| u32::from(u16::from_le_bytes([c[0], c[1]]))).collect(),
-            _ => b.chunks_exact(4).map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect(),
+            5123 => b
+                .chunks_exact(2)
+                .map(|c| u32::from(u16::from_le_bytes([c[0], c[1]])))
+                .collect(),
+            _ => b
+                .chunks_exact(4)
+                .map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+                .collect(),
         })
     }
 }
@@ -88,7 +118,8 @@ impl Accessors<'_> {
 pub fn validate(dir: &Path, name: &str) -> Result<()> {
     let path = dir.join(format!("{name}.gltf"));
     let text = std::fs::read_to_string(&path).map_err(|e| format!("{}: {e}", path.display()))?;
-    let json: Value = serde_json::from_str(&text).map_err(|e| format!("{}: {e}", path.display()))?;
+    let json: Value =
+        serde_json::from_str(&text).map_err(|e| format!("{}: {e}", path.display()))?;
     let in_doc = |e: String| format!("{}: {e}", path.display());
 
     if json["asset"]["version"] != "2.0" {
@@ -108,9 +139,17 @@ pub fn validate(dir: &Path, name: &str) -> Result<()> {
     let bin_path = dir.join(get(buffer, "uri").map_err(in_doc)?.as_str().unwrap_or(""));
     let bin = std::fs::read(&bin_path).map_err(|e| format!("{}: {e}", bin_path.display()))?;
     if uint(buffer, "byteLength").map_err(in_doc)? != bin.len() {
-        return Err(in_doc(format!("buffer byteLength differs from the size of {}", bin_path.display())));
+        return Err(in_doc(format!(
+            "buffer byteLength differs from the size of {}",
+            bin_path.display()
+        )));
     }
-    for (i, view) in json["bufferViews"].as_array().into_iter().flatten().enumerate() {
+    for (i, view) in json["bufferViews"]
+        .as_array()
+        .into_iter()
+        .flatten()
+        .enumerate()
+    {
         let offset = view.get("byteOffset").and_then(Value::as_u64).unwrap_or(0) as usize;
         if !offset.is_multiple_of(4) {
             return Err(in_doc(format!("bufferView {i} is not 4-byte aligned")));
@@ -120,29 +159,56 @@ pub fn validate(dir: &Path, name: &str) -> Result<()> {
         }
     }
 
-    let acc = Accessors { json: &json, bin: &bin };
+    let acc = Accessors {
+        json: &json,
+        bin: &bin,
+    };
     let mut used = BTreeSet::new();
-    for (m, material) in json["materials"].as_array().into_iter().flatten().enumerate() {
+    for (m, material) in json["materials"]
+        .as_array()
+        .into_iter()
+        .flatten()
+        .enumerate()
+    {
         if material.get("doubleSided").is_none() {
             return Err(in_doc(format!("material {m} does not state doubleSided")));
         }
         if let Some(f) = material.get("emissiveFactor").and_then(Value::as_array)
-            && f.iter().any(|c| !(0.0..=1.0).contains(&c.as_f64().unwrap_or(-1.0)))
+            && f.iter()
+                .any(|c| !(0.0..=1.0).contains(&c.as_f64().unwrap_or(-1.0)))
         {
-            return Err(in_doc(format!("material {m}: emissiveFactor outside [0, 1]")));
+            return Err(in_doc(format!(
+                "material {m}: emissiveFactor outside [0, 1]"
+            )));
         }
-        for ext in material.get("extensions").and_then(Value::as_object).into_iter().flatten() {
+        for ext in material
+            .get("extensions")
+            .and_then(Value::as_object)
+            .into_iter()
+            .flatten()
+        {
             used.insert(ext.0.clone());
         }
     }
-    let declared: BTreeSet<String> =
-        json["extensionsUsed"].as_array().into_iter().flatten().filter_map(|e| e.as_str().map(str::to_owned)).collect();
+    let declared: BTreeSet<String> = json["extensionsUsed"]
+        .as_array()
+        .into_iter()
+        .flatten()
+        .filter_map(|e| e.as_str().map(str::to_owned))
+        .collect();
     if used != declared {
-        return Err(in_doc(format!("extensionsUsed {declared:?} but materials use {used:?}")));
+        return Err(in_doc(format!(
+            "extensionsUsed {declared:?} but materials use {used:?}"
+        )));
     }
 
     for (m, mesh) in json["meshes"].as_array().into_iter().flatten().enumerate() {
-        for prim in get(mesh, "primitives").map_err(in_doc)?.as_array().into_iter().flatten() {
+        for prim in get(mesh, "primitives")
+            .map_err(in_doc)?
+            .as_array()
+            .into_iter()
+            .flatten()
+        {
             if prim.get("mode").and_then(Value::as_u64).unwrap_or(4) != 4 {
                 return Err(in_doc(format!("mesh {m}: not a triangle list")));
             }
@@ -161,10 +227,23 @@ pub fn validate(dir: &Path, name: &str) -> Result<()> {
                     .flatten()
                     .map(|v| v.as_f64().unwrap_or(f64::NAN) as f32)
                     .collect();
-                let start = if bound == "min" { f32::INFINITY } else { f32::NEG_INFINITY };
-                let actual: Vec<f32> = (0..3).map(|k| pos.iter().skip(k).step_by(3).fold(start, |a, &b| pick(a, b))).collect();
+                let start = if bound == "min" {
+                    f32::INFINITY
+                } else {
+                    f32::NEG_INFINITY
+                };
+                let actual: Vec<f32> = (0..3)
+                    .map(|k| {
+                        pos.iter()
+                            .skip(k)
+                            .step_by(3)
+                            .fold(start, |a, &b| pick(a, b))
+                    })
+                    .collect();
                 if stated != actual {
-                    return Err(in_doc(format!("mesh {m}: POSITION {bound} {stated:?} differs from the data {actual:?}")));
+                    return Err(in_doc(format!(
+                        "mesh {m}: POSITION {bound} {stated:?} differs from the data {actual:?}"
+                    )));
                 }
             }
             if pos.iter().any(|x| !x.is_finite()) {
@@ -173,21 +252,32 @@ pub fn validate(dir: &Path, name: &str) -> Result<()> {
             if let Some(i) = attributes.get("NORMAL").and_then(Value::as_u64) {
                 let (normals, c, n) = acc.floats(i as usize).map_err(in_doc)?;
                 if c != count || n != 3 {
-                    return Err(in_doc(format!("mesh {m}: NORMAL count or type differs from POSITION")));
+                    return Err(in_doc(format!(
+                        "mesh {m}: NORMAL count or type differs from POSITION"
+                    )));
                 }
-                if normals.chunks_exact(3).any(|v| ((v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt() - 1.0).abs() > 1e-4) {
+                if normals
+                    .chunks_exact(3)
+                    .any(|v| ((v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt() - 1.0).abs() > 1e-4)
+                {
                     return Err(in_doc(format!("mesh {m}: NORMAL not of unit length")));
                 }
             }
             if let Some(i) = attributes.get("TEXCOORD_0").and_then(Value::as_u64) {
                 let (_, c, n) = acc.floats(i as usize).map_err(in_doc)?;
                 if c != count || n != 2 {
-                    return Err(in_doc(format!("mesh {m}: TEXCOORD_0 count or type differs from POSITION")));
+                    return Err(in_doc(format!(
+                        "mesh {m}: TEXCOORD_0 count or type differs from POSITION"
+                    )));
                 }
             }
-            let indices = acc.indices(uint(prim, "indices").map_err(in_doc)?).map_err(in_doc)?;
+            let indices = acc
+                .indices(uint(prim, "indices").map_err(in_doc)?)
+                .map_err(in_doc)?;
             if !indices.len().is_multiple_of(3) || indices.iter().any(|&i| i as usize >= count) {
-                return Err(in_doc(format!("mesh {m}: index count not a multiple of 3 or index out of range")));
+                return Err(in_doc(format!(
+                    "mesh {m}: index count not a multiple of 3 or index out of range"
+                )));
             }
             let p = |i: u32| glam::Vec3::from_slice(&pos[3 * i as usize..3 * i as usize + 3]);
             for t in indices.chunks_exact(3) {
@@ -200,10 +290,18 @@ pub fn validate(dir: &Path, name: &str) -> Result<()> {
 
     for image in json["images"].as_array().into_iter().flatten() {
         let file = dir.join(get(image, "uri").map_err(in_doc)?.as_str().unwrap_or(""));
-        let decoder = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(&file).map_err(|e| format!("{}: {e}", file.display()))?));
-        decoder.read_info().map_err(|e| format!("{}: {e}", file.display()))?;
+        let decoder = png::Decoder::new(std::io::BufReader::new(
+            std::fs::File::open(&file).map_err(|e| format!("{}: {e}", file.display()))?,
+        ));
+        decoder
+            .read_info()
+            .map_err(|e| format!("{}: {e}", file.display()))?;
     }
-    let has_camera = json["nodes"].as_array().into_iter().flatten().any(|n| n.get("camera").is_some());
+    let has_camera = json["nodes"]
+        .as_array()
+        .into_iter()
+        .flatten()
+        .any(|n| n.get("camera").is_some());
     if !has_camera {
         return Err(in_doc("no camera node".into()));
     }

@@ -31,18 +31,31 @@ fn mm(x: f32, y: f32, z: f32) -> Vec3 {
 
 /// A face from the data, wound so that its front looks towards `toward` (millimetres).
 fn face(corners: [[f32; 3]; 4], toward: [f32; 3]) -> Mesh {
-    Mesh::quad_facing(corners.map(|[x, y, z]| mm(x, y, z)), mm(toward[0], toward[1], toward[2]))
+    Mesh::quad_facing(
+        corners.map(|[x, y, z]| mm(x, y, z)),
+        mm(toward[0], toward[1], toward[2]),
+    )
 }
 
 /// A block from the data (five faces, no bottom), faces pointing away from its centre.
 fn block(faces: [[[f32; 3]; 4]; 5]) -> Mesh {
     let corners: Vec<[f32; 3]> = faces.iter().flatten().copied().collect();
-    let centre = corners.iter().fold([0.0; 3], |s, c| [s[0] + c[0], s[1] + c[1], s[2] + c[2]]).map(|s| s / corners.len() as f32);
+    let centre = corners
+        .iter()
+        .fold([0.0; 3], |s, c| [s[0] + c[0], s[1] + c[1], s[2] + c[2]])
+        .map(|s| s / corners.len() as f32);
     let mut mesh = Mesh::default();
     for f in faces {
-        let fc = f.iter().fold([0.0; 3], |s, c| [s[0] + c[0], s[1] + c[1], s[2] + c[2]]).map(|s| s / 4.0);
+        let fc = f
+            .iter()
+            .fold([0.0; 3], |s, c| [s[0] + c[0], s[1] + c[1], s[2] + c[2]])
+            .map(|s| s / 4.0);
         // A point beyond the face, away from the block's centre.
-        let away = [2.0 * fc[0] - centre[0], 2.0 * fc[1] - centre[1], 2.0 * fc[2] - centre[2]];
+        let away = [
+            2.0 * fc[0] - centre[0],
+            2.0 * fc[1] - centre[1],
+            2.0 * fc[2] - centre[2],
+        ];
         mesh.append(&face(f, away));
     }
     mesh
@@ -53,31 +66,134 @@ pub fn build() -> Document {
     let white = doc.add_material(Material::diffuse("white", WHITE));
     let red = doc.add_material(Material::diffuse("red", RED));
     let green = doc.add_material(Material::diffuse("green", GREEN));
-    let light = doc.add_material(Material::emitter("light", LIGHT_RADIANCE, LIGHT_ALBEDO, false));
+    let light = doc.add_material(Material::emitter(
+        "light",
+        LIGHT_RADIANCE,
+        LIGHT_ALBEDO,
+        false,
+    ));
 
     // The room's faces look towards the inside of the box.
     let inside = [278.0, 274.4, 279.6];
-    let floor = face([[552.8, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 559.2], [549.6, 0.0, 559.2]], inside);
-    let ceiling = face([[556.0, 548.8, 0.0], [556.0, 548.8, 559.2], [0.0, 548.8, 559.2], [0.0, 548.8, 0.0]], inside);
-    let back = face([[549.6, 0.0, 559.2], [0.0, 0.0, 559.2], [0.0, 548.8, 559.2], [556.0, 548.8, 559.2]], inside);
-    let right = face([[0.0, 0.0, 559.2], [0.0, 0.0, 0.0], [0.0, 548.8, 0.0], [0.0, 548.8, 559.2]], inside);
-    let left = face([[552.8, 0.0, 0.0], [549.6, 0.0, 559.2], [556.0, 548.8, 559.2], [556.0, 548.8, 0.0]], inside);
+    let floor = face(
+        [
+            [552.8, 0.0, 0.0],
+            [0.0, 0.0, 0.0],
+            [0.0, 0.0, 559.2],
+            [549.6, 0.0, 559.2],
+        ],
+        inside,
+    );
+    let ceiling = face(
+        [
+            [556.0, 548.8, 0.0],
+            [556.0, 548.8, 559.2],
+            [0.0, 548.8, 559.2],
+            [0.0, 548.8, 0.0],
+        ],
+        inside,
+    );
+    let back = face(
+        [
+            [549.6, 0.0, 559.2],
+            [0.0, 0.0, 559.2],
+            [0.0, 548.8, 559.2],
+            [556.0, 548.8, 559.2],
+        ],
+        inside,
+    );
+    let right = face(
+        [
+            [0.0, 0.0, 559.2],
+            [0.0, 0.0, 0.0],
+            [0.0, 548.8, 0.0],
+            [0.0, 548.8, 559.2],
+        ],
+        inside,
+    );
+    let left = face(
+        [
+            [552.8, 0.0, 0.0],
+            [549.6, 0.0, 559.2],
+            [556.0, 548.8, 559.2],
+            [556.0, 548.8, 0.0],
+        ],
+        inside,
+    );
     let y = 548.8 - LIGHT_DROP_MM;
-    let lamp = face([[343.0, y, 227.0], [343.0, y, 332.0], [213.0, y, 332.0], [213.0, y, 227.0]], [278.0, 0.0, 279.5]);
+    let lamp = face(
+        [
+            [343.0, y, 227.0],
+            [343.0, y, 332.0],
+            [213.0, y, 332.0],
+            [213.0, y, 227.0],
+        ],
+        [278.0, 0.0, 279.5],
+    );
 
     let short_block = block([
-        [[130.0, 165.0, 65.0], [82.0, 165.0, 225.0], [240.0, 165.0, 272.0], [290.0, 165.0, 114.0]],
-        [[290.0, 0.0, 114.0], [290.0, 165.0, 114.0], [240.0, 165.0, 272.0], [240.0, 0.0, 272.0]],
-        [[130.0, 0.0, 65.0], [130.0, 165.0, 65.0], [290.0, 165.0, 114.0], [290.0, 0.0, 114.0]],
-        [[82.0, 0.0, 225.0], [82.0, 165.0, 225.0], [130.0, 165.0, 65.0], [130.0, 0.0, 65.0]],
-        [[240.0, 0.0, 272.0], [240.0, 165.0, 272.0], [82.0, 165.0, 225.0], [82.0, 0.0, 225.0]],
+        [
+            [130.0, 165.0, 65.0],
+            [82.0, 165.0, 225.0],
+            [240.0, 165.0, 272.0],
+            [290.0, 165.0, 114.0],
+        ],
+        [
+            [290.0, 0.0, 114.0],
+            [290.0, 165.0, 114.0],
+            [240.0, 165.0, 272.0],
+            [240.0, 0.0, 272.0],
+        ],
+        [
+            [130.0, 0.0, 65.0],
+            [130.0, 165.0, 65.0],
+            [290.0, 165.0, 114.0],
+            [290.0, 0.0, 114.0],
+        ],
+        [
+            [82.0, 0.0, 225.0],
+            [82.0, 165.0, 225.0],
+            [130.0, 165.0, 65.0],
+            [130.0, 0.0, 65.0],
+        ],
+        [
+            [240.0, 0.0, 272.0],
+            [240.0, 165.0, 272.0],
+            [82.0, 165.0, 225.0],
+            [82.0, 0.0, 225.0],
+        ],
     ]);
     let tall_block = block([
-        [[423.0, 330.0, 247.0], [265.0, 330.0, 296.0], [314.0, 330.0, 456.0], [472.0, 330.0, 406.0]],
-        [[423.0, 0.0, 247.0], [423.0, 330.0, 247.0], [472.0, 330.0, 406.0], [472.0, 0.0, 406.0]],
-        [[472.0, 0.0, 406.0], [472.0, 330.0, 406.0], [314.0, 330.0, 456.0], [314.0, 0.0, 456.0]],
-        [[314.0, 0.0, 456.0], [314.0, 330.0, 456.0], [265.0, 330.0, 296.0], [265.0, 0.0, 296.0]],
-        [[265.0, 0.0, 296.0], [265.0, 330.0, 296.0], [423.0, 330.0, 247.0], [423.0, 0.0, 247.0]],
+        [
+            [423.0, 330.0, 247.0],
+            [265.0, 330.0, 296.0],
+            [314.0, 330.0, 456.0],
+            [472.0, 330.0, 406.0],
+        ],
+        [
+            [423.0, 0.0, 247.0],
+            [423.0, 330.0, 247.0],
+            [472.0, 330.0, 406.0],
+            [472.0, 0.0, 406.0],
+        ],
+        [
+            [472.0, 0.0, 406.0],
+            [472.0, 330.0, 406.0],
+            [314.0, 330.0, 456.0],
+            [314.0, 0.0, 456.0],
+        ],
+        [
+            [314.0, 0.0, 456.0],
+            [314.0, 330.0, 456.0],
+            [265.0, 330.0, 296.0],
+            [265.0, 0.0, 296.0],
+        ],
+        [
+            [265.0, 0.0, 296.0],
+            [265.0, 330.0, 296.0],
+            [423.0, 330.0, 247.0],
+            [423.0, 0.0, 247.0],
+        ],
     ]);
 
     for (name, mesh, material) in [
@@ -98,7 +214,11 @@ pub fn build() -> Document {
     // down −z, so the node turns half a turn about +y (which also keeps +x to the viewer's
     // left: the red wall at x ≈ 0.55 m on the left, the green one on the right).
     let yfov = 2.0 * (12.5_f32 / 35.0).atan().to_degrees();
-    let placement = Transform { translation: mm(278.0, 273.0, -800.0), rotation: Quat::from_xyzw(0.0, 1.0, 0.0, 0.0), scale: 1.0 };
+    let placement = Transform {
+        translation: mm(278.0, 273.0, -800.0),
+        rotation: Quat::from_xyzw(0.0, 1.0, 0.0, 0.0),
+        scale: 1.0,
+    };
     doc.add_camera("camera", yfov, placement);
     doc
 }

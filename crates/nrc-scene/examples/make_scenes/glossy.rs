@@ -53,7 +53,11 @@ fn panel_textures() -> (Image, Image) {
     // glTF metallic-roughness texture: G = roughness, B = metallic (R unused: left at 1).
     let metallic_roughness = Image::from_fn(COLS * CELL, ROWS * CELL, |x, y| {
         let (col, row) = (x / CELL, y / CELL);
-        [255, unorm(panel_roughness(col)), if panel_is_metal(col, row) { 255 } else { 0 }]
+        [
+            255,
+            unorm(panel_roughness(col)),
+            if panel_is_metal(col, row) { 255 } else { 0 },
+        ]
     });
     (base, metallic_roughness)
 }
@@ -62,17 +66,38 @@ pub fn build() -> Document {
     let mut doc = Document::default();
 
     // Floor: a 10 m × 10 m checkerboard of 0.25 m squares.
-    let floor_texture = doc.add_png_texture("glossy-floor.png", checker(40, 16, Vec3::splat(0.6), Vec3::splat(0.15)).encode_png(), true);
-    let floor_material = doc.add_material(Material { base_color: Vec3::ONE, base_color_texture: Some(floor_texture), ..Material::diffuse("floor", Vec3::ONE) });
+    let floor_texture = doc.add_png_texture(
+        "glossy-floor.png",
+        checker(40, 16, Vec3::splat(0.6), Vec3::splat(0.15)).encode_png(),
+        true,
+    );
+    let floor_material = doc.add_material(Material {
+        base_color: Vec3::ONE,
+        base_color_texture: Some(floor_texture),
+        ..Material::diffuse("floor", Vec3::ONE)
+    });
     let h = 5.0;
-    let floor = Mesh::textured_quad(Vec3::new(-h, 0.0, -h), Vec3::new(-h, 0.0, h), Vec3::new(h, 0.0, h), Vec3::new(h, 0.0, -h));
+    let floor = Mesh::textured_quad(
+        Vec3::new(-h, 0.0, -h),
+        Vec3::new(-h, 0.0, h),
+        Vec3::new(h, 0.0, h),
+        Vec3::new(h, 0.0, -h),
+    );
     doc.add_object("floor", &floor, floor_material, Transform::IDENTITY);
 
     // One sphere geometry shared by all ten spheres; each row is a group node.
     let sphere = doc.add_geometry(&Mesh::uv_sphere(1.0, 64, 32));
     let rows = [
-        ("conductors", -0.9, CONDUCTOR_ROUGHNESS.map(|r| Material::conductor(&format!("gold_r{r:.2}"), GOLD, r))),
-        ("dielectrics", 0.2, GLASS_ROUGHNESS.map(|r| Material::dielectric(&format!("glass_r{r:.2}"), r, GLASS_IOR))),
+        (
+            "conductors",
+            -0.9,
+            CONDUCTOR_ROUGHNESS.map(|r| Material::conductor(&format!("gold_r{r:.2}"), GOLD, r)),
+        ),
+        (
+            "dielectrics",
+            0.2,
+            GLASS_ROUGHNESS.map(|r| Material::dielectric(&format!("glass_r{r:.2}"), r, GLASS_IOR)),
+        ),
     ];
     for (row_name, z, materials) in rows {
         let group = doc.add_group(row_name, Transform::at(Vec3::new(0.0, SPHERE_RADIUS, z)));
@@ -81,7 +106,14 @@ pub fn build() -> Document {
             let m = doc.add_material(material);
             let mesh = doc.add_mesh(&name, sphere, m);
             let x = (i as f32 - 2.0) * SPACING;
-            let node = doc.add_mesh_node(&name, mesh, Transform { scale: SPHERE_RADIUS, ..Transform::at(Vec3::new(x, 0.0, 0.0)) });
+            let node = doc.add_mesh_node(
+                &name,
+                mesh,
+                Transform {
+                    scale: SPHERE_RADIUS,
+                    ..Transform::at(Vec3::new(x, 0.0, 0.0))
+                },
+            );
             doc.add_child(group, node);
         }
     }
@@ -89,7 +121,11 @@ pub fn build() -> Document {
     // The textured panel: 3.2 m × 1.6 m, standing on the floor behind the spheres.
     let (base, metallic_roughness) = panel_textures();
     let base_texture = doc.add_png_texture("glossy-panel-base-color.png", base.encode_png(), true);
-    let mr_texture = doc.add_png_texture("glossy-panel-metallic-roughness.png", metallic_roughness.encode_png(), true);
+    let mr_texture = doc.add_png_texture(
+        "glossy-panel-metallic-roughness.png",
+        metallic_roughness.encode_png(),
+        true,
+    );
     let panel_material = doc.add_material(Material {
         base_color: Vec3::ONE,
         base_color_texture: Some(base_texture),
@@ -100,20 +136,63 @@ pub fn build() -> Document {
         ..Material::diffuse("textured_panel", Vec3::ONE)
     });
     let (pz, pw, ph) = (-2.0, 1.6, 1.6);
-    let panel = Mesh::textured_quad(Vec3::new(-pw, ph, pz), Vec3::new(-pw, 0.0, pz), Vec3::new(pw, 0.0, pz), Vec3::new(pw, ph, pz));
-    doc.add_object("textured_panel", &panel, panel_material, Transform::IDENTITY);
+    let panel = Mesh::textured_quad(
+        Vec3::new(-pw, ph, pz),
+        Vec3::new(-pw, 0.0, pz),
+        Vec3::new(pw, 0.0, pz),
+        Vec3::new(pw, ph, pz),
+    );
+    doc.add_object(
+        "textured_panel",
+        &panel,
+        panel_material,
+        Transform::IDENTITY,
+    );
 
     // Lights: the overhead panel, facing down, and the dim backdrop far behind.
-    let light = doc.add_material(Material::emitter("overhead_light", LIGHT_RADIANCE, Vec3::ZERO, false));
+    let light = doc.add_material(Material::emitter(
+        "overhead_light",
+        LIGHT_RADIANCE,
+        Vec3::ZERO,
+        false,
+    ));
     let lamp = Mesh::quad_facing(
-        [Vec3::new(-1.5, 3.0, -1.25), Vec3::new(1.5, 3.0, -1.25), Vec3::new(1.5, 3.0, 0.25), Vec3::new(-1.5, 3.0, 0.25)],
+        [
+            Vec3::new(-1.5, 3.0, -1.25),
+            Vec3::new(1.5, 3.0, -1.25),
+            Vec3::new(1.5, 3.0, 0.25),
+            Vec3::new(-1.5, 3.0, 0.25),
+        ],
         Vec3::ZERO,
     );
     doc.add_object("overhead_light", &lamp, light, Transform::IDENTITY);
-    let backdrop_material = doc.add_material(Material::emitter("backdrop", BACKDROP_RADIANCE, Vec3::ZERO, false));
-    let backdrop = Mesh::quad(Vec3::new(-h, 0.0, -h), Vec3::new(h, 0.0, -h), Vec3::new(h, 5.0, -h), Vec3::new(-h, 5.0, -h));
-    doc.add_object("backdrop", &backdrop, backdrop_material, Transform::IDENTITY);
+    let backdrop_material = doc.add_material(Material::emitter(
+        "backdrop",
+        BACKDROP_RADIANCE,
+        Vec3::ZERO,
+        false,
+    ));
+    let backdrop = Mesh::quad(
+        Vec3::new(-h, 0.0, -h),
+        Vec3::new(h, 0.0, -h),
+        Vec3::new(h, 5.0, -h),
+        Vec3::new(-h, 5.0, -h),
+    );
+    doc.add_object(
+        "backdrop",
+        &backdrop,
+        backdrop_material,
+        Transform::IDENTITY,
+    );
 
-    doc.add_camera("camera", 42.0, Transform::look_at(Vec3::new(0.0, 2.0, 5.2), Vec3::new(0.0, 0.45, -0.6), Vec3::Y));
+    doc.add_camera(
+        "camera",
+        42.0,
+        Transform::look_at(
+            Vec3::new(0.0, 2.0, 5.2),
+            Vec3::new(0.0, 0.45, -0.6),
+            Vec3::Y,
+        ),
+    );
     doc
 }

@@ -30,7 +30,11 @@ const SPECULAR: &str = "KHR_materials_specular";
 /// `0.1_f32` is written as `0.1` and reads back as the same `f32`.
 pub fn num(x: f32) -> Value {
     assert!(x.is_finite(), "non-finite number in a glTF document");
-    Value::from(x.to_string().parse::<f64>().expect("f32 formats as a number"))
+    Value::from(
+        x.to_string()
+            .parse::<f64>()
+            .expect("f32 formats as a number"),
+    )
 }
 
 fn vec3(v: Vec3) -> Value {
@@ -81,22 +85,45 @@ impl Material {
     /// An area light of radiance `radiance` over a Lambertian surface of albedo `albedo`.
     /// One-sided lights emit on their front face only.
     pub fn emitter(name: &str, radiance: Vec3, albedo: Vec3, double_sided: bool) -> Self {
-        Self { emission: radiance, double_sided, ..Self::diffuse(name, albedo) }
+        Self {
+            emission: radiance,
+            double_sided,
+            ..Self::diffuse(name, albedo)
+        }
     }
 
     /// A GGX conductor: metallic 1, `base_color` is its normal-incidence reflectance.
     pub fn conductor(name: &str, base_color: Vec3, roughness: f32) -> Self {
-        Self { metallic: 1.0, roughness, specular: None, ..Self::diffuse(name, base_color) }
+        Self {
+            metallic: 1.0,
+            roughness,
+            specular: None,
+            ..Self::diffuse(name, base_color)
+        }
     }
 
     /// A clear dielectric (glass): transmission 1, index of refraction `ior`.
     pub fn dielectric(name: &str, roughness: f32, ior: f32) -> Self {
-        Self { roughness, transmission: 1.0, ior: Some(ior), specular: None, ..Self::diffuse(name, Vec3::ONE) }
+        Self {
+            roughness,
+            transmission: 1.0,
+            ior: Some(ior),
+            specular: None,
+            ..Self::diffuse(name, Vec3::ONE)
+        }
     }
 
     fn to_json(&self, used: &mut BTreeSet<&'static str>) -> Value {
         let mut pbr = Map::new();
-        pbr.insert("baseColorFactor".into(), json!([num(self.base_color.x), num(self.base_color.y), num(self.base_color.z), 1.0]));
+        pbr.insert(
+            "baseColorFactor".into(),
+            json!([
+                num(self.base_color.x),
+                num(self.base_color.y),
+                num(self.base_color.z),
+                1.0
+            ]),
+        );
         pbr.insert("metallicFactor".into(), num(self.metallic));
         pbr.insert("roughnessFactor".into(), num(self.roughness));
         if let Some(t) = self.base_color_texture {
@@ -111,17 +138,27 @@ impl Material {
         m.insert("doubleSided".into(), json!(self.double_sided));
         let mut ext = Map::new();
         let peak = self.emission.max_element();
-        assert!(self.emission.min_element() >= 0.0, "negative emission in {}", self.name);
+        assert!(
+            self.emission.min_element() >= 0.0,
+            "negative emission in {}",
+            self.name
+        );
         if peak > 0.0 {
             if peak <= 1.0 {
                 m.insert("emissiveFactor".into(), vec3(self.emission));
             } else {
                 m.insert("emissiveFactor".into(), vec3(self.emission / peak));
-                ext.insert(EMISSIVE_STRENGTH.into(), json!({ "emissiveStrength": num(peak) }));
+                ext.insert(
+                    EMISSIVE_STRENGTH.into(),
+                    json!({ "emissiveStrength": num(peak) }),
+                );
             }
         }
         if self.transmission > 0.0 {
-            ext.insert(TRANSMISSION.into(), json!({ "transmissionFactor": num(self.transmission) }));
+            ext.insert(
+                TRANSMISSION.into(),
+                json!({ "transmissionFactor": num(self.transmission) }),
+            );
         }
         if let Some(ior) = self.ior {
             ext.insert(IOR.into(), json!({ "ior": num(ior) }));
@@ -130,7 +167,12 @@ impl Material {
             ext.insert(SPECULAR.into(), json!({ "specularFactor": num(s) }));
         }
         for name in ext.keys() {
-            used.insert([EMISSIVE_STRENGTH, TRANSMISSION, IOR, SPECULAR].into_iter().find(|e| e == name).expect("known extension"));
+            used.insert(
+                [EMISSIVE_STRENGTH, TRANSMISSION, IOR, SPECULAR]
+                    .into_iter()
+                    .find(|e| e == name)
+                    .expect("known extension"),
+            );
         }
         if !ext.is_empty() {
             m.insert("extensions".into(), Value::Object(ext));
@@ -159,10 +201,17 @@ pub struct Transform {
 }
 
 impl Transform {
-    pub const IDENTITY: Self = Self { translation: Vec3::ZERO, rotation: Quat::IDENTITY, scale: 1.0 };
+    pub const IDENTITY: Self = Self {
+        translation: Vec3::ZERO,
+        rotation: Quat::IDENTITY,
+        scale: 1.0,
+    };
 
     pub fn at(translation: Vec3) -> Self {
-        Self { translation, ..Self::IDENTITY }
+        Self {
+            translation,
+            ..Self::IDENTITY
+        }
     }
 
     /// The placement of a camera at `eye` looking at `target`: glTF cameras look down
@@ -171,12 +220,21 @@ impl Transform {
         let forward = (target - eye).normalize();
         let right = forward.cross(up).normalize();
         let true_up = right.cross(forward);
-        let rotation = Quat::from_mat3(&glam::Mat3::from_cols(right, true_up, -forward)).normalize();
-        Self { translation: eye, rotation, scale: 1.0 }
+        let rotation =
+            Quat::from_mat3(&glam::Mat3::from_cols(right, true_up, -forward)).normalize();
+        Self {
+            translation: eye,
+            rotation,
+            scale: 1.0,
+        }
     }
 
     fn affine(&self) -> Affine3A {
-        Affine3A::from_scale_rotation_translation(Vec3::splat(self.scale), self.rotation, self.translation)
+        Affine3A::from_scale_rotation_translation(
+            Vec3::splat(self.scale),
+            self.rotation,
+            self.translation,
+        )
     }
 }
 
@@ -236,9 +294,18 @@ impl Document {
     pub fn add_geometry(&mut self, mesh: &Mesh) -> usize {
         assert!(!mesh.indices.is_empty() && mesh.indices.len().is_multiple_of(3));
         let count = mesh.positions.len();
-        let floats = |vs: &mut dyn Iterator<Item = f32>| vs.flat_map(f32::to_le_bytes).collect::<Vec<u8>>();
-        let view = self.add_view(&floats(&mut mesh.positions.iter().flat_map(|p| p.to_array())), ARRAY_BUFFER);
-        let (lo, hi) = mesh.positions.iter().fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), &p| (lo.min(p), hi.max(p)));
+        let floats =
+            |vs: &mut dyn Iterator<Item = f32>| vs.flat_map(f32::to_le_bytes).collect::<Vec<u8>>();
+        let view = self.add_view(
+            &floats(&mut mesh.positions.iter().flat_map(|p| p.to_array())),
+            ARRAY_BUFFER,
+        );
+        let (lo, hi) = mesh
+            .positions
+            .iter()
+            .fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), &p| {
+                (lo.min(p), hi.max(p))
+            });
         let position = self.add_accessor(json!({
             "bufferView": view, "componentType": FLOAT, "count": count, "type": "VEC3",
             "min": vec3(lo), "max": vec3(hi),
@@ -258,15 +325,30 @@ impl Document {
         let max_index = *mesh.indices.iter().max().expect("non-empty");
         assert!((max_index as usize) < count, "index out of range");
         let (bytes, component) = if max_index < u32::from(u16::MAX) {
-            (mesh.indices.iter().flat_map(|&i| (i as u16).to_le_bytes()).collect::<Vec<u8>>(), UNSIGNED_SHORT)
+            (
+                mesh.indices
+                    .iter()
+                    .flat_map(|&i| (i as u16).to_le_bytes())
+                    .collect::<Vec<u8>>(),
+                UNSIGNED_SHORT,
+            )
         } else {
-            (mesh.indices.iter().flat_map(|&i| i.to_le_bytes()).collect(), UNSIGNED_INT)
+            (
+                mesh.indices.iter().flat_map(|&i| i.to_le_bytes()).collect(),
+                UNSIGNED_INT,
+            )
         };
         let view = self.add_view(&bytes, ELEMENT_ARRAY_BUFFER);
         let indices = self.add_accessor(json!({
             "bufferView": view, "componentType": component, "count": mesh.indices.len(), "type": "SCALAR",
         }));
-        self.geometries.push(Geometry { position, normal, uv, indices, mesh: mesh.clone() });
+        self.geometries.push(Geometry {
+            position,
+            normal,
+            uv,
+            indices,
+            mesh: mesh.clone(),
+        });
         self.geometries.len() - 1
     }
 
@@ -301,7 +383,10 @@ impl Document {
             json.insert("translation".into(), vec3(transform.translation));
         }
         if transform.rotation != Quat::IDENTITY {
-            json.insert("rotation".into(), Value::Array(transform.rotation.to_array().map(num).to_vec()));
+            json.insert(
+                "rotation".into(),
+                Value::Array(transform.rotation.to_array().map(num).to_vec()),
+            );
         }
         if transform.scale != 1.0 {
             json.insert("scale".into(), vec3(Vec3::splat(transform.scale)));
@@ -309,7 +394,13 @@ impl Document {
         if let Some(m) = mesh {
             json.insert("mesh".into(), json!(m));
         }
-        self.nodes.push(Node { json, transform, mesh, children: Vec::new(), is_child: false });
+        self.nodes.push(Node {
+            json,
+            transform,
+            mesh,
+            children: Vec::new(),
+            is_child: false,
+        });
         self.nodes.len() - 1
     }
 
@@ -319,7 +410,13 @@ impl Document {
     }
 
     /// A mesh made of `geometry` and `material`, instanced once with `transform`.
-    pub fn add_object(&mut self, name: &str, mesh: &Mesh, material: usize, transform: Transform) -> usize {
+    pub fn add_object(
+        &mut self,
+        name: &str,
+        mesh: &Mesh,
+        material: usize,
+        transform: Transform,
+    ) -> usize {
         let g = self.add_geometry(mesh);
         let m = self.add_mesh(name, g, material);
         self.add_mesh_node(name, m, transform)
@@ -344,26 +441,37 @@ impl Document {
             "perspective": { "yfov": num(yfov_degrees.to_radians()), "aspectRatio": 1.0, "znear": 0.01 },
         }));
         let node = self.add_node_json(name, placement, None);
-        self.nodes[node].json.insert("camera".into(), json!(self.cameras.len() - 1));
+        self.nodes[node]
+            .json
+            .insert("camera".into(), json!(self.cameras.len() - 1));
         node
     }
 
     /// A texture from an encoded PNG written beside the document as `file_name`.
     /// `nearest` selects nearest-neighbour filtering (crisp checkers).
     pub fn add_png_texture(&mut self, file_name: &str, png: Vec<u8>, nearest: bool) -> usize {
-        let (mag, min) = if nearest { (NEAREST, NEAREST) } else { (LINEAR, LINEAR_MIPMAP_LINEAR) };
-        self.samplers.push(json!({ "magFilter": mag, "minFilter": min, "wrapS": REPEAT, "wrapT": REPEAT }));
-        self.images.push(json!({ "name": file_name, "uri": file_name, "mimeType": "image/png" }));
+        let (mag, min) = if nearest {
+            (NEAREST, NEAREST)
+        } else {
+            (LINEAR, LINEAR_MIPMAP_LINEAR)
+        };
+        self.samplers
+            .push(json!({ "magFilter": mag, "minFilter": min, "wrapS": REPEAT, "wrapT": REPEAT }));
+        self.images
+            .push(json!({ "name": file_name, "uri": file_name, "mimeType": "image/png" }));
         self.png_files.push((file_name.to_owned(), png));
-        self.textures.push(json!({ "source": self.images.len() - 1, "sampler": self.samplers.len() - 1 }));
+        self.textures
+            .push(json!({ "source": self.images.len() - 1, "sampler": self.samplers.len() - 1 }));
         self.textures.len() - 1
     }
 
     /// Triangle and light figures over every node instance.
     pub fn stats(&self) -> Stats {
         let mut stats = Stats::default();
-        let mut stack: Vec<(usize, Affine3A)> =
-            (0..self.nodes.len()).filter(|&i| !self.nodes[i].is_child).map(|i| (i, Affine3A::IDENTITY)).collect();
+        let mut stack: Vec<(usize, Affine3A)> = (0..self.nodes.len())
+            .filter(|&i| !self.nodes[i].is_child)
+            .map(|i| (i, Affine3A::IDENTITY))
+            .collect();
         while let Some((i, parent)) = stack.pop() {
             let node = &self.nodes[i];
             let world = parent * node.transform.affine();
@@ -375,7 +483,8 @@ impl Document {
                 if material.emission.max_element() > 0.0 {
                     stats.emissive_triangles += mesh.triangle_count();
                     let sides = if material.double_sided { 2.0 } else { 1.0 };
-                    stats.power += material.emission * (std::f32::consts::PI * mesh.area(world) * sides);
+                    stats.power +=
+                        material.emission * (std::f32::consts::PI * mesh.area(world) * sides);
                 }
             }
             stack.extend(node.children.iter().map(|&c| (c, world)));
@@ -388,7 +497,11 @@ impl Document {
     pub fn write(&self, dir: &Path, name: &str) -> std::io::Result<()> {
         let bin_name = format!("{name}.bin");
         let mut used = BTreeSet::new();
-        let materials: Vec<Value> = self.materials.iter().map(|m| m.to_json(&mut used)).collect();
+        let materials: Vec<Value> = self
+            .materials
+            .iter()
+            .map(|m| m.to_json(&mut used))
+            .collect();
         let nodes: Vec<Value> = self
             .nodes
             .iter()
@@ -400,7 +513,9 @@ impl Document {
                 Value::Object(json)
             })
             .collect();
-        let roots: Vec<usize> = (0..self.nodes.len()).filter(|&i| !self.nodes[i].is_child).collect();
+        let roots: Vec<usize> = (0..self.nodes.len())
+            .filter(|&i| !self.nodes[i].is_child)
+            .collect();
         let mut doc = Map::new();
         doc.insert(
             "asset".into(),
@@ -415,7 +530,10 @@ impl Document {
         // glTF forbids empty arrays: each list is written only when it has entries.
         let lists = [
             ("cameras", self.cameras.clone()),
-            ("meshes", self.meshes.iter().map(|(m, _, _)| m.clone()).collect()),
+            (
+                "meshes",
+                self.meshes.iter().map(|(m, _, _)| m.clone()).collect(),
+            ),
             ("materials", materials),
             ("textures", self.textures.clone()),
             ("images", self.images.clone()),
@@ -428,8 +546,13 @@ impl Document {
                 doc.insert(key.into(), Value::Array(list));
             }
         }
-        doc.insert("buffers".into(), json!([{ "byteLength": self.bin.len(), "uri": bin_name }]));
-        let text = serde_json::to_string_pretty(&Value::Object(doc)).map_err(std::io::Error::other)? + "\n";
+        doc.insert(
+            "buffers".into(),
+            json!([{ "byteLength": self.bin.len(), "uri": bin_name }]),
+        );
+        let text = serde_json::to_string_pretty(&Value::Object(doc))
+            .map_err(std::io::Error::other)?
+            + "\n";
 
         write_atomic(&dir.join(&bin_name), &self.bin)?;
         for (file, bytes) in &self.png_files {

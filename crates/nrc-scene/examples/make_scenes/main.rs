@@ -67,12 +67,21 @@ fn main() -> ExitCode {
 /// Loads the written scene with the project's loader and compares it with the generator's
 /// own figures.
 fn check_loaded(dir: &std::path::Path, name: &str, stats: &gltf_doc::Stats) -> Result<(), String> {
-    let scene = nrc_scene::Scene::load(&dir.join(format!("{name}.gltf"))).map_err(|e| format!("loader: {e}"))?;
+    let scene = nrc_scene::Scene::load(&dir.join(format!("{name}.gltf")))
+        .map_err(|e| format!("loader: {e}"))?;
     if scene.triangle_count() != stats.triangles {
-        return Err(format!("loader sees {} triangles, {} written", scene.triangle_count(), stats.triangles));
+        return Err(format!(
+            "loader sees {} triangles, {} written",
+            scene.triangle_count(),
+            stats.triangles
+        ));
     }
     if scene.light_count() != stats.emissive_triangles {
-        return Err(format!("loader sees {} lights, {} written", scene.light_count(), stats.emissive_triangles));
+        return Err(format!(
+            "loader sees {} lights, {} written",
+            scene.light_count(),
+            stats.emissive_triangles
+        ));
     }
     if !scene.camera_from_file() {
         return Err("loader did not take the camera from the file".into());
@@ -84,7 +93,9 @@ fn check_loaded(dir: &std::path::Path, name: &str, stats: &gltf_doc::Stats) -> R
     let expected = nrc_scene::sampling::luminance(stats.power) as f64 / std::f64::consts::PI;
     let loaded = scene.lights().total_power();
     if ((loaded - expected) / expected).abs() > 1e-3 {
-        return Err(format!("loader's light power {loaded} differs from the written {expected}"));
+        return Err(format!(
+            "loader's light power {loaded} differs from the written {expected}"
+        ));
     }
     Ok(())
 }

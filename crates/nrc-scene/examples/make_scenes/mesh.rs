@@ -17,15 +17,30 @@ impl Mesh {
     /// A quadrilateral `a b c d` (in order around its boundary), split along `a c`.
     /// The front face is the one from which `a b c d` runs counter-clockwise.
     pub fn quad(a: Vec3, b: Vec3, c: Vec3, d: Vec3) -> Self {
-        Self { positions: vec![a, b, c, d], normals: None, uvs: None, indices: vec![0, 1, 2, 0, 2, 3] }
+        Self {
+            positions: vec![a, b, c, d],
+            normals: None,
+            uvs: None,
+            indices: vec![0, 1, 2, 0, 2, 3],
+        }
     }
 
     /// A textured quad given by its corners as seen from the front: the texture's first row
     /// (glTF v = 0) runs along the top edge, u grows to the right. The order
     /// top-left, bottom-left, bottom-right, top-right is counter-clockwise from the front.
-    pub fn textured_quad(top_left: Vec3, bottom_left: Vec3, bottom_right: Vec3, top_right: Vec3) -> Self {
+    pub fn textured_quad(
+        top_left: Vec3,
+        bottom_left: Vec3,
+        bottom_right: Vec3,
+        top_right: Vec3,
+    ) -> Self {
         let mut q = Self::quad(top_left, bottom_left, bottom_right, top_right);
-        q.uvs = Some(vec![Vec2::new(0.0, 0.0), Vec2::new(0.0, 1.0), Vec2::new(1.0, 1.0), Vec2::new(1.0, 0.0)]);
+        q.uvs = Some(vec![
+            Vec2::new(0.0, 0.0),
+            Vec2::new(0.0, 1.0),
+            Vec2::new(1.0, 1.0),
+            Vec2::new(1.0, 0.0),
+        ]);
         q
     }
 
@@ -47,15 +62,49 @@ impl Mesh {
     pub fn cuboid(min: Vec3, max: Vec3) -> Self {
         let centre = (min + max) / 2.0;
         let p = |x: bool, y: bool, z: bool| {
-            Vec3::new(if x { max.x } else { min.x }, if y { max.y } else { min.y }, if z { max.z } else { min.z })
+            Vec3::new(
+                if x { max.x } else { min.x },
+                if y { max.y } else { min.y },
+                if z { max.z } else { min.z },
+            )
         };
         let faces = [
-            [p(false, false, false), p(false, true, false), p(false, true, true), p(false, false, true)],
-            [p(true, false, false), p(true, true, false), p(true, true, true), p(true, false, true)],
-            [p(false, false, false), p(true, false, false), p(true, false, true), p(false, false, true)],
-            [p(false, true, false), p(true, true, false), p(true, true, true), p(false, true, true)],
-            [p(false, false, false), p(true, false, false), p(true, true, false), p(false, true, false)],
-            [p(false, false, true), p(true, false, true), p(true, true, true), p(false, true, true)],
+            [
+                p(false, false, false),
+                p(false, true, false),
+                p(false, true, true),
+                p(false, false, true),
+            ],
+            [
+                p(true, false, false),
+                p(true, true, false),
+                p(true, true, true),
+                p(true, false, true),
+            ],
+            [
+                p(false, false, false),
+                p(true, false, false),
+                p(true, false, true),
+                p(false, false, true),
+            ],
+            [
+                p(false, true, false),
+                p(true, true, false),
+                p(true, true, true),
+                p(false, true, true),
+            ],
+            [
+                p(false, false, false),
+                p(true, false, false),
+                p(true, true, false),
+                p(false, true, false),
+            ],
+            [
+                p(false, false, true),
+                p(true, false, true),
+                p(true, true, true),
+                p(false, true, true),
+            ],
         ];
         let mut mesh = Self::default();
         for face in faces {
@@ -87,7 +136,11 @@ impl Mesh {
                     r if r == rings => (0.0, -1.0),
                     _ => theta.sin_cos(),
                 };
-                let (sin_p, cos_p) = if seg == segments { (0.0, 1.0) } else { phi.sin_cos() };
+                let (sin_p, cos_p) = if seg == segments {
+                    (0.0, 1.0)
+                } else {
+                    phi.sin_cos()
+                };
                 let n = Vec3::new(sin_t * cos_p, cos_t, -sin_t * sin_p);
                 positions.push(n * radius);
                 normals.push(n);
@@ -110,7 +163,12 @@ impl Mesh {
                 }
             }
         }
-        Self { positions, normals: Some(normals), uvs: Some(uvs), indices }
+        Self {
+            positions,
+            normals: Some(normals),
+            uvs: Some(uvs),
+            indices,
+        }
     }
 
     /// Reverses every triangle's winding (and the normals with it).
@@ -129,8 +187,16 @@ impl Mesh {
             *self = other.clone();
             return;
         }
-        assert_eq!(self.normals.is_some(), other.normals.is_some(), "mixing smooth and flat meshes");
-        assert_eq!(self.uvs.is_some(), other.uvs.is_some(), "mixing textured and untextured meshes");
+        assert_eq!(
+            self.normals.is_some(),
+            other.normals.is_some(),
+            "mixing smooth and flat meshes"
+        );
+        assert_eq!(
+            self.uvs.is_some(),
+            other.uvs.is_some(),
+            "mixing textured and untextured meshes"
+        );
         let base = self.positions.len() as u32;
         self.positions.extend_from_slice(&other.positions);
         if let (Some(n), Some(m)) = (&mut self.normals, &other.normals) {
@@ -151,7 +217,8 @@ impl Mesh {
         self.indices
             .chunks_exact(3)
             .map(|t| {
-                let [a, b, c] = [t[0], t[1], t[2]].map(|i| transform.transform_point3(self.positions[i as usize]));
+                let [a, b, c] = [t[0], t[1], t[2]]
+                    .map(|i| transform.transform_point3(self.positions[i as usize]));
                 0.5 * (b - a).cross(c - a).length()
             })
             .sum()

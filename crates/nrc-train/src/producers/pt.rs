@@ -72,7 +72,13 @@ struct TracedPath {
 
 impl PathProducer {
     /// Traces one training path from `start`.
-    fn trace(&self, ctx: &ProducerContext, start: &StartRay, sampler: &mut PixelSampler, unbiased: bool) -> TracedPath {
+    fn trace(
+        &self,
+        ctx: &ProducerContext,
+        start: &StartRay,
+        sampler: &mut PixelSampler,
+        unbiased: bool,
+    ) -> TracedPath {
         let scene = ctx.scene;
         let limit = if ctx.tracer.max_depth <= 0 {
             u32::MAX
@@ -104,7 +110,9 @@ impl PathProducer {
             if let Some(last) = out.vertices.last_mut() {
                 let le = scene.emission(&si);
                 if le != Vec3::ZERO {
-                    last.direct += last.weight * le * emission_mis_weight(scene, &si, dist, prev_pdf, prev_delta || !use_nee);
+                    last.direct += last.weight
+                        * le
+                        * emission_mis_weight(scene, &si, dist, prev_pdf, prev_delta || !use_nee);
                 }
             }
             let bsdf = Bsdf::from_pbr(&scene.pbr(&si));
@@ -144,7 +152,8 @@ impl PathProducer {
             let frame = Frame::from_normal(si.ns);
             let wo = frame.to_local(si.wo);
             if use_nee && !bsdf.is_delta() {
-                vertex.direct += next_event(scene, &si, &bsdf, &frame, wo, true, sampler, &mut stats);
+                vertex.direct +=
+                    next_event(scene, &si, &bsdf, &frame, wo, true, sampler, &mut stats);
             }
             let u_lobe = sampler.next_1d();
             let u_dir = sampler.next_2d();
@@ -198,8 +207,14 @@ impl Producer for PathProducer {
                 .into_par_iter()
                 .map(|i| {
                     let mut sampler = PixelSampler::new(seed, i as u64, 0);
-                    let unbiased = !self.self_learning || (i as u32).is_multiple_of(self.unbiased_every.max(1));
-                    self.trace(ctx, &ctx.starts[i % ctx.starts.len()], &mut sampler, unbiased)
+                    let unbiased = !self.self_learning
+                        || (i as u32).is_multiple_of(self.unbiased_every.max(1));
+                    self.trace(
+                        ctx,
+                        &ctx.starts[i % ctx.starts.len()],
+                        &mut sampler,
+                        unbiased,
+                    )
                 })
                 .collect();
             let before = records;
@@ -213,7 +228,11 @@ impl Producer for PathProducer {
         stats.rays = paths.iter().map(|p| p.rays).sum();
         // Self-learning: every path's closing query in one cache call.
         let tails: Vec<CacheQuery> = paths.iter().filter_map(|p| p.tail).collect();
-        let predicted = if tails.is_empty() { Vec::new() } else { ctx.cache.predict(&tails) };
+        let predicted = if tails.is_empty() {
+            Vec::new()
+        } else {
+            ctx.cache.predict(&tails)
+        };
         let mut predicted = predicted.into_iter();
         let mut batch = TrainingBatch::default();
         for p in &paths {
