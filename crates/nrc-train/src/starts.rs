@@ -121,4 +121,31 @@ mod tests {
             assert!((q as i64 - 128).abs() <= 20, "{quadrants:?}");
         }
     }
+
+    #[test]
+    fn a_fraction_of_the_starts_aims_at_previous_termination_points() {
+        let cam = Camera::look_at(Vec3::new(0.0, 0.0, 5.0), Vec3::ZERO, Vec3::Y, 60.0).unwrap();
+        let points: Vec<TerminationPoint> = (0..10)
+            .map(|i| TerminationPoint {
+                from: Vec3::new(i as f32, 1.0, 0.0),
+                to: Vec3::new(i as f32, 0.0, 0.0),
+            })
+            .collect();
+        let rays = predict(&cam, 32, 32, &points, 0.25, 400, 7);
+        assert_eq!(rays.len(), 400);
+        // A ray aimed at a termination point starts on its segment and points down (-y); camera
+        // rays start at the camera.
+        let aimed = rays.iter().filter(|r| r.ray.o != cam.position).count();
+        assert_eq!(aimed, 100);
+        for r in rays.iter().filter(|r| r.ray.o != cam.position) {
+            assert!((r.ray.d - Vec3::new(0.0, -1.0, 0.0)).length() < 1e-6);
+            assert!((r.ray.o.y - 0.99).abs() < 1e-6, "{:?}", r.ray.o);
+        }
+        // Without previous points every start is a camera ray.
+        assert!(
+            predict(&cam, 32, 32, &[], 0.25, 50, 7)
+                .iter()
+                .all(|r| r.ray.o == cam.position)
+        );
+    }
 }

@@ -37,6 +37,8 @@ fn online_loop_is_deterministic_and_snapshots_render_identically() {
     let scene = scene("cornell-box.gltf");
     let run = || {
         let mut t = trainer(&scene, "pt-sl", 2048);
+        // Half the training queries from the previous frame's termination points.
+        t.settings.from_terminations = 0.5;
         let mut last = None;
         for _ in 0..3 {
             let (stats, out) = t.frame(&scene, &scene.camera, 24, 16, true).unwrap();
