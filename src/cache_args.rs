@@ -6,6 +6,7 @@ use anyhow::{Context, Result, bail};
 use nrc_cache::{CacheConfig, CacheDevice};
 use nrc_train::Termination;
 use nrc_train::methods::CacheMethodSettings;
+use nrc_train::producer::ProducerOptions;
 
 /// Where the cache computes.
 #[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
@@ -60,6 +61,39 @@ pub struct RadianceCacheArgs {
     /// Records per optimisation step (a frame trains records/batch steps).
     #[arg(long, default_value_t = 1 << 14)]
     pub batch: usize,
+
+    /// Light training: fraction of its records at uniformly chosen surface points.
+    #[arg(long, default_value_t = 0.0)]
+    pub lt_surface_balance: f32,
+
+    /// Light training: fraction of its records at camera primary hits.
+    #[arg(long, default_value_t = 0.0)]
+    pub lt_camera_balance: f32,
+
+    /// SPPC: persistent query balls kept (ring buffer).
+    #[arg(long, default_value_t = 16384)]
+    pub sppc_capacity: usize,
+
+    /// SPPC: fraction of the balls replaced each frame, oldest first.
+    #[arg(long, default_value_t = 0.25)]
+    pub sppc_replace: f32,
+
+    /// SPPC: initial ball radius as a fraction of the scene bounds' diagonal.
+    #[arg(long, default_value_t = 0.01)]
+    pub sppc_radius: f32,
+
+    /// SPPC: photon paths traced per training record.
+    #[arg(long, default_value_t = 4.0)]
+    pub sppc_photons: f32,
+
+    /// SPPC: progressive radius reduction α in (0, 1].
+    #[arg(long, default_value_t = 0.7)]
+    pub sppc_alpha: f32,
+
+    /// SPPC: gather photons whatever their normal (default: reject those whose normal differs
+    /// from the ball's, n·n < 0.9).
+    #[arg(long)]
+    pub sppc_no_normal_reject: bool,
 }
 
 impl RadianceCacheArgs {
@@ -97,6 +131,17 @@ impl RadianceCacheArgs {
         s.batch_size = self.batch;
         s.train_frames = train_frames;
         s.seed = seed;
+        s.producer_options = ProducerOptions {
+            lt_surface_balance: self.lt_surface_balance,
+            lt_camera_balance: self.lt_camera_balance,
+            sppc_capacity: self.sppc_capacity,
+            sppc_replace_fraction: self.sppc_replace,
+            sppc_initial_radius: self.sppc_radius,
+            sppc_photons_per_record: self.sppc_photons,
+            sppc_alpha: self.sppc_alpha,
+            sppc_normal_reject: !self.sppc_no_normal_reject,
+        };
+        s.producer_options.validate().map_err(anyhow::Error::msg)?;
         Ok(s)
     }
 }

@@ -142,6 +142,11 @@ fn bad_training_options_are_clear_errors() {
         (vec!["--from-terminations", "2"], "--from-terminations"),
         (vec!["--resolution", "0"], "--resolution"),
         (vec!["--config", "/nonexistent.json"], "nonexistent"),
+        (vec!["--sppc-alpha", "1.5"], "alpha"),
+        (
+            vec!["--lt-surface-balance", "0.8", "--lt-camera-balance", "0.5"],
+            "at most 1",
+        ),
     ] {
         let mut all = vec!["train", "--scene", s, "--width", "8", "--height", "8"];
         all.extend(args.iter());

@@ -20,7 +20,7 @@ use nrc_scene::{Camera, Scene};
 
 use crate::inference::{TERMINATION_NAMES, Termination};
 use crate::online::{OnlineSettings, OnlineTrainer};
-use crate::producer::{PRODUCER_NAMES, ProducerSpec};
+use crate::producer::{PRODUCER_NAMES, ProducerOptions, ProducerSpec};
 use crate::query::QueryMaker;
 
 /// The grammar of all method names.
@@ -115,6 +115,8 @@ pub struct CacheMethodSettings {
     pub batch_size: usize,
     /// Keep training during measurement (each pass is a full online frame); else frozen.
     pub online: bool,
+    /// The producers' own settings.
+    pub producer_options: ProducerOptions,
     pub seed: u64,
 }
 
@@ -128,6 +130,7 @@ impl CacheMethodSettings {
             records_per_frame: 1 << 16,
             batch_size: 1 << 14,
             online: true,
+            producer_options: ProducerOptions::default(),
             seed: 0,
         }
     }
@@ -189,6 +192,7 @@ pub fn scene_trainer(
     .map_err(|e| e.to_string())?;
     let mut online = OnlineSettings::new(producer, scene, tracer);
     online.records_per_frame = settings.records_per_frame;
+    online.producer_options = settings.producer_options;
     online.batch_size = settings.batch_size;
     online.renderer.termination = termination;
     online.renderer.queries = queries;

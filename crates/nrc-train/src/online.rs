@@ -9,7 +9,7 @@ use nrc_render::{PathTracer, PixelSampler};
 use nrc_scene::{Camera, Scene};
 
 use crate::inference::{CacheRenderer, InferenceOutput, InferenceStats};
-use crate::producer::{ProducerContext, ProducerMix, ProducerSpec, ProducerStats};
+use crate::producer::{ProducerContext, ProducerMix, ProducerOptions, ProducerSpec, ProducerStats};
 use crate::query::QueryMaker;
 use crate::starts::{self, TerminationPoint};
 
@@ -18,6 +18,8 @@ use crate::starts::{self, TerminationPoint};
 pub struct OnlineSettings {
     /// The producers and their shares of the record budget.
     pub producer: ProducerSpec,
+    /// The producers' own settings.
+    pub producer_options: ProducerOptions,
     /// Training records produced per frame.
     pub records_per_frame: usize,
     /// Records per optimisation step: a frame's records are shuffled and trained in batches
@@ -41,6 +43,7 @@ impl OnlineSettings {
     pub fn new(producer: ProducerSpec, scene: &Scene, tracer: PathTracer) -> Self {
         Self {
             producer,
+            producer_options: ProducerOptions::default(),
             records_per_frame: 1 << 16,
             batch_size: 1 << 14,
             from_terminations: 0.0,
@@ -73,7 +76,7 @@ impl OnlineSettings {
         if self.spp == 0 {
             return Err("samples per pixel must be at least 1".into());
         }
-        Ok(())
+        self.producer_options.validate()
     }
 }
 
@@ -118,7 +121,7 @@ impl OnlineTrainer {
         settings.validate()?;
         Ok(Self {
             cache,
-            mix: ProducerMix::new(&settings.producer),
+            mix: ProducerMix::new(&settings.producer, &settings.producer_options),
             settings,
             previous: Vec::new(),
             frame: 0,

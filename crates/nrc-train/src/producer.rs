@@ -66,6 +66,69 @@ pub trait Producer: Send {
     fn produce(&mut self, ctx: &ProducerContext, budget: usize, seed: u64) -> Produced;
 }
 
+/// Settings of the producers that have any (defaults: the producers' own).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ProducerOptions {
+    /// Light training: fraction of the budget at uniformly area-sampled surface points.
+    pub lt_surface_balance: f32,
+    /// Light training: fraction of the budget at camera primary hits.
+    pub lt_camera_balance: f32,
+    /// SPPC: query balls kept.
+    pub sppc_capacity: usize,
+    /// SPPC: fraction of the balls replaced each frame.
+    pub sppc_replace_fraction: f32,
+    /// SPPC: initial radius, as a fraction of the scene bounds' diagonal.
+    pub sppc_initial_radius: f32,
+    /// SPPC: photon paths per training record.
+    pub sppc_photons_per_record: f32,
+    /// SPPC: progressive radius reduction α.
+    pub sppc_alpha: f32,
+    /// SPPC: reject photons whose normal differs from the ball's.
+    pub sppc_normal_reject: bool,
+}
+
+impl Default for ProducerOptions {
+    fn default() -> Self {
+        let (lt, sppc) = (LightProducer::default(), SppcProducer::default());
+        Self {
+            lt_surface_balance: lt.surface_balance,
+            lt_camera_balance: lt.camera_balance,
+            sppc_capacity: sppc.capacity,
+            sppc_replace_fraction: sppc.replace_fraction,
+            sppc_initial_radius: sppc.initial_radius,
+            sppc_photons_per_record: sppc.photons_per_record,
+            sppc_alpha: sppc.alpha,
+            sppc_normal_reject: sppc.normal_reject,
+        }
+    }
+}
+
+impl ProducerOptions {
+    fn light(&self) -> LightProducer {
+        LightProducer {
+            surface_balance: self.lt_surface_balance,
+            camera_balance: self.lt_camera_balance,
+        }
+    }
+
+    fn sppc(&self) -> SppcProducer {
+        let mut p = SppcProducer::default();
+        p.capacity = self.sppc_capacity;
+        p.replace_fraction = self.sppc_replace_fraction;
+        p.initial_radius = self.sppc_initial_radius;
+        p.photons_per_record = self.sppc_photons_per_record;
+        p.alpha = self.sppc_alpha;
+        p.normal_reject = self.sppc_normal_reject;
+        p
+    }
+
+    /// Checks every setting, naming the first bad one.
+    pub fn validate(&self) -> Result<(), String> {
+        self.light().validate()?;
+        self.sppc().validate()
+    }
+}
+
 /// One producer and its settings, as named in a configuration.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum ProducerKind {
@@ -110,13 +173,13 @@ impl ProducerKind {
         })
     }
 
-    /// The producer with default settings.
-    pub fn build(self) -> Box<dyn Producer> {
+    /// The producer with `options`.
+    pub fn build(self, options: &ProducerOptions) -> Box<dyn Producer> {
         match self {
             Self::Pt { self_learning } => Box::new(PathProducer::new(self_learning)),
             Self::Bt => Box::new(BidirectionalProducer::default()),
-            Self::Lt => Box::new(LightProducer::default()),
-            Self::Sppc => Box::new(SppcProducer::default()),
+            Self::Lt => Box::new(options.light()),
+            Self::Sppc => Box::new(options.sppc()),
         }
     }
 }
@@ -189,9 +252,13 @@ pub struct ProducerMix {
 }
 
 impl ProducerMix {
-    pub fn new(spec: &ProducerSpec) -> Self {
+    pub fn new(spec: &ProducerSpec, options: &ProducerOptions) -> Self {
         Self {
-            parts: spec.parts.iter().map(|(k, s)| (k.build(), *s)).collect(),
+            parts: spec
+                .parts
+                .iter()
+                .map(|(k, s)| (k.build(options), *s))
+                .collect(),
         }
     }
 
