@@ -243,3 +243,86 @@ fn terminations_end_where_they_say() {
         "a closed box: every path ends in the cache"
     );
 }
+
+/// A diffuse box lit by a ceiling quad, with a mirror sphere and a glass sphere: paths cross
+/// delta vertices, where the spread heuristic must not end them.
+fn mirror_and_glass() -> Scene {
+    let mut b = SceneBuilder::new();
+    let wall = b.material(mat::diffuse(Vec3::splat(0.6)));
+    let light = b.material(mat::emissive(Vec3::splat(0.5), Vec3::splat(3.0), false));
+    let mirror = b.material(mat::metal(Vec3::splat(0.9), 0.0));
+    let glass = b.material(mat::glass(1.5, 0.0));
+    b.mesh(
+        &Mesh::cuboid(Vec3::splat(-1.0), Vec3::splat(1.0), true),
+        wall,
+        false,
+    );
+    // Facing down (a × b = −y).
+    b.mesh(
+        &Mesh::quad(
+            Vec3::new(0.0, 0.99, 0.0),
+            Vec3::new(0.7, 0.0, 0.0),
+            Vec3::new(0.0, 0.0, 0.7),
+        ),
+        light,
+        false,
+    );
+    b.mesh(
+        &Mesh::sphere(Vec3::new(-0.45, -0.6, -0.2), 0.35, 16, 32),
+        mirror,
+        true,
+    );
+    b.mesh(
+        &Mesh::sphere(Vec3::new(0.45, -0.6, 0.1), 0.35, 16, 32),
+        glass,
+        true,
+    );
+    b.camera(Vec3::new(0.0, 0.0, 0.95), Vec3::new(0.0, -0.4, -1.0), 70.0);
+    b.build()
+}
+
+#[test]
+fn terminations_through_delta_vertices_reproduce_the_reference() {
+    let scene = mirror_and_glass();
+    let (w, h, passes) = (16, 16, 24);
+    let tracer = PathTracer::default();
+    let queries = QueryMaker::new(&scene.bounds());
+    let (ref_m, ref_se) = pass_means(passes, |seed| {
+        let s = RenderSettings {
+            width: w,
+            height: h,
+            spp: 8,
+            seed,
+            variance: false,
+        };
+        render(&scene, &scene.camera, &tracer, &s, &|_| {}).mean
+    });
+    println!("reference: {ref_m:.5} ± {ref_se:.5}");
+    for termination in [
+        Termination::FirstVertex,
+        Termination::SpreadAngle { c: 0.01 },
+        Termination::Balanced { k: 4.0 },
+    ] {
+        let renderer = CacheRenderer {
+            termination,
+            nee: true,
+            tracer,
+            queries,
+        };
+        let (m, se) = pass_means(passes, |seed| {
+            let exact = PathTracedView {
+                scene: &scene,
+                queries,
+                tracer,
+                samples: 8,
+                seed: seed ^ 0x5A5A,
+            };
+            renderer
+                .render(&scene, &scene.camera, &exact, w, h, 4, seed)
+                .image
+        });
+        let z = (m - ref_m) / (se * se + ref_se * ref_se).sqrt();
+        println!("{termination}: {m:.5} ± {se:.5}, z = {z:.2}");
+        assert!(z.abs() < 4.0, "{termination}: z = {z}");
+    }
+}
