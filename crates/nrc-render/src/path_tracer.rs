@@ -102,7 +102,33 @@ impl PathTracer {
     pub fn radiance(
         &self,
         scene: &Scene,
-        mut ray: Ray,
+        ray: Ray,
+        sampler: &mut PixelSampler,
+        stats: &mut PathStats,
+    ) -> Vec3 {
+        stats.closest_rays += 1;
+        let Some(hit) = scene.intersect(&ray) else {
+            // Escaped: constant background radiance (not light-sampled, so weight 1).
+            return scene.background;
+        };
+        let si = scene.interaction(&ray, &hit);
+        // Emission seen by the camera ray counts fully (no light sample could produce it);
+        // the ray is the path's first segment.
+        scene.emission(&si) + self.reflected(scene, &si, si.wo, 1, sampler, stats)
+    }
+
+    /// One sample of the radiance leaving the surface point `si` toward `wo` (unit, world
+    /// space), the point's own emission excluded, for a path that has already used `segments`
+    /// segments to reach `si` (1 for a camera primary hit; they count toward `max_depth` and
+    /// `segments − 1` scattering events toward `rr_depth`). The loop of [`PathTracer::radiance`]
+    /// after its first hit; producers that need the radiance of a point in a chosen direction
+    /// call it directly.
+    pub fn reflected(
+        &self,
+        scene: &Scene,
+        si: &SurfaceInteraction,
+        wo: Vec3,
+        segments: u32,
         sampler: &mut PixelSampler,
         stats: &mut PathStats,
     ) -> Vec3 {
@@ -110,51 +136,19 @@ impl PathTracer {
         let use_nee = self.strategy != LightStrategy::BsdfOnly && scene.light_count() > 0;
         let mut radiance = Vec3::ZERO;
         let mut throughput = Vec3::ONE;
-        // The previous scattering event, for the MIS weight of emission found by it:
-        // solid-angle density of the sampled direction, and whether it was a delta lobe.
-        // The camera ray counts as a delta event (no light sample could produce it).
-        let mut prev_pdf = 0.0f32;
-        let mut prev_delta = true;
-        // Scattering events so far; the current ray is segment `depth + 1`.
-        let mut depth: u32 = 0;
+        let (mut si, mut wo_world) = (*si, wo);
+        let mut segments = segments.max(1);
+        // Scattering events so far.
+        let mut depth = segments - 1;
         loop {
-            stats.closest_rays += 1;
-            let Some(hit) = scene.intersect(&ray) else {
-                // Escaped: constant background radiance (not light-sampled, so weight 1).
-                radiance += throughput * scene.background;
-                break;
-            };
-            let si = scene.interaction(&ray, &hit);
-
-            // Emission found by the ray.
-            let le = scene.emission(&si);
-            if le != Vec3::ZERO {
-                let weight = if self.strategy == LightStrategy::LightOnly
-                    && use_nee
-                    && !prev_delta
-                    && scene.light_pdf_area(si.tri) > 0.0
-                {
-                    0.0
-                } else {
-                    emission_mis_weight(
-                        scene,
-                        &si,
-                        hit.t * ray.d.length(),
-                        prev_pdf,
-                        prev_delta || !use_nee,
-                    )
-                };
-                radiance += throughput * le * weight;
-            }
-
             // A further segment would exceed the maximum depth.
-            if depth + 1 >= limit {
+            if segments >= limit {
                 break;
             }
 
             let bsdf = Bsdf::from_pbr(&scene.pbr(&si));
             let frame = Frame::from_normal(si.ns);
-            let wo = frame.to_local(si.wo);
+            let wo = frame.to_local(wo_world);
 
             // Next-event estimation: one point on an emitter, chosen by power.
             if use_nee && !bsdf.is_delta() {
@@ -174,10 +168,9 @@ impl PathTracer {
                 break;
             };
             throughput *= bs.weight;
-            prev_pdf = bs.pdf;
-            prev_delta = bs.delta;
-            ray = spawn_ray(si.p, si.ng, frame.to_world(bs.wi));
+            let ray = spawn_ray(si.p, si.ng, frame.to_world(bs.wi));
             depth += 1;
+            segments += 1;
             if throughput == Vec3::ZERO {
                 break;
             }
@@ -191,6 +184,37 @@ impl PathTracer {
                     break;
                 }
                 throughput /= q;
+            }
+
+            stats.closest_rays += 1;
+            let Some(hit) = scene.intersect(&ray) else {
+                // Escaped: constant background radiance (not light-sampled, so weight 1).
+                radiance += throughput * scene.background;
+                break;
+            };
+            si = scene.interaction(&ray, &hit);
+            wo_world = si.wo;
+
+            // Emission found by the ray, weighted against NEE finding it (the solid-angle
+            // density of the sampled direction, and whether it was a delta lobe).
+            let le = scene.emission(&si);
+            if le != Vec3::ZERO {
+                let weight = if self.strategy == LightStrategy::LightOnly
+                    && use_nee
+                    && !bs.delta
+                    && scene.light_pdf_area(si.tri) > 0.0
+                {
+                    0.0
+                } else {
+                    emission_mis_weight(
+                        scene,
+                        &si,
+                        hit.t * ray.d.length(),
+                        bs.pdf,
+                        bs.delta || !use_nee,
+                    )
+                };
+                radiance += throughput * le * weight;
             }
         }
         radiance

@@ -36,8 +36,7 @@
 
 use glam::Vec3;
 use nrc_cache::{CacheQuery, TrainingBatch};
-use nrc_render::path_tracer::{emission_mis_weight, next_event};
-use nrc_render::{PathStats, PathTracer, PixelSampler};
+use nrc_render::{LightStrategy, PathStats, PathTracer, PixelSampler};
 use nrc_scene::{
     LightSample, Ray, Scene, SurfaceInteraction,
     accel::Hit,
@@ -142,7 +141,7 @@ impl Producer for LightProducer {
                     continue;
                 }
                 let mut s = PixelSampler::new(seed, i as u64, 1 + j as u64);
-                let target = outgoing_radiance(ctx, &v.si, &v.bsdf, wo, &mut s, &mut ps);
+                let target = outgoing_radiance(ctx, &v.si, wo, &mut s, &mut ps);
                 out.push((ctx.queries.query_toward(&v.si, &v.bsdf, wo), target));
             }
             (out, ps.rays())
@@ -161,7 +160,7 @@ impl Producer for LightProducer {
                 if let Some((si, wo)) = areas.sample(scene, &mut s) {
                     let bsdf = Bsdf::from_pbr(&scene.pbr(&si));
                     if !bsdf.is_delta() {
-                        let target = outgoing_radiance(ctx, &si, &bsdf, wo, &mut s, &mut ps);
+                        let target = outgoing_radiance(ctx, &si, wo, &mut s, &mut ps);
                         out.push((ctx.queries.query_toward(&si, &bsdf, wo), target));
                     }
                 }
@@ -185,7 +184,7 @@ impl Producer for LightProducer {
                     let si = scene.interaction(&ray, &hit);
                     let bsdf = Bsdf::from_pbr(&scene.pbr(&si));
                     if !bsdf.is_delta() {
-                        let target = outgoing_radiance(ctx, &si, &bsdf, si.wo, &mut s, &mut ps);
+                        let target = outgoing_radiance(ctx, &si, si.wo, &mut s, &mut ps);
                         out.push((ctx.queries.query(&si, &bsdf), target));
                     }
                 }
@@ -424,85 +423,21 @@ pub(crate) fn trace_light_path(
 }
 
 /// A path-traced estimate of the radiance leaving the surface point `si` toward `wo` (unit,
-/// world), the point's own emission excluded: next-event estimation and BSDF sampling combined
-/// by MIS (power heuristic), Russian roulette from `tracer.rr_depth` scattering events on, as
-/// the reference path tracer. The point counts as a camera primary hit for the tracer's
-/// maximum depth (one segment already used).
+/// world), the point's own emission excluded: the reference path tracer's estimate from a
+/// vertex ([`nrc_render::PathTracer::reflected`], NEE and BSDF sampling combined by MIS,
+/// Russian roulette), the point counting as a camera primary hit for the maximum depth.
 pub fn outgoing_radiance(
     ctx: &ProducerContext,
     si: &SurfaceInteraction,
-    bsdf: &Bsdf,
     wo: Vec3,
     sampler: &mut PixelSampler,
     stats: &mut PathStats,
 ) -> Vec3 {
-    let scene = ctx.scene;
-    let limit = if ctx.tracer.max_depth <= 0 {
-        u32::MAX
-    } else {
-        ctx.tracer.max_depth as u32
+    let tracer = PathTracer {
+        strategy: LightStrategy::Mis,
+        ..ctx.tracer
     };
-    let use_nee = scene.light_count() > 0;
-    let mut radiance = Vec3::ZERO;
-    let mut throughput = Vec3::ONE;
-    let (mut si, mut bsdf, mut wo_world) = (*si, *bsdf, wo);
-    // Segments from the camera to the current vertex, and scattering events so far.
-    let mut segments: u32 = 1;
-    let mut events: u32 = 0;
-    loop {
-        if segments >= limit {
-            break;
-        }
-        let frame = Frame::from_normal(si.ns);
-        let wo = frame.to_local(wo_world);
-        if use_nee && !bsdf.is_delta() {
-            radiance +=
-                throughput * next_event(scene, &si, &bsdf, &frame, wo, true, sampler, stats);
-        } else {
-            sampler.next_1d();
-            sampler.next_2d();
-        }
-        let u_lobe = sampler.next_1d();
-        let u_dir = sampler.next_2d();
-        let Some(bs) = bsdf.sample(wo, u_dir, u_lobe) else {
-            break;
-        };
-        throughput *= bs.weight;
-        events += 1;
-        if throughput == Vec3::ZERO {
-            break;
-        }
-        if events >= ctx.tracer.rr_depth {
-            let q = throughput.max_element().min(0.95);
-            if q.is_nan() || q <= 0.0 || sampler.next_1d() >= q {
-                break;
-            }
-            throughput /= q;
-        }
-        let ray = spawn_ray(si.p, si.ng, frame.to_world(bs.wi));
-        stats.closest_rays += 1;
-        let Some(hit) = scene.intersect(&ray) else {
-            radiance += throughput * scene.background;
-            break;
-        };
-        let next = scene.interaction(&ray, &hit);
-        let le = scene.emission(&next);
-        if le != Vec3::ZERO {
-            let w = emission_mis_weight(
-                scene,
-                &next,
-                hit.t * ray.d.length(),
-                bs.pdf,
-                bs.delta || !use_nee,
-            );
-            radiance += throughput * le * w;
-        }
-        segments += 1;
-        wo_world = next.wo;
-        bsdf = Bsdf::from_pbr(&scene.pbr(&next));
-        si = next;
-    }
-    radiance
+    tracer.reflected(ctx.scene, si, wo, 1, sampler, stats)
 }
 
 /// Uniform points on the scene's surfaces: a triangle chosen in proportion to its area, a
