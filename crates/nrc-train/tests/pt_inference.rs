@@ -162,53 +162,82 @@ fn pass_means(passes: u32, mut one: impl FnMut(u64) -> nrc_scene::Image) -> (f64
     (m, (var / passes as f64).sqrt())
 }
 
+/// Cache-terminated renders with an exact (path-traced) cache against the reference path
+/// tracer: image means of `passes` independent passes agree within 4 standard errors for every
+/// termination and NEE setting.
+struct Check {
+    size: (u32, u32),
+    ref_spp: u32,
+    spp: u32,
+    passes: u32,
+    /// Stream offset of the exact cache's estimates.
+    cache_seed: u64,
+}
+
+impl Check {
+    fn run(&self, scene: &Scene, terminations: &[Termination], nees: &[bool]) {
+        let ((w, h), passes) = (self.size, self.passes);
+        let tracer = PathTracer::default();
+        let queries = QueryMaker::new(&scene.bounds());
+        let (ref_m, ref_se) = pass_means(passes, |seed| {
+            let s = RenderSettings {
+                width: w,
+                height: h,
+                spp: self.ref_spp,
+                seed,
+                variance: false,
+            };
+            render(scene, &scene.camera, &tracer, &s, &|_| {}).mean
+        });
+        println!("reference: {ref_m:.5} ± {ref_se:.5}");
+        for &termination in terminations {
+            for &nee in nees {
+                let renderer = CacheRenderer {
+                    termination,
+                    nee,
+                    tracer,
+                    queries,
+                };
+                let (m, se) = pass_means(passes, |seed| {
+                    let exact = PathTracedView {
+                        scene,
+                        queries,
+                        tracer,
+                        samples: 8,
+                        seed: seed ^ self.cache_seed,
+                    };
+                    renderer
+                        .render(scene, &scene.camera, &exact, w, h, self.spp, seed)
+                        .image
+                });
+                let z = (m - ref_m) / (se * se + ref_se * ref_se).sqrt();
+                println!("{termination} (nee {nee}): {m:.5} ± {se:.5}, z = {z:.2}");
+                assert!(z.abs() < 4.0, "{termination} nee {nee}: z = {z}");
+            }
+        }
+    }
+}
+
 #[test]
 fn every_termination_with_an_exact_cache_reproduces_the_reference() {
     let scene = Scene::load(&common::project_scenes().join("cornell-box.gltf")).unwrap();
-    let (w, h, spp, passes) = (24, 24, 2, 10);
-    let tracer = PathTracer::default();
-    let queries = QueryMaker::new(&scene.bounds());
-    let (ref_m, ref_se) = pass_means(passes, |seed| {
-        let s = RenderSettings {
-            width: w,
-            height: h,
-            spp: 4,
-            seed,
-            variance: false,
-        };
-        render(&scene, &scene.camera, &tracer, &s, &|_| {}).mean
-    });
-    println!("reference: {ref_m:.5} ± {ref_se:.5}");
-    for termination in [
-        Termination::FirstVertex,
-        Termination::FirstDiffuse { roughness: 0.3 },
-        Termination::SpreadAngle { c: 0.01 },
-        Termination::Balanced { k: 4.0 },
-    ] {
-        for nee in [true, false] {
-            let renderer = CacheRenderer {
-                termination,
-                nee,
-                tracer,
-                queries,
-            };
-            let (m, se) = pass_means(passes, |seed| {
-                let exact = PathTracedView {
-                    scene: &scene,
-                    queries,
-                    tracer,
-                    samples: 8,
-                    seed: seed ^ 0xABCD,
-                };
-                renderer
-                    .render(&scene, &scene.camera, &exact, w, h, spp, seed)
-                    .image
-            });
-            let z = (m - ref_m) / (se * se + ref_se * ref_se).sqrt();
-            println!("{termination} (nee {nee}): {m:.5} ± {se:.5}, z = {z:.2}");
-            assert!(z.abs() < 4.0, "{termination} nee {nee}: z = {z}");
-        }
-    }
+    let check = Check {
+        size: (24, 24),
+        ref_spp: 4,
+        spp: 2,
+        passes: 10,
+        cache_seed: 0xABCD,
+    };
+    check.run(
+        &scene,
+        &[
+            Termination::FirstVertex,
+            Termination::FirstDiffuse { roughness: 0.3 },
+            Termination::SpreadAngle { c: 0.01 },
+            Termination::Balanced { k: 4.0 },
+        ],
+        &[true, false],
+    );
 }
 
 #[test]
@@ -283,46 +312,20 @@ fn mirror_and_glass() -> Scene {
 
 #[test]
 fn terminations_through_delta_vertices_reproduce_the_reference() {
-    let scene = mirror_and_glass();
-    let (w, h, passes) = (16, 16, 24);
-    let tracer = PathTracer::default();
-    let queries = QueryMaker::new(&scene.bounds());
-    let (ref_m, ref_se) = pass_means(passes, |seed| {
-        let s = RenderSettings {
-            width: w,
-            height: h,
-            spp: 8,
-            seed,
-            variance: false,
-        };
-        render(&scene, &scene.camera, &tracer, &s, &|_| {}).mean
-    });
-    println!("reference: {ref_m:.5} ± {ref_se:.5}");
-    for termination in [
-        Termination::FirstVertex,
-        Termination::SpreadAngle { c: 0.01 },
-        Termination::Balanced { k: 4.0 },
-    ] {
-        let renderer = CacheRenderer {
-            termination,
-            nee: true,
-            tracer,
-            queries,
-        };
-        let (m, se) = pass_means(passes, |seed| {
-            let exact = PathTracedView {
-                scene: &scene,
-                queries,
-                tracer,
-                samples: 8,
-                seed: seed ^ 0x5A5A,
-            };
-            renderer
-                .render(&scene, &scene.camera, &exact, w, h, 4, seed)
-                .image
-        });
-        let z = (m - ref_m) / (se * se + ref_se * ref_se).sqrt();
-        println!("{termination}: {m:.5} ± {se:.5}, z = {z:.2}");
-        assert!(z.abs() < 4.0, "{termination}: z = {z}");
-    }
+    let check = Check {
+        size: (16, 16),
+        ref_spp: 8,
+        spp: 4,
+        passes: 24,
+        cache_seed: 0x5A5A,
+    };
+    check.run(
+        &mirror_and_glass(),
+        &[
+            Termination::FirstVertex,
+            Termination::SpreadAngle { c: 0.01 },
+            Termination::Balanced { k: 4.0 },
+        ],
+        &[true],
+    );
 }
