@@ -114,7 +114,8 @@ impl PathTracer {
         let si = scene.interaction(&ray, &hit);
         // Emission seen by the camera ray counts fully (no light sample could produce it);
         // the ray is the path's first segment.
-        scene.emission(&si) + self.reflected(scene, &si, si.wo, 1, sampler, stats)
+        // (Accumulated first, so sums come out in the same order as along any path.)
+        self.continue_path(scene, &si, si.wo, 1, scene.emission(&si), sampler, stats)
     }
 
     /// One sample of the radiance leaving the surface point `si` toward `wo` (unit, world
@@ -132,9 +133,22 @@ impl PathTracer {
         sampler: &mut PixelSampler,
         stats: &mut PathStats,
     ) -> Vec3 {
+        self.continue_path(scene, si, wo, segments, Vec3::ZERO, sampler, stats)
+    }
+
+    /// [`PathTracer::reflected`] added onto `radiance` (what the path found before `si`).
+    fn continue_path(
+        &self,
+        scene: &Scene,
+        si: &SurfaceInteraction,
+        wo: Vec3,
+        segments: u32,
+        mut radiance: Vec3,
+        sampler: &mut PixelSampler,
+        stats: &mut PathStats,
+    ) -> Vec3 {
         let limit = self.segment_limit();
         let use_nee = self.strategy != LightStrategy::BsdfOnly && scene.light_count() > 0;
-        let mut radiance = Vec3::ZERO;
         let mut throughput = Vec3::ONE;
         let (mut si, mut wo_world) = (*si, wo);
         let mut segments = segments.max(1);
