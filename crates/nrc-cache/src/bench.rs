@@ -8,6 +8,7 @@ use burn::tensor::{Device, Tensor, TensorData};
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64Mcg;
 
+use crate::cpu::infer::INFER_PHASE_NANOS;
 use crate::cpu::train::PHASE_NANOS;
 use crate::model::ModelLayout;
 use crate::{
@@ -288,8 +289,13 @@ pub fn run(options: &BenchOptions) -> Vec<BenchFigure> {
                 let t_mat = Instant::now();
                 let _ = cache.inference_weights();
                 let materialise = t_mat.elapsed();
+                for p in &INFER_PHASE_NANOS {
+                    p.store(0, std::sync::atomic::Ordering::Relaxed);
+                }
+                let mut infer_calls = 0usize;
                 let infer = rate(options.min_time, batch_size, || {
                     std::hint::black_box(cache.infer(&batch.queries));
+                    infer_calls += 1;
                 });
                 println!(
                     "  batch {batch_size:>6} [{}]: train {} samples/s, infer {} queries/s; EMA materialisation {:.1} ms",
@@ -299,6 +305,17 @@ pub fn run(options: &BenchOptions) -> Vec<BenchFigure> {
                     materialise.as_secs_f64() * 1e3
                 );
                 if device == CacheDevice::Cpu {
+                    let ns = |i: usize| {
+                        INFER_PHASE_NANOS[i].load(std::sync::atomic::Ordering::Relaxed) as f64
+                            / (infer_calls * batch_size).max(1) as f64
+                    };
+                    println!(
+                        "    inference per query: encode {:.0} ns + MLP {:.0} ns thread-time; kernel {:.0} ns wall of {:.0} ns per call (rest: packing and copies)",
+                        ns(0),
+                        ns(1),
+                        ns(2),
+                        ns(3)
+                    );
                     let phases: Vec<f64> = PHASE_NANOS
                         .iter()
                         .map(|p| p.load(std::sync::atomic::Ordering::Relaxed) as f64 * 1e-9)

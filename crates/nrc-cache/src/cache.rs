@@ -343,6 +343,7 @@ impl RadianceCache {
         if queries.is_empty() {
             return Vec::new();
         }
+        let t_call = std::time::Instant::now();
         let rows = Tensor::<2>::from_data(
             TensorData::new(pack_queries(queries), [queries.len(), QUERY_ROW]),
             &self.burn_device,
@@ -370,7 +371,9 @@ impl RadianceCache {
             .convert::<f32>()
             .try_to_vec::<f32>()
             .expect("f32 output");
-        flat.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect()
+        let out = flat.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
+        crate::cpu::infer::add_infer_phase(3, t_call);
+        out
     }
 
     /// The bias-corrected EMA weights (the weights without EMA), computed once per step count.

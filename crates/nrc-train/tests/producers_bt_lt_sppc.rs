@@ -181,6 +181,57 @@ fn bt_with_depth_two_sees_direct_light_only() {
 }
 
 #[test]
+fn bt_skips_queries_on_delta_surfaces() {
+    // A perfect mirror in front of the camera: no connection can reach a point on it (its BSDF
+    // is zero for every direction but one), so the starts that hit it give no record and the
+    // budget is filled from the others.
+    let mut b = SceneBuilder::new();
+    let wall = b.material(mat::emissive(RHO, Vec3::ONE, false));
+    let mirror = b.material(mat::metal(Vec3::ONE, 0.0));
+    b.mesh(
+        &Mesh::cuboid(Vec3::splat(-1.0), Vec3::splat(1.0), true),
+        wall,
+        false,
+    )
+    .mesh(
+        &Mesh::quad(Vec3::new(0.0, 0.0, -0.5), 0.2 * Vec3::X, 0.2 * Vec3::Y),
+        mirror,
+        false,
+    )
+    .camera(Vec3::ZERO, -Vec3::Z, 60.0);
+    let scene = b.build();
+    let starts = tiles(&scene, 4096);
+    let on_mirror = |i: usize| {
+        let ray = starts[i % starts.len()].ray;
+        scene
+            .intersect(&ray)
+            .is_some_and(|h| (scene.interaction(&ray, &h).p.z + 0.5).abs() < 1e-4)
+    };
+    let budget = 3000;
+    let out = with_ctx(&scene, &starts, |ctx| {
+        BidirectionalProducer::default().produce(ctx, budget, 5)
+    });
+    let tried = out.stats.paths as usize;
+    let mirrored = (0..tried).filter(|&i| on_mirror(i)).count();
+    println!("bt: {tried} starts tried, {mirrored} on the mirror");
+    assert!(
+        mirrored * 20 > tried,
+        "the mirror must take a real share of the starts"
+    );
+    assert!(tried - mirrored >= budget);
+    assert_eq!(out.batch.queries.len(), budget);
+    assert_eq!(out.stats.dropped, 0);
+    // No record on the mirror (z = −0.5 is 0.25 in the scene box's normalised coordinates).
+    for q in &out.batch.queries {
+        assert!(
+            (q.position[2] - 0.25).abs() > 1e-3,
+            "a record on the mirror: {:?}",
+            q.position
+        );
+    }
+}
+
+#[test]
 fn lt_targets_match_the_enclosure() {
     let scene = enclosure();
     let starts = tiles(&scene, 4096);
@@ -432,4 +483,76 @@ fn deterministic_whatever_the_thread_count_and_within_budget() {
             );
         }
     });
+}
+
+/// Balls of radius `R` centred on the `z = −1` wall at distance `d < R` from its edges cross
+/// the neighbouring walls. Normal rejection gathers only the photons on the ball's own wall,
+/// which inside the ball is a disc less the segment beyond the edge, so with a fixed radius
+/// (α = 1) the estimate's mean is the exact radiance times that area fraction,
+/// `1 − (acos(d/R) − (d/R)√(1 − d²/R²))/π`. Without rejection the photons on the neighbouring
+/// wall are gathered too and the estimate comes out higher.
+#[test]
+fn sppc_normal_rejection_gathers_only_the_balls_own_surface() {
+    let scene = enclosure();
+    let (r, d) = (0.1f32, 0.05f32);
+    let mut starts = Vec::new();
+    for t in [-0.5f32, -0.25, 0.0, 0.25, 0.5] {
+        for p in [
+            Vec3::new(t, -1.0 + d, -1.0),
+            Vec3::new(t, 1.0 - d, -1.0),
+            Vec3::new(-1.0 + d, t, -1.0),
+            Vec3::new(1.0 - d, t, -1.0),
+        ] {
+            starts.push(StartRay {
+                ray: Ray::new(Vec3::ZERO, p.normalize()),
+            });
+        }
+    }
+    let n = starts.len();
+    let u = d / r;
+    let fraction = 1.0 - (u.acos() - u * (1.0 - u * u).sqrt()) / std::f32::consts::PI;
+    let run = |reject: bool| {
+        let mut p = sppc(n, 0.0, 5000.0);
+        p.alpha = 1.0;
+        p.initial_radius = r / (2.0 * 3f32.sqrt());
+        p.normal_reject = reject;
+        let mut last = None;
+        for frame in 0..8 {
+            last = Some(with_ctx(&scene, &starts, |ctx| {
+                p.produce(ctx, n, 40 + frame)
+            }));
+        }
+        for b in p.balls() {
+            assert!(
+                (b.radius2.sqrt() - r).abs() < 1e-5,
+                "α = 1 keeps the radius"
+            );
+        }
+        let batch = last.unwrap().batch;
+        assert_eq!(batch.targets.len(), n);
+        mean_se(&batch.targets)
+    };
+    let (with, with_se) = run(true);
+    let (without, without_se) = run(false);
+    for c in 0..3 {
+        let expected = (exact()[c] * fraction) as f64;
+        println!(
+            "sppc near edges, channel {c}: rejecting {:.4} ± {:.4} (expected {expected:.4}), \
+             not rejecting {:.4} ± {:.4}",
+            with[c], with_se[c], without[c], without_se[c]
+        );
+        assert!(with_se[c] <= 0.03 * expected, "standard error too large");
+        assert!(
+            (with[c] - expected).abs() <= 4.0 * with_se[c],
+            "channel {c}: {} vs {expected}",
+            with[c]
+        );
+        let gap = without[c] - with[c];
+        assert!(
+            gap > 4.0 * (with_se[c].powi(2) + without_se[c].powi(2)).sqrt(),
+            "channel {c}: without rejection {} is not above {}",
+            without[c],
+            with[c]
+        );
+    }
 }

@@ -1,5 +1,8 @@
 //! Fused CPU inference: encode and run the MLP per cache-resident tile, parallel over tiles.
 
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::time::Instant;
+
 use rayon::prelude::*;
 
 use super::grid::encode_tile;
@@ -9,9 +12,20 @@ use crate::loss::activate;
 use crate::model::ModelLayout;
 use crate::record::RAW_INPUT_DIMS;
 
+/// Accumulated nanoseconds of inference, read by the benchmark: 0 encoding, 1 MLP forward
+/// (both summed over threads), 2 the fused kernel (wall), 3 the whole
+/// [`crate::RadianceCache::infer`] call including packing and copies (wall).
+pub static INFER_PHASE_NANOS: [AtomicU64; 4] = [const { AtomicU64::new(0) }; 4];
+
+/// Adds the time since `since` to inference phase `i`.
+pub fn add_infer_phase(i: usize, since: Instant) {
+    INFER_PHASE_NANOS[i].fetch_add(since.elapsed().as_nanos() as u64, Ordering::Relaxed);
+}
+
 /// Radiance of the packed query rows (`n · QUERY_ROW` floats) into `out` (`n · 3`), with the
 /// hash table `grid` and MLP weights `mlp` (the bias-corrected EMA weights for inference).
 pub fn infer(layout: &ModelLayout, grid: &[f32], mlp: &[f32], rows: &[f32], out: &mut [f32]) {
+    let t_kernel = Instant::now();
     let prepared = PreparedMlp::new(&layout.layers, mlp);
     let network_out = network_outputs(layout, &prepared, grid, rows);
     out.par_chunks_mut(3)
@@ -22,6 +36,7 @@ pub fn infer(layout: &ModelLayout, grid: &[f32], mlp: &[f32], rows: &[f32], out:
                 o[c] = activate(layout.output_activation, y[c]).0 * r[FACTOR_AT + c];
             }
         });
+    add_infer_phase(2, t_kernel);
 }
 
 /// The raw network outputs (before the output activation and reflectance factor), `[n][3]`.
@@ -45,6 +60,7 @@ pub fn network_outputs(
             || TileScratch::new(k_in, prepared.hidden()),
             |s, (o, r)| {
                 let m = r.len() / QUERY_ROW;
+                let t_encode = Instant::now();
                 for i in 0..m {
                     layout.encoding.forward_one_without_grid(
                         &r[i * QUERY_ROW..i * QUERY_ROW + RAW_INPUT_DIMS],
@@ -71,7 +87,10 @@ pub fn network_outputs(
                         part.out_offset,
                     );
                 }
+                add_infer_phase(0, t_encode);
+                let t_mlp = Instant::now();
                 forward_tile(prepared, m, s);
+                add_infer_phase(1, t_mlp);
                 for i in 0..m {
                     o[i * 3..i * 3 + 3].copy_from_slice(&s.out[i * OUT_PAD..i * OUT_PAD + 3]);
                 }
