@@ -3,6 +3,8 @@
 //! A training row is `[raw inputs (14) | reflectance factor (3) | target (3) | weight (1)]`,
 //! an inference row `[raw inputs (14) | reflectance factor (3)]`.
 
+use rayon::prelude::*;
+
 use crate::record::{
     CacheQuery, RAW_INPUT_DIMS, TrainingBatch, query_is_finite, raw_inputs, reflectance_factor,
 };
@@ -77,12 +79,17 @@ pub fn pack_training(
     Ok(out)
 }
 
-/// Packs inference queries (non-finite fields are sanitised, see [`raw_inputs`]).
+/// Packs inference queries (non-finite fields are sanitised, see [`raw_inputs`]), in parallel:
+/// the spherical coordinates cost about as much per query as a thread's share of the cache's
+/// encoding.
 pub fn pack_queries(queries: &[CacheQuery]) -> Vec<f32> {
-    let mut rows = Vec::with_capacity(queries.len() * QUERY_ROW);
-    for q in queries {
-        rows.extend_from_slice(&raw_inputs(q));
-        rows.extend_from_slice(&reflectance_factor(q));
-    }
+    let mut rows = vec![0f32; queries.len() * QUERY_ROW];
+    rows.par_chunks_mut(QUERY_ROW)
+        .zip(queries.par_iter())
+        .with_min_len(1024)
+        .for_each(|(row, q)| {
+            row[..RAW_INPUT_DIMS].copy_from_slice(&raw_inputs(q));
+            row[RAW_INPUT_DIMS..].copy_from_slice(&reflectance_factor(q));
+        });
     rows
 }

@@ -310,8 +310,9 @@ pub fn run(options: &BenchOptions) -> Vec<BenchFigure> {
                             / (infer_calls * batch_size).max(1) as f64
                     };
                     println!(
-                        "    inference per query: encode {:.0} ns + MLP {:.0} ns thread-time; kernel {:.0} ns wall of {:.0} ns per call (rest: packing and copies)",
+                        "    inference per query: encode {:.0} ns (hash grid {:.0} ns) + MLP {:.0} ns thread-time; kernel {:.0} ns wall of {:.0} ns per call (rest: packing and copies)",
                         ns(0),
+                        ns(4),
                         ns(1),
                         ns(2),
                         ns(3)

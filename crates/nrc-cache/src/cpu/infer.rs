@@ -14,8 +14,9 @@ use crate::record::RAW_INPUT_DIMS;
 
 /// Accumulated nanoseconds of inference, read by the benchmark: 0 encoding, 1 MLP forward
 /// (both summed over threads), 2 the fused kernel (wall), 3 the whole
-/// [`crate::RadianceCache::infer`] call including packing and copies (wall).
-pub static INFER_PHASE_NANOS: [AtomicU64; 4] = [const { AtomicU64::new(0) }; 4];
+/// [`crate::RadianceCache::infer`] call including packing and copies (wall), 4 the hash-grid part
+/// of the encoding (included in 0).
+pub static INFER_PHASE_NANOS: [AtomicU64; 5] = [const { AtomicU64::new(0) }; 5];
 
 /// Adds the time since `since` to inference phase `i`.
 pub fn add_infer_phase(i: usize, since: Instant) {
@@ -67,6 +68,7 @@ pub fn network_outputs(
                         &mut s.x[i * k_in..(i + 1) * k_in],
                     );
                 }
+                let t_grid = Instant::now();
                 if let Some((hg, part)) = layout.encoding.grid() {
                     let at = part.in_offset;
                     encode_tile(
@@ -87,6 +89,7 @@ pub fn network_outputs(
                         part.out_offset,
                     );
                 }
+                add_infer_phase(4, t_grid);
                 add_infer_phase(0, t_encode);
                 let t_mlp = Instant::now();
                 forward_tile(prepared, m, s);

@@ -242,6 +242,8 @@ pub struct FastLevel {
     entries: u32,
     offset: u32,
     dense: bool,
+    /// Offsets of the 8 corners from the first on a dense level.
+    dense_offsets: [u32; 8],
 }
 
 impl FastLevel {
@@ -254,6 +256,13 @@ impl FastLevel {
             entries: level.entries,
             offset: level.offset as u32,
             dense: level.dense,
+            dense_offsets: {
+                let (r, r2) = (
+                    level.resolution,
+                    level.resolution.wrapping_mul(level.resolution),
+                );
+                [0, 1, r, r + 1, r2, r2 + 1, r2 + r, r2 + r + 1]
+            },
         }
     }
 
@@ -308,6 +317,88 @@ impl FastLevel {
             }
         }
         (idx, w)
+    }
+
+    /// [`FastLevel::corners`] in AVX2 registers (lane `k` is corner `k`), the same bits;
+    /// `None` for the wrapped corners of a dense level (the caller falls back to the scalar
+    /// version).
+    ///
+    /// # Safety
+    /// Callable only where the CPU has AVX2 and FMA (a `target_feature` function).
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    #[inline]
+    pub fn corners_avx2(
+        &self,
+        p: [f32; 3],
+    ) -> Option<(std::arch::x86_64::__m256i, std::arch::x86_64::__m256)> {
+        use std::arch::x86_64::*;
+        let mut c = [0u32; 3];
+        let mut w1 = [0f32; 3];
+        for d in 0..3 {
+            let pos = clamp01(p[d]) * self.scale + 0.5;
+            let fl = (pos as u32) as f32;
+            c[d] = fl as u32;
+            w1[d] = pos - fl;
+        }
+        // Weights: lane k takes w1[d] where bit d of k is set, 1 − w1[d] elsewhere.
+        let pick = |f: f32, mask: i32| -> __m256 {
+            let hi = _mm256_set1_ps(f);
+            let lo = _mm256_set1_ps(1.0 - f);
+            match mask {
+                0b1010_1010 => _mm256_blend_ps::<0b1010_1010>(lo, hi),
+                0b1100_1100 => _mm256_blend_ps::<0b1100_1100>(lo, hi),
+                _ => _mm256_blend_ps::<0b1111_0000>(lo, hi),
+            }
+        };
+        let w = _mm256_mul_ps(
+            _mm256_mul_ps(pick(w1[0], 0b1010_1010), pick(w1[1], 0b1100_1100)),
+            pick(w1[2], 0b1111_0000),
+        );
+        let offset = _mm256_set1_epi32(self.offset as i32);
+        let idx = if self.dense {
+            let (r, r2) = (self.res, self.res2);
+            let base = c[0]
+                .wrapping_add(c[1].wrapping_mul(r))
+                .wrapping_add(c[2].wrapping_mul(r2));
+            if base >= self.entries - (r2 + r + 1).min(self.entries) {
+                return None;
+            }
+            // SAFETY: `dense_offsets` holds eight u32.
+            let offs = unsafe { _mm256_loadu_si256(self.dense_offsets.as_ptr().cast()) };
+            _mm256_add_epi32(
+                _mm256_add_epi32(offset, _mm256_set1_epi32(base as i32)),
+                offs,
+            )
+        } else {
+            let bit = |k: i32| {
+                _mm256_set_epi32(
+                    (7 >> k) & 1,
+                    (6 >> k) & 1,
+                    (5 >> k) & 1,
+                    (4 >> k) & 1,
+                    (3 >> k) & 1,
+                    (2 >> k) & 1,
+                    (1 >> k) & 1,
+                    0,
+                )
+            };
+            let hx = _mm256_add_epi32(_mm256_set1_epi32(c[0] as i32), bit(0));
+            let hy = _mm256_mullo_epi32(
+                _mm256_add_epi32(_mm256_set1_epi32(c[1] as i32), bit(1)),
+                _mm256_set1_epi32(PRIMES[1] as i32),
+            );
+            let hz = _mm256_mullo_epi32(
+                _mm256_add_epi32(_mm256_set1_epi32(c[2] as i32), bit(2)),
+                _mm256_set1_epi32(PRIMES[2] as i32),
+            );
+            let h = _mm256_xor_si256(_mm256_xor_si256(hx, hy), hz);
+            _mm256_add_epi32(
+                offset,
+                _mm256_and_si256(h, _mm256_set1_epi32((self.entries - 1) as i32)),
+            )
+        };
+        Some((idx, w))
     }
 }
 
