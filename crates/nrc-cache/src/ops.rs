@@ -416,15 +416,17 @@ impl NrcFusedOps for Flex {
         let mlp = flex_f32(&state.mlp);
         let last_i32 = flex_last(&state.grid_last);
         let last: &[u32] = bytemuck::cast_slice(&last_i32);
-        let mut g = cpu::huge::huge_vec(layout.grid_params, 0f32);
+        let n = layout.grid_params;
+        let mut g: Vec<f32> = cpu::huge::huge_empty(n);
         if let Some((hg, _)) = layout.encoding.grid() {
             let f = hg.features();
+            assert_eq!(hg.total_entries * f, n, "the levels partition the table");
             let rec = cpu::optim::RECORD * f;
-            let outs = cpu::grid::split_levels(hg, f, &mut g[..]);
+            let outs = cpu::grid::split_levels(hg, f, &mut g.spare_capacity_mut()[..n]);
             outs.into_par_iter().enumerate().for_each(|(l, o)| {
                 let level = &hg.levels[l];
                 let (a, b) = (level.offset, level.offset + level.entries as usize);
-                cpu::optim::materialize_grid(
+                cpu::optim::materialize_grid_into(
                     ema,
                     step,
                     f,
@@ -433,7 +435,12 @@ impl NrcFusedOps for Flex {
                     o,
                 );
             });
+        } else {
+            assert_eq!(n, 0, "a table without a hash grid");
         }
+        // SAFETY: the levels partition the `n` elements and `materialize_grid_into` wrote
+        // each of them (checked above and inside).
+        unsafe { g.set_len(n) };
         let m = match ema {
             Some(alpha) => {
                 let mut m = vec![0f32; mlp.len()];

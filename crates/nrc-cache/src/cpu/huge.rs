@@ -7,6 +7,15 @@
 
 /// A vector of `n` copies of `value`, advised for huge pages when it is large (Linux).
 pub fn huge_vec<T: Copy>(n: usize, value: T) -> Vec<T> {
+    let mut v = huge_empty(n);
+    v.resize(n, value);
+    v
+}
+
+/// An empty vector with room for `n` elements, advised for huge pages when it is large
+/// (Linux): for callers that write every element themselves, in parallel, through
+/// [`Vec::spare_capacity_mut`].
+pub fn huge_empty<T>(n: usize) -> Vec<T> {
     let mut v: Vec<T> = Vec::with_capacity(n);
     #[cfg(target_os = "linux")]
     {
@@ -25,6 +34,5 @@ pub fn huge_vec<T: Copy>(n: usize, value: T) -> Vec<T> {
             }
         }
     }
-    v.resize(n, value);
     v
 }

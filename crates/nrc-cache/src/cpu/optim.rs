@@ -236,12 +236,45 @@ pub fn materialize_grid(
     last: &[u32],
     out: &mut [f32],
 ) {
+    // SAFETY: `MaybeUninit<f32>` has the layout of `f32`, and `materialize_grid_into` only
+    // writes initialised values through the view.
+    let out = unsafe {
+        std::slice::from_raw_parts_mut(
+            out.as_mut_ptr().cast::<std::mem::MaybeUninit<f32>>(),
+            out.len(),
+        )
+    };
+    materialize_grid_into(alpha, step, f, records, last, out);
+}
+
+/// [`materialize_grid`] into memory not yet initialised: writes every element of `out`
+/// (`last.len() · f` of them), so a fresh buffer needs no zero fill (whose page faults, on one
+/// thread, cost more than the pass itself on a 2^19 table).
+pub fn materialize_grid_into(
+    alpha: Option<f32>,
+    step: u32,
+    f: usize,
+    records: &[f32],
+    last: &[u32],
+    out: &mut [std::mem::MaybeUninit<f32>],
+) {
+    assert_eq!(
+        out.len(),
+        last.len() * f,
+        "one output per entry and feature"
+    );
+    assert!(
+        records.len() >= last.len() * RECORD * f,
+        "records too short"
+    );
     let Some(alpha) = alpha.filter(|_| step > 0) else {
         for (o, r) in out
             .chunks_exact_mut(f)
             .zip(records.chunks_exact(RECORD * f))
         {
-            o.copy_from_slice(&r[..f]);
+            for (o, r) in o.iter_mut().zip(&r[..f]) {
+                o.write(*r);
+            }
         }
         return;
     };
@@ -251,7 +284,7 @@ pub fn materialize_grid(
         let ak = table.get(step - *l);
         let r = &records[e * RECORD * f..(e + 1) * RECORD * f];
         for j in 0..f {
-            out[e * f + j] = (ak * r[3 * f + j] + (1.0 - ak) * r[j]) * inv;
+            out[e * f + j].write((ak * r[3 * f + j] + (1.0 - ak) * r[j]) * inv);
         }
     }
 }
