@@ -175,3 +175,73 @@ fn cache_inference_weights_are_the_closed_form_average() {
         }
     }
 }
+
+/// The AVX2 sparse update (four entries of two features at once) gives the same bits as the
+/// portable loop: weights, moments, EMA, zeroed gradients, EMA step table and cleared bitmap,
+/// with non-finite gradients and an L2 term in the mix, with and without the EMA.
+#[test]
+fn avx2_sparse_step_matches_the_portable_loop() {
+    use nrc_cache::cpu::optim::{RECORD, sparse_step_portable};
+    if !nrc_cache::cpu::gemm::has_avx2_fma() {
+        println!("skipped: this CPU has no AVX2/FMA, so only the portable loop exists");
+        return;
+    }
+    let mut rng = Pcg64Mcg::seed_from_u64(3);
+    let (entries, f) = (1001usize, 2usize);
+    let adam = AdamParams {
+        learning_rate: 1e-2,
+        beta1: 0.9,
+        beta2: 0.99,
+        epsilon: 1e-15,
+        l2_reg: 1e-3,
+    };
+    for ema in [Some(0.99f32), None] {
+        let step = 57;
+        let c = StepConstants::new(adam, ema, step);
+        let records: Vec<f32> = (0..entries * RECORD * f)
+            .map(|i| match i % 8 {
+                4 | 5 => rng.random_range(0.0..2.0), // v ≥ 0
+                _ => rng.random_range(-3.0..3.0),
+            })
+            .collect();
+        let grad: Vec<f32> = (0..entries * f)
+            .map(|i| match i % 97 {
+                3 => f32::NAN,
+                5 => f32::INFINITY,
+                7 => 0.0,
+                _ => rng.random_range(-5.0..5.0),
+            })
+            .collect();
+        let last: Vec<u32> = (0..entries).map(|_| rng.random_range(0..step)).collect();
+        let mut touched = vec![0u64; entries.div_ceil(64)];
+        for e in 0..entries {
+            if rng.random::<f32>() < 0.3 {
+                touched[e / 64] |= 1 << (e % 64);
+            }
+        }
+        let run = |avx: bool| {
+            let (mut r, mut g, mut l, mut t) =
+                (records.clone(), grad.clone(), last.clone(), touched.clone());
+            if avx {
+                sparse_step(&c, f, &mut t, &mut r, &mut g, &mut l);
+            } else {
+                sparse_step_portable::<2>(&c, &mut t, &mut r, &mut g, &mut l);
+            }
+            (r, g, l, t)
+        };
+        let (a, b) = (run(true), run(false));
+        assert_ne!(a.0, records, "the step changed nothing");
+        let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        for (i, (x, y)) in a.0.iter().zip(&b.0).enumerate() {
+            assert_eq!(
+                x.to_bits(),
+                y.to_bits(),
+                "ema {ema:?}: record float {i}: {x} vs {y}"
+            );
+        }
+        assert_eq!(bits(&a.1), bits(&b.1), "gradients");
+        assert_eq!(a.2, b.2, "EMA step table");
+        assert_eq!(a.3, b.3, "bitmap");
+        assert!(a.3.iter().all(|w| *w == 0));
+    }
+}

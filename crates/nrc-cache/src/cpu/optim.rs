@@ -170,7 +170,9 @@ pub fn sparse_step(
     }
 }
 
-/// [`sparse_step`] for `F` features (a compile-time constant, so the record loop unrolls).
+/// [`sparse_step`] for `F` features (a compile-time constant, so the record loop unrolls). With
+/// two features on a CPU with AVX2, four entries are updated at once
+/// ([`sparse_step_f2_avx2`]); the same operations per value, so the same bits.
 fn sparse_step_f<const F: usize>(
     c: &StepConstants,
     touched: &mut [u64],
@@ -178,34 +180,190 @@ fn sparse_step_f<const F: usize>(
     grad: &mut [f32],
     last: &mut [u32],
 ) {
-    let ema_on = c.ema.is_some();
-    let alpha = c.ema.unwrap_or(0.0);
-    let table = DecayTable::new(alpha);
+    let entries = last.len();
+    assert!(records.len() >= entries * RECORD * F && grad.len() >= entries * F);
+    assert!(touched.len() * 64 <= entries.next_multiple_of(64));
+    #[cfg(target_arch = "x86_64")]
+    if F == 2 && super::gemm::has_avx2_fma() {
+        // SAFETY: AVX2 was detected; every touched entry is below `entries` (the bitmap's
+        // bits beyond the last entry are never set by the scatter, and the indices are
+        // checked again inside), and the slices' lengths were checked above.
+        unsafe { sparse_step_f2_avx2(c, touched, records, grad, last) };
+        return;
+    }
+    sparse_step_portable::<F>(c, touched, records, grad, last);
+}
+
+/// The portable loop of [`sparse_step`] for `F` features (public for the test that compares it
+/// with the AVX2 kernel).
+pub fn sparse_step_portable<const F: usize>(
+    c: &StepConstants,
+    touched: &mut [u64],
+    records: &mut [f32],
+    grad: &mut [f32],
+    last: &mut [u32],
+) {
+    let table = DecayTable::new(c.ema.unwrap_or(0.0));
     for (word_index, word) in touched.iter_mut().enumerate() {
         let mut bits = *word;
         *word = 0;
         while bits != 0 {
             let e = word_index * 64 + bits.trailing_zeros() as usize;
             bits &= bits - 1;
-            let k = c.step - last[e];
+            update_entry::<F>(c, &table, e, records, grad, last);
+        }
+    }
+}
+
+/// Adam and the EMA catch-up of one table entry.
+#[inline(always)]
+fn update_entry<const F: usize>(
+    c: &StepConstants,
+    table: &DecayTable,
+    e: usize,
+    records: &mut [f32],
+    grad: &mut [f32],
+    last: &mut [u32],
+) {
+    let k = c.step - last[e];
+    last[e] = c.step;
+    // e_t = α^k e_s + (α − α^k) w_old + (1 − α) w_new  (w_old held for k − 1 steps).
+    let ak = table.get(k);
+    let r = &mut records[e * RECORD * F..(e + 1) * RECORD * F];
+    let g = &mut grad[e * F..(e + 1) * F];
+    for j in 0..F {
+        let w_old = r[j];
+        let (mut w, mut m, mut v) = (r[j], r[F + j], r[2 * F + j]);
+        c.adam(&mut w, &mut m, &mut v, g[j]);
+        r[j] = w;
+        r[F + j] = m;
+        r[2 * F + j] = v;
+        g[j] = 0.0;
+        if let Some(alpha) = c.ema {
+            r[3 * F + j] = ak * r[3 * F + j] + (alpha - ak) * w_old + (1.0 - alpha) * w;
+        }
+    }
+}
+
+/// [`sparse_step_portable`] for two features, four touched entries at a time: their records
+/// `[w0 w1 | m0 m1 | v0 v1 | e0 e1]` are transposed (as 64-bit pairs) into one register each of
+/// weights, moments and EMA, so one square root and one division serve eight values. Each
+/// value goes through the same IEEE operations in the same order as [`StepConstants::adam`]
+/// (no fused multiply-adds), so the results are bit-identical. A remainder of fewer than four
+/// entries takes the scalar update.
+///
+/// # Safety
+/// The CPU has AVX2; `records` holds `8·last.len()` floats and `grad` `2·last.len()`.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+unsafe fn sparse_step_f2_avx2(
+    c: &StepConstants,
+    touched: &mut [u64],
+    records: &mut [f32],
+    grad: &mut [f32],
+    last: &mut [u32],
+) {
+    use std::arch::x86_64::*;
+    let table = DecayTable::new(c.ema.unwrap_or(0.0));
+    let a = &c.adam;
+    let alpha = c.ema.unwrap_or(0.0);
+    let set = _mm256_set1_ps;
+    let (l2, b1, nb1, b2, nb2) = (
+        set(a.l2_reg),
+        set(a.beta1),
+        set(1.0 - a.beta1),
+        set(a.beta2),
+        set(1.0 - a.beta2),
+    );
+    let (step_size, inv_bc2, eps) = (set(c.step_size), set(c.inv_bc2), set(a.epsilon));
+    let (alpha_v, one_minus_alpha) = (set(alpha), set(1.0 - alpha));
+    let zero = _mm256_setzero_ps();
+    let rec = records.as_mut_ptr();
+    let update4 = |es: [usize; 4], last: &mut [u32], grad: &mut [f32]| {
+        let mut ak = [0f32; 4];
+        let mut g = [0f64; 4];
+        for (q, &e) in es.iter().enumerate() {
+            ak[q] = table.get(c.step - last[e]);
             last[e] = c.step;
-            // e_t = α^k e_s + (α − α^k) w_old + (1 − α) w_new  (w_old held for k − 1 steps).
-            let ak = table.get(k);
-            let r = &mut records[e * RECORD * F..(e + 1) * RECORD * F];
-            let g = &mut grad[e * F..(e + 1) * F];
-            for j in 0..F {
-                let w_old = r[j];
-                let (mut w, mut m, mut v) = (r[j], r[F + j], r[2 * F + j]);
-                c.adam(&mut w, &mut m, &mut v, g[j]);
-                r[j] = w;
-                r[F + j] = m;
-                r[2 * F + j] = v;
-                g[j] = 0.0;
-                if ema_on {
-                    r[3 * F + j] = ak * r[3 * F + j] + (alpha - ak) * w_old + (1.0 - alpha) * w;
-                }
+            let gp = &mut grad[2 * e..2 * e + 2];
+            g[q] = f64::from_bits(u64::from(gp[0].to_bits()) | (u64::from(gp[1].to_bits()) << 32));
+            gp.fill(0.0);
+        }
+        // SAFETY (whole block): `e < last.len()` was checked by the indexing above, so each
+        // record `rec[8e..8e + 8]` is inside `records`.
+        unsafe {
+            let load = |e: usize| _mm256_loadu_pd(rec.add(8 * e).cast::<f64>().cast_const());
+            let (ra, rb, rc, rd) = (load(es[0]), load(es[1]), load(es[2]), load(es[3]));
+            let t0 = _mm256_unpacklo_pd(ra, rb); // [Aw Bw Av Bv]
+            let t1 = _mm256_unpackhi_pd(ra, rb); // [Am Bm Ae Be]
+            let t2 = _mm256_unpacklo_pd(rc, rd);
+            let t3 = _mm256_unpackhi_pd(rc, rd);
+            let w = _mm256_castpd_ps(_mm256_permute2f128_pd::<0x20>(t0, t2));
+            let v = _mm256_castpd_ps(_mm256_permute2f128_pd::<0x31>(t0, t2));
+            let m = _mm256_castpd_ps(_mm256_permute2f128_pd::<0x20>(t1, t3));
+            let e = _mm256_castpd_ps(_mm256_permute2f128_pd::<0x31>(t1, t3));
+            let g = _mm256_castpd_ps(_mm256_loadu_pd(g.as_ptr()));
+            let ak = _mm256_set_ps(ak[3], ak[3], ak[2], ak[2], ak[1], ak[1], ak[0], ak[0]);
+            // Adam, as `StepConstants::adam`.
+            let finite = |x: __m256| _mm256_cmp_ps::<_CMP_EQ_OQ>(_mm256_sub_ps(x, x), zero);
+            let l2w = _mm256_mul_ps(l2, w);
+            let g = _mm256_blendv_ps(l2w, _mm256_add_ps(g, l2w), finite(g));
+            let m = _mm256_add_ps(_mm256_mul_ps(b1, m), _mm256_mul_ps(nb1, g));
+            let v = _mm256_add_ps(
+                _mm256_mul_ps(b2, v),
+                _mm256_mul_ps(_mm256_mul_ps(nb2, g), g),
+            );
+            let upd = _mm256_div_ps(
+                _mm256_mul_ps(step_size, m),
+                _mm256_add_ps(_mm256_sqrt_ps(_mm256_mul_ps(v, inv_bc2)), eps),
+            );
+            let w_new = _mm256_blendv_ps(w, _mm256_sub_ps(w, upd), finite(upd));
+            let e = if c.ema.is_some() {
+                _mm256_add_ps(
+                    _mm256_add_ps(
+                        _mm256_mul_ps(ak, e),
+                        _mm256_mul_ps(_mm256_sub_ps(alpha_v, ak), w),
+                    ),
+                    _mm256_mul_ps(one_minus_alpha, w_new),
+                )
+            } else {
+                e
+            };
+            // Back to records.
+            let (w, m, v, e) = (
+                _mm256_castps_pd(w_new),
+                _mm256_castps_pd(m),
+                _mm256_castps_pd(v),
+                _mm256_castps_pd(e),
+            );
+            let u0 = _mm256_unpacklo_pd(w, m); // [Aw Am Cw Cm]
+            let u1 = _mm256_unpackhi_pd(w, m); // [Bw Bm Dw Dm]
+            let u2 = _mm256_unpacklo_pd(v, e); // [Av Ae Cv Ce]
+            let u3 = _mm256_unpackhi_pd(v, e);
+            let store = |e: usize, x: __m256d| _mm256_storeu_pd(rec.add(8 * e).cast::<f64>(), x);
+            store(es[0], _mm256_permute2f128_pd::<0x20>(u0, u2));
+            store(es[1], _mm256_permute2f128_pd::<0x20>(u1, u3));
+            store(es[2], _mm256_permute2f128_pd::<0x31>(u0, u2));
+            store(es[3], _mm256_permute2f128_pd::<0x31>(u1, u3));
+        }
+    };
+    let mut group = [0usize; 4];
+    let mut n = 0;
+    for (word_index, word) in touched.iter_mut().enumerate() {
+        let mut bits = *word;
+        *word = 0;
+        while bits != 0 {
+            group[n] = word_index * 64 + bits.trailing_zeros() as usize;
+            bits &= bits - 1;
+            n += 1;
+            if n == 4 {
+                update4(group, last, grad);
+                n = 0;
             }
         }
+    }
+    for &e in &group[..n] {
+        update_entry::<2>(c, &table, e, records, grad, last);
     }
 }
 
