@@ -235,7 +235,7 @@ pub fn run(args: &TrainArgs) -> Result<()> {
             let (stats, out) = trainer.frame(&scene, camera, args.width, args.height, true)?;
             let last = f + 1 == cameras.len();
             if let (Some(dir), Some(out)) = (&args.frames_out, &out)
-                && (f as u32 % args.every == 0 || last)
+                && ((f as u32).is_multiple_of(args.every) || last)
             {
                 out.image
                     .write_exr(&dir.join(format!("frame-{f:05}.exr")))?;

@@ -98,11 +98,11 @@ impl fmt::Display for Termination {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match *self {
             Self::FirstVertex => write!(f, "first"),
-            Self::FirstDiffuse { roughness } if roughness == 0.3 => write!(f, "diffuse"),
+            Self::FirstDiffuse { roughness: 0.3 } => write!(f, "diffuse"),
             Self::FirstDiffuse { roughness } => write!(f, "diffuse:{roughness}"),
-            Self::SpreadAngle { c } if c == 0.01 => write!(f, "spread"),
+            Self::SpreadAngle { c: 0.01 } => write!(f, "spread"),
             Self::SpreadAngle { c } => write!(f, "spread:{c}"),
-            Self::Balanced { k } if k == 4.0 => write!(f, "bth"),
+            Self::Balanced { k: 4.0 } => write!(f, "bth"),
             Self::Balanced { k } => write!(f, "bth:{k}"),
         }
     }

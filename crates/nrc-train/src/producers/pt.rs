@@ -167,7 +167,7 @@ impl PathProducer {
                 let before = &out.vertices[..out.vertices.len() - 1];
                 let throughput = before.iter().fold(Vec3::ONE, |t, v| t * v.weight) * weight;
                 let q = throughput.max_element().min(0.95);
-                if !(q > 0.0) || sampler.next_1d() >= q {
+                if q.is_nan() || q <= 0.0 || sampler.next_1d() >= q {
                     break;
                 }
                 weight /= q;
