@@ -479,7 +479,11 @@ impl RadianceCache {
 
     /// Loads a snapshot onto `device` (its default path).
     pub fn load(path: &Path, device: CacheDevice) -> Result<Self, CacheError> {
-        let s = snapshot::read(path)?;
+        Self::from_snapshot(snapshot::read(path)?, device)
+    }
+
+    /// A cache on `device` (its default path) holding what a snapshot held.
+    fn from_snapshot(s: snapshot::Snapshot, device: CacheDevice) -> Result<Self, CacheError> {
         Self::from_host(
             s.config,
             s.scene_box,
@@ -499,14 +503,7 @@ impl RadianceCache {
     ) -> Result<Self, CacheError> {
         let s = snapshot::read(path)?;
         snapshot::check_config(path, &s.config, expected)?;
-        Self::from_host(
-            s.config,
-            s.scene_box,
-            device,
-            device.default_path(),
-            s.state,
-            s.step,
-        )
+        Self::from_snapshot(s, device)
     }
 
     /// Changes the compute path (the state moves over; the fused path requires the CPU).

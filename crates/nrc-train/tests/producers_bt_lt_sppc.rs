@@ -457,30 +457,15 @@ fn deterministic_whatever_the_thread_count_and_within_budget() {
     // Small budgets are respected exactly, and a zero budget gives nothing.
     with_ctx(&scene, &starts, |ctx| {
         for budget in [0, 1, 37] {
-            assert_eq!(
-                BidirectionalProducer::default()
-                    .produce(ctx, budget, 1)
-                    .batch
-                    .targets
-                    .len(),
-                budget
-            );
-            assert_eq!(
-                LightProducer::default()
-                    .produce(ctx, budget, 1)
-                    .batch
-                    .targets
-                    .len(),
-                budget
-            );
-            assert_eq!(
-                SppcProducer::default()
-                    .produce(ctx, budget, 1)
-                    .batch
-                    .targets
-                    .len(),
-                budget
-            );
+            let producers: [Box<dyn Producer>; 3] = [
+                Box::new(BidirectionalProducer::default()),
+                Box::new(LightProducer::default()),
+                Box::new(SppcProducer::default()),
+            ];
+            for mut p in producers {
+                let got = p.produce(ctx, budget, 1).batch.targets.len();
+                assert_eq!(got, budget, "{}", p.name());
+            }
         }
     });
 }

@@ -23,6 +23,29 @@ pub fn prefetch<T>(p: *const T) {
 /// misses in flight to cover memory latency, few enough that the requests are not dropped.
 const AHEAD: usize = 64;
 
+/// Runs `body(i, fetch(i))` for `i` in `0..n`, calling `fetch` `AHEAD` samples early (it
+/// computes a sample's table entries and prefetches their lines), so the cache misses of the
+/// following samples overlap the work on this one. `empty` fills the ring before it is used.
+#[inline(always)]
+fn pipelined<T: Copy>(
+    n: usize,
+    empty: T,
+    mut fetch: impl FnMut(usize) -> T,
+    mut body: impl FnMut(usize, T),
+) {
+    let mut ring = [empty; AHEAD];
+    for (i, r) in ring.iter_mut().enumerate().take(AHEAD.min(n)) {
+        *r = fetch(i);
+    }
+    for i in 0..n {
+        let x = ring[i % AHEAD];
+        if i + AHEAD < n {
+            ring[i % AHEAD] = fetch(i + AHEAD);
+        }
+        body(i, x);
+    }
+}
+
 /// Encodes the hash grid of `m` samples into columns `col..col + L·F` of `out` (row stride
 /// `stride`), level by level. Entry `e`'s features are `table[e·table_stride..][..F]` (the
 /// plain table has `table_stride = F`, the training records `4F`). Software-pipelined: while
@@ -30,9 +53,9 @@ const AHEAD: usize = 64;
 /// lines prefetched, so the cache misses of the fine levels overlap.
 ///
 /// With two features per level (the presets) on a CPU with AVX2, the eight corners of a
-/// vertex are computed and gathered in one register each ([`encode_tile_avx2`], about twice as
-/// fast); the scalar loop sums the eight products in the same tree order, so both give the
-/// same bits.
+/// vertex are computed and gathered in one register each ([`encode_tile_avx2`]; 10–15 % faster
+/// in `nrc bench cache`, see BENCHMARKS.md); the portable loop sums the eight products in the
+/// same tree order, so both give the same bits.
 #[inline(always)]
 pub fn encode_tile(
     grid: &HashGrid,
@@ -92,8 +115,6 @@ pub fn encode_tile_portable(
     stride: usize,
     col: usize,
 ) {
-    let mut ring = [([0u32; 8], [0f32; 8]); AHEAD];
-    let ahead = AHEAD.min(m);
     for (l, level) in levels.iter().enumerate() {
         let fetch = |i: usize| {
             let c = level.corners(position(i));
@@ -102,15 +123,8 @@ pub fn encode_tile_portable(
             }
             c
         };
-        for (i, r) in ring.iter_mut().enumerate().take(ahead) {
-            *r = fetch(i);
-        }
         let o = col + l * f;
-        for i in 0..m {
-            let (idx, w) = ring[i % AHEAD];
-            if i + AHEAD < m {
-                ring[i % AHEAD] = fetch(i + AHEAD);
-            }
+        pipelined(m, ([0u32; 8], [0f32; 8]), fetch, |i, (idx, w)| {
             let dst = &mut out[i * stride + o..i * stride + o + f];
             if f == 2 {
                 let mut a = [0f32; 8];
@@ -131,7 +145,7 @@ pub fn encode_tile_portable(
                     }
                 }
             }
-        }
+        });
     }
 }
 
@@ -160,9 +174,7 @@ unsafe fn encode_tile_avx2(
     col: usize,
 ) {
     use std::arch::x86_64::*;
-    let zero = (_mm256_setzero_si256(), _mm256_setzero_ps());
-    let mut ring = [zero; AHEAD];
-    let ahead = AHEAD.min(m);
+    let empty = (_mm256_setzero_si256(), _mm256_setzero_ps());
     let scale = _mm256_set1_epi32(table_stride as i32);
     let base = table.as_ptr();
     for (l, level) in levels.iter().enumerate() {
@@ -186,15 +198,8 @@ unsafe fn encode_tile_avx2(
             }
             (at, w)
         };
-        for (i, r) in ring.iter_mut().enumerate().take(ahead) {
-            *r = fetch(i);
-        }
         let o = col + l * 2;
-        for i in 0..m {
-            let (at, w) = ring[i % AHEAD];
-            if i + AHEAD < m {
-                ring[i % AHEAD] = fetch(i + AHEAD);
-            }
+        pipelined(m, empty, fetch, |i, (at, w)| {
             // SAFETY: the caller guarantees the gathered indices are inside `table`.
             let (a, b) = unsafe {
                 (
@@ -220,7 +225,7 @@ unsafe fn encode_tile_avx2(
                 *out.get_unchecked_mut(d) = sa;
                 *out.get_unchecked_mut(d + 1) = sb;
             }
-        }
+        });
     }
 }
 
@@ -310,23 +315,16 @@ pub fn scatter_level<'p, 'd>(
     let f = grid.features();
     let fast = FastLevel::new(&grid.levels[l]);
     let offset = grid.levels[l].offset as u32;
-    let fetch = |i: usize, grad: &[f32]| {
+    let lines = grad.as_ptr();
+    let fetch = |i: usize| {
         let (mut idx, w) = fast.corners(position(i));
         for e in idx.iter_mut() {
             *e -= offset;
-            prefetch(grad.as_ptr().wrapping_add(*e as usize * f));
+            prefetch(lines.wrapping_add(*e as usize * f));
         }
         (idx, w)
     };
-    let mut ring = [([0u32; 8], [0f32; 8]); AHEAD];
-    for (i, r) in ring.iter_mut().enumerate().take(AHEAD.min(n)) {
-        *r = fetch(i, grad);
-    }
-    for i in 0..n {
-        let (idx, w) = ring[i % AHEAD];
-        if i + AHEAD < n {
-            ring[i % AHEAD] = fetch(i + AHEAD, grad);
-        }
+    pipelined(n, ([0u32; 8], [0f32; 8]), fetch, |i, (idx, w)| {
         let d = dout(i);
         for k in 0..8 {
             let e = idx[k] as usize;
@@ -337,5 +335,5 @@ pub fn scatter_level<'p, 'd>(
                 t[e / 64] |= 1u64 << (e % 64);
             }
         }
-    }
+    });
 }

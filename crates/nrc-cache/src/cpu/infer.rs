@@ -5,12 +5,10 @@ use std::time::Instant;
 
 use rayon::prelude::*;
 
-use super::grid::encode_tile;
 use super::mlp::{OUT_PAD, PreparedMlp, TILE, TileScratch, forward_tile};
 use crate::batch::{FACTOR_AT, QUERY_ROW};
 use crate::loss::activate;
 use crate::model::ModelLayout;
-use crate::record::RAW_INPUT_DIMS;
 
 /// Accumulated nanoseconds of inference, read by the benchmark: 0 encoding, 1 MLP forward
 /// (both summed over threads), 2 the fused kernel (wall), 3 the whole
@@ -62,34 +60,17 @@ pub fn network_outputs(
             |s, (o, r)| {
                 let m = r.len() / QUERY_ROW;
                 let t_encode = Instant::now();
-                for i in 0..m {
-                    layout.encoding.forward_one_without_grid(
-                        &r[i * QUERY_ROW..i * QUERY_ROW + RAW_INPUT_DIMS],
-                        &mut s.x[i * k_in..(i + 1) * k_in],
-                    );
-                }
-                let t_grid = Instant::now();
-                if let Some((hg, part)) = layout.encoding.grid() {
-                    let at = part.in_offset;
-                    encode_tile(
-                        hg,
-                        &fast,
-                        grid,
-                        hg.features(),
-                        m,
-                        |i| {
-                            [
-                                r[i * QUERY_ROW + at],
-                                r[i * QUERY_ROW + at + 1],
-                                r[i * QUERY_ROW + at + 2],
-                            ]
-                        },
-                        &mut s.x,
-                        k_in,
-                        part.out_offset,
-                    );
-                }
-                add_infer_phase(4, t_grid);
+                let grid_time = super::encode_rows(
+                    layout,
+                    &fast,
+                    grid,
+                    layout.encoding.grid().map_or(1, |(g, _)| g.features()),
+                    r,
+                    QUERY_ROW,
+                    &mut s.x,
+                    k_in,
+                );
+                INFER_PHASE_NANOS[4].fetch_add(grid_time.as_nanos() as u64, Ordering::Relaxed);
                 add_infer_phase(0, t_encode);
                 let t_mlp = Instant::now();
                 forward_tile(prepared, m, s);

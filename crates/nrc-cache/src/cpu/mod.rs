@@ -9,3 +9,44 @@ pub mod infer;
 pub mod mlp;
 pub mod optim;
 pub mod train;
+
+/// Encodes the packed rows `rows` (`row_len` floats each, the raw inputs first) into a tile's
+/// network inputs `x` (`k_in` per sample): the per-sample encodings, then the hash grid level
+/// by level from `table` (`table_stride` floats per entry, see [`grid::encode_tile`]). Returns
+/// the time spent in the hash grid.
+pub fn encode_rows(
+    layout: &crate::model::ModelLayout,
+    levels: &[crate::encoding::hash_grid::FastLevel],
+    table: &[f32],
+    table_stride: usize,
+    rows: &[f32],
+    row_len: usize,
+    x: &mut [f32],
+    k_in: usize,
+) -> std::time::Duration {
+    let m = rows.len() / row_len;
+    for (row, xi) in rows.chunks_exact(row_len).zip(x.chunks_exact_mut(k_in)) {
+        layout
+            .encoding
+            .forward_one_without_grid(&row[..crate::record::RAW_INPUT_DIMS], xi);
+    }
+    let t_grid = std::time::Instant::now();
+    if let Some((hg, part)) = layout.encoding.grid() {
+        let at = part.in_offset;
+        grid::encode_tile(
+            hg,
+            levels,
+            table,
+            table_stride,
+            m,
+            |i| {
+                let p = &rows[i * row_len + at..];
+                [p[0], p[1], p[2]]
+            },
+            x,
+            k_in,
+            part.out_offset,
+        );
+    }
+    t_grid.elapsed()
+}

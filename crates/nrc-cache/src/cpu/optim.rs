@@ -204,13 +204,19 @@ pub fn sparse_step_portable<const F: usize>(
     last: &mut [u32],
 ) {
     let table = DecayTable::new(c.ema.unwrap_or(0.0));
-    for (word_index, word) in touched.iter_mut().enumerate() {
-        let mut bits = *word;
-        *word = 0;
-        while bits != 0 {
-            let e = word_index * 64 + bits.trailing_zeros() as usize;
-            bits &= bits - 1;
-            update_entry::<F>(c, &table, e, records, grad, last);
+    drain_bits(touched, |e| {
+        update_entry::<F>(c, &table, e, records, grad, last)
+    });
+}
+
+/// Calls `f` with the index of every set bit of `bits`, in increasing order, and clears them.
+#[inline(always)]
+fn drain_bits(bits: &mut [u64], mut f: impl FnMut(usize)) {
+    for (word_index, word) in bits.iter_mut().enumerate() {
+        let mut w = std::mem::take(word);
+        while w != 0 {
+            f(word_index * 64 + w.trailing_zeros() as usize);
+            w &= w - 1;
         }
     }
 }
@@ -349,19 +355,14 @@ unsafe fn sparse_step_f2_avx2(
     };
     let mut group = [0usize; 4];
     let mut n = 0;
-    for (word_index, word) in touched.iter_mut().enumerate() {
-        let mut bits = *word;
-        *word = 0;
-        while bits != 0 {
-            group[n] = word_index * 64 + bits.trailing_zeros() as usize;
-            bits &= bits - 1;
-            n += 1;
-            if n == 4 {
-                update4(group, last, grad);
-                n = 0;
-            }
+    drain_bits(touched, |e| {
+        group[n] = e;
+        n += 1;
+        if n == 4 {
+            update4(group, last, grad);
+            n = 0;
         }
-    }
+    });
     for &e in &group[..n] {
         update_entry::<2>(c, &table, e, records, grad, last);
     }

@@ -7,14 +7,13 @@ use std::time::Instant;
 
 use rayon::prelude::*;
 
-use super::grid::{encode_tile, scatter_level, split_levels};
+use super::grid::{scatter_level, split_levels};
 use super::mlp::{MlpGrad, OUT_PAD, PreparedMlp, TILE, TileScratch, backward_tile, forward_tile};
 use super::optim::{StepConstants, dense_step, sparse_step};
 use crate::batch::{FACTOR_AT, TARGET_AT, TRAIN_ROW, WEIGHT_AT};
 use crate::config::OutputActivation;
 use crate::loss::sample_loss;
 use crate::model::ModelLayout;
-use crate::record::RAW_INPUT_DIMS;
 
 /// Accumulated nanoseconds per phase, read by the benchmark: 0 encode (summed over threads),
 /// 1 MLP forward + loss + backward (summed over threads), 2 hash-grid scatter + sparse
@@ -101,33 +100,16 @@ fn forward_backward(
             |(mut loss_acc, mut grad, mut s), (rows_t, dxg_t)| {
                 let m = rows_t.len() / TRAIN_ROW;
                 let t_encode = Instant::now();
-                for i in 0..m {
-                    let row = &rows_t[i * TRAIN_ROW..(i + 1) * TRAIN_ROW];
-                    layout.encoding.forward_one_without_grid(
-                        &row[..RAW_INPUT_DIMS],
-                        &mut s.x[i * k_in..(i + 1) * k_in],
-                    );
-                }
-                if let Some((hg, part)) = layout.encoding.grid() {
-                    let at = part.in_offset;
-                    encode_tile(
-                        hg,
-                        &fast,
-                        grid_w,
-                        grid_stride,
-                        m,
-                        |i| {
-                            [
-                                rows_t[i * TRAIN_ROW + at],
-                                rows_t[i * TRAIN_ROW + at + 1],
-                                rows_t[i * TRAIN_ROW + at + 2],
-                            ]
-                        },
-                        &mut s.x,
-                        k_in,
-                        part.out_offset,
-                    );
-                }
+                super::encode_rows(
+                    layout,
+                    &fast,
+                    grid_w,
+                    grid_stride,
+                    rows_t,
+                    TRAIN_ROW,
+                    &mut s.x,
+                    k_in,
+                );
                 add_phase(0, t_encode);
                 let t_mlp = Instant::now();
                 forward_tile(&prepared, m, &mut s);

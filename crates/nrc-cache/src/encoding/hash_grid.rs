@@ -138,24 +138,16 @@ impl HashGrid {
     /// Vertex indices and weights of level `l` for input `p` (components in [0,1]).
     #[inline(always)]
     pub fn corners(&self, level: &GridLevel, p: [f32; 3]) -> Corners {
-        let mut cell = [0u32; 3];
-        let mut frac = [0f32; 3];
-        for ((c, f), x) in cell.iter_mut().zip(frac.iter_mut()).zip(p) {
-            // pos ≥ 0.5 after the clamp, so truncation is the floor.
-            let pos = clamp01(x) * level.scale + 0.5;
-            let fl = (pos as u32) as f32;
-            *c = fl as u32;
-            *f = pos - fl;
-        }
+        let (lower, frac) = cell(level.scale, p);
         let mut out = Corners {
             frac,
             ..Corners::default()
         };
         for c in 0..8u32 {
             let v = [
-                cell[0] + (c & 1),
-                cell[1] + ((c >> 1) & 1),
-                cell[2] + ((c >> 2) & 1),
+                lower[0] + (c & 1),
+                lower[1] + ((c >> 1) & 1),
+                lower[2] + ((c >> 2) & 1),
             ];
             let mut w = 1.0;
             for (d, fd) in frac.iter().enumerate() {
@@ -270,14 +262,7 @@ impl FastLevel {
     /// bit for bit, to [`HashGrid::corners`].
     #[inline(always)]
     pub fn corners(&self, p: [f32; 3]) -> ([u32; 8], [f32; 8]) {
-        let mut c = [0u32; 3];
-        let mut w1 = [0f32; 3];
-        for d in 0..3 {
-            let pos = clamp01(p[d]) * self.scale + 0.5;
-            let fl = (pos as u32) as f32;
-            c[d] = fl as u32;
-            w1[d] = pos - fl;
-        }
+        let (c, w1) = cell(self.scale, p);
         let wx = [1.0 - w1[0], w1[0]];
         let wy = [1.0 - w1[1], w1[1]];
         let wz = [1.0 - w1[2], w1[2]];
@@ -333,14 +318,7 @@ impl FastLevel {
         p: [f32; 3],
     ) -> Option<(std::arch::x86_64::__m256i, std::arch::x86_64::__m256)> {
         use std::arch::x86_64::*;
-        let mut c = [0u32; 3];
-        let mut w1 = [0f32; 3];
-        for d in 0..3 {
-            let pos = clamp01(p[d]) * self.scale + 0.5;
-            let fl = (pos as u32) as f32;
-            c[d] = fl as u32;
-            w1[d] = pos - fl;
-        }
+        let (c, w1) = cell(self.scale, p);
         // Weights: lane k takes w1[d] where bit d of k is set, 1 − w1[d] elsewhere.
         let pick = |f: f32, mask: i32| -> __m256 {
             let hi = _mm256_set1_ps(f);
@@ -400,6 +378,22 @@ impl FastLevel {
         };
         Some((idx, w))
     }
+}
+
+/// The cell of a level with scale `scale` that holds `p` (components clamped to [0,1]): its
+/// lower vertex and the fractional position inside it, per dimension.
+#[inline(always)]
+pub fn cell(scale: f32, p: [f32; 3]) -> ([u32; 3], [f32; 3]) {
+    let mut c = [0u32; 3];
+    let mut frac = [0f32; 3];
+    for d in 0..3 {
+        // pos ≥ 0.5 after the clamp, so truncation is the floor.
+        let pos = clamp01(p[d]) * scale + 0.5;
+        let fl = (pos as u32) as f32;
+        c[d] = fl as u32;
+        frac[d] = pos - fl;
+    }
+    (c, frac)
 }
 
 /// Clamps a coordinate to [0,1] (NaN becomes 0).
