@@ -221,6 +221,60 @@ pub fn memory_limits() -> (f64, f64) {
     (copy, random)
 }
 
+/// The hash-grid encoding kernel alone, on one thread, over the hash-grid preset's grid
+/// (tables in huge pages): ns per query for the plain table (2 floats per entry, inference)
+/// and the training records (8 floats per entry), with random positions (the table's lines
+/// come from memory) and with every query at one position (all lines in L1: the arithmetic
+/// alone), for the dispatching kernel and the portable loop. Returns
+/// `[stride][random, one position][kernel, portable]`.
+pub fn hash_grid_kernel(min_time: Duration) -> [[[f64; 2]; 2]; 2] {
+    use crate::cpu::grid::{encode_tile, encode_tile_portable};
+    let layout = ModelLayout::new(&CacheConfig::hash_grid_preset());
+    let Some((grid, _)) = layout.encoding.grid() else {
+        return [[[f64::NAN; 2]; 2]; 2];
+    };
+    let levels = grid.fast_levels();
+    let d = grid.output_dims();
+    let mut rng = Pcg64Mcg::seed_from_u64(3);
+    let n = 1 << 14;
+    let tile = 128;
+    let mut out = vec![0f32; tile * d];
+    let mut figures = [[[0f64; 2]; 2]; 2];
+    for (si, stride) in [2usize, 8].into_iter().enumerate() {
+        let mut table = crate::cpu::huge::huge_vec(grid.total_entries * stride, 0f32);
+        table
+            .iter_mut()
+            .for_each(|v| *v = rng.random_range(-1.0..1.0));
+        for (pi, one_position) in [false, true].into_iter().enumerate() {
+            let pos: Vec<f32> = (0..3 * n)
+                .map(|i| {
+                    if one_position {
+                        [0.37, 0.52, 0.71][i % 3]
+                    } else {
+                        rng.random()
+                    }
+                })
+                .collect();
+            for (ki, portable) in [false, true].into_iter().enumerate() {
+                let r = rate(min_time / 8, n, || {
+                    for chunk in pos.chunks(3 * tile) {
+                        let p = |i: usize| [chunk[3 * i], chunk[3 * i + 1], chunk[3 * i + 2]];
+                        let m = chunk.len() / 3;
+                        if portable {
+                            encode_tile_portable(&levels, 2, &table, stride, m, p, &mut out, d, 0);
+                        } else {
+                            encode_tile(grid, &levels, &table, stride, m, p, &mut out, d, 0);
+                        }
+                    }
+                    std::hint::black_box(&out);
+                });
+                figures[si][pi][ki] = 1e9 / r.per_s;
+            }
+        }
+    }
+    figures
+}
+
 /// Runs the benchmark, printing a table as it goes; returns the figures.
 pub fn run(options: &BenchOptions) -> Vec<BenchFigure> {
     let presets = [
@@ -239,6 +293,16 @@ pub fn run(options: &BenchOptions) -> Vec<BenchFigure> {
         copy / 1e9,
         random / 1e6
     );
+    let k = hash_grid_kernel(options.min_time);
+    for (si, what) in ["table (inference)", "training records"]
+        .into_iter()
+        .enumerate()
+    {
+        println!(
+            "hash-grid encode, one thread, {what}: {:.0} ns/query with random positions, {:.0} at one position (kernel); portable loop {:.0} / {:.0}",
+            k[si][0][0], k[si][1][0], k[si][0][1], k[si][1][1]
+        );
+    }
     for &device in &options.devices {
         if device == CacheDevice::Wgpu {
             match crate::gpu::wgpu_device() {

@@ -23,24 +23,24 @@ pub fn prefetch<T>(p: *const T) {
 /// misses in flight to cover memory latency, few enough that the requests are not dropped.
 const AHEAD: usize = 64;
 
-/// Runs `body(i, fetch(i))` for `i` in `0..n`, calling `fetch` `AHEAD` samples early (it
+/// Runs `body(i, fetch(i))` for `i` in `0..n`, calling `fetch` `N` items early (it
 /// computes a sample's table entries and prefetches their lines), so the cache misses of the
 /// following samples overlap the work on this one. `empty` fills the ring before it is used.
 #[inline(always)]
-fn pipelined<T: Copy>(
+fn pipelined<T: Copy, const N: usize>(
     n: usize,
     empty: T,
     mut fetch: impl FnMut(usize) -> T,
     mut body: impl FnMut(usize, T),
 ) {
-    let mut ring = [empty; AHEAD];
-    for (i, r) in ring.iter_mut().enumerate().take(AHEAD.min(n)) {
+    let mut ring = [empty; N];
+    for (i, r) in ring.iter_mut().enumerate().take(N.min(n)) {
         *r = fetch(i);
     }
     for i in 0..n {
-        let x = ring[i % AHEAD];
-        if i + AHEAD < n {
-            ring[i % AHEAD] = fetch(i + AHEAD);
+        let x = ring[i % N];
+        if i + N < n {
+            ring[i % N] = fetch(i + N);
         }
         body(i, x);
     }
@@ -52,10 +52,9 @@ fn pipelined<T: Copy>(
 /// sample `i` is interpolated, the vertices of sample `i + AHEAD` are computed and their table
 /// lines prefetched, so the cache misses of the fine levels overlap.
 ///
-/// With two features per level (the presets) on a CPU with AVX2, the eight corners of a
-/// vertex are computed and gathered in one register each ([`encode_tile_avx2`]; 10–15 % faster
-/// in `nrc bench cache`, see BENCHMARKS.md); the portable loop sums the eight products in the
-/// same tree order, so both give the same bits.
+/// With two features per level (the presets) on a CPU with AVX2, eight samples are encoded
+/// per register ([`encode_tile_avx2`]); the portable loop sums the eight products in the same
+/// tree order, so both give the same bits.
 #[inline(always)]
 pub fn encode_tile(
     grid: &HashGrid,
@@ -124,7 +123,7 @@ pub fn encode_tile_portable(
             c
         };
         let o = col + l * f;
-        pipelined(m, ([0u32; 8], [0f32; 8]), fetch, |i, (idx, w)| {
+        pipelined::<_, AHEAD>(m, ([0u32; 8], [0f32; 8]), fetch, |i, (idx, w)| {
             let dst = &mut out[i * stride + o..i * stride + o + f];
             if f == 2 {
                 let mut a = [0f32; 8];
@@ -156,7 +155,14 @@ fn tree_sum(p: [f32; 8]) -> f32 {
     (q[0] + q[2]) + (q[1] + q[3])
 }
 
-/// The AVX2 form of [`encode_tile`] for two features per level.
+/// Samples per AVX2 group: one per lane.
+const LANES: usize = 8;
+
+/// The AVX2 form of [`encode_tile`] for two features per level, eight samples per register:
+/// lane `j` of every vector belongs to sample `j` of a group, so the cell, weights and hashes
+/// of eight samples take one instruction each; each corner's two features of four samples
+/// come with one 64-bit gather. Groups are software-pipelined like the portable loop: the
+/// table lines of group `g + AHEAD/8` are prefetched while group `g` is interpolated.
 ///
 /// # Safety
 /// The CPU has AVX2 and FMA; every corner index of `levels` times `table_stride`, plus 1, is
@@ -174,58 +180,137 @@ unsafe fn encode_tile_avx2(
     col: usize,
 ) {
     use std::arch::x86_64::*;
-    let empty = (_mm256_setzero_si256(), _mm256_setzero_ps());
+    // The tile's positions, one array per axis, padded to whole groups (padding lanes sit at
+    // the origin and are never stored).
+    let groups = m.div_ceil(LANES);
+    let mut soa = vec![0f32; 3 * groups * LANES];
+    let (xs, rest) = soa.split_at_mut(groups * LANES);
+    let (ys, zs) = rest.split_at_mut(groups * LANES);
+    for i in 0..m {
+        [xs[i], ys[i], zs[i]] = position(i);
+    }
     let scale = _mm256_set1_epi32(table_stride as i32);
     let base = table.as_ptr();
+    // Lanes 0–3 and 4–7 of a weight vector, each repeated for the entry's two features.
+    let (dup_lo, dup_hi) = (
+        _mm256_setr_epi32(0, 0, 1, 1, 2, 2, 3, 3),
+        _mm256_setr_epi32(4, 4, 5, 5, 6, 6, 7, 7),
+    );
     for (l, level) in levels.iter().enumerate() {
-        let fetch = |i: usize| {
-            let (idx, w) = level.corners_avx2(position(i)).unwrap_or_else(|| {
-                let (idx, w) = level.corners(position(i));
-                // SAFETY: eight lanes read from eight-element arrays.
-                unsafe {
-                    (
-                        _mm256_loadu_si256(idx.as_ptr().cast()),
-                        _mm256_loadu_ps(w.as_ptr()),
+        let fetch = |g: usize| {
+            let at = g * LANES;
+            // SAFETY: `xs`, `ys`, `zs` hold `groups · LANES` floats.
+            let (idx, w) = unsafe {
+                level
+                    .corners_x8(
+                        _mm256_loadu_ps(xs.as_ptr().add(at)),
+                        _mm256_loadu_ps(ys.as_ptr().add(at)),
+                        _mm256_loadu_ps(zs.as_ptr().add(at)),
                     )
-                }
-            });
-            let at = _mm256_mullo_epi32(idx, scale);
-            let mut lanes = [0i32; 8];
-            // SAFETY: eight lanes written to an eight-element array.
-            unsafe { _mm256_storeu_si256(lanes.as_mut_ptr().cast(), at) };
+                    .unwrap_or_else(|| scalar_corners_x8(level, xs, ys, zs, at))
+            };
+            let idx = idx.map(|v| _mm256_mullo_epi32(v, scale));
+            // Corners k and k ^ 1 differ in the lowest hash bit, so they share a line: four
+            // prefetches per sample.
+            let mut lanes = [0i32; 4 * LANES];
+            for (k, chunk) in lanes.chunks_exact_mut(LANES).enumerate() {
+                // SAFETY: eight lanes written to an eight-element chunk.
+                unsafe { _mm256_storeu_si256(chunk.as_mut_ptr().cast(), idx[2 * k]) };
+            }
             for e in lanes {
                 prefetch(base.wrapping_add(e as usize));
             }
-            (at, w)
+            (idx, w)
         };
         let o = col + l * 2;
-        pipelined(m, empty, fetch, |i, (at, w)| {
-            // SAFETY: the caller guarantees the gathered indices are inside `table`.
-            let (a, b) = unsafe {
-                (
-                    _mm256_i32gather_ps::<4>(base, at),
-                    _mm256_i32gather_ps::<4>(base.add(1), at),
-                )
+        let empty = ([_mm256_setzero_si256(); 8], [_mm256_setzero_ps(); 8]);
+        pipelined::<_, { AHEAD / LANES }>(groups, empty, fetch, |g, (idx, w)| {
+            // Per corner: (feature 0, feature 1) of samples 0–3 in `lo`, of 4–7 in `hi`,
+            // weighted; summed over the corners in the portable loop's tree order.
+            let products = |k: usize| {
+                // SAFETY: the caller guarantees the gathered entries are inside `table`.
+                unsafe {
+                    let lo =
+                        _mm256_i32gather_epi64::<4>(base.cast(), _mm256_castsi256_si128(idx[k]));
+                    let hi = _mm256_i32gather_epi64::<4>(
+                        base.cast(),
+                        _mm256_extracti128_si256::<1>(idx[k]),
+                    );
+                    (
+                        _mm256_mul_ps(
+                            _mm256_permutevar8x32_ps(w[k], dup_lo),
+                            _mm256_castsi256_ps(lo),
+                        ),
+                        _mm256_mul_ps(
+                            _mm256_permutevar8x32_ps(w[k], dup_hi),
+                            _mm256_castsi256_ps(hi),
+                        ),
+                    )
+                }
             };
-            let (a, b) = (_mm256_mul_ps(w, a), _mm256_mul_ps(w, b));
-            // (p0+p4, p1+p5, p2+p6, p3+p7) for both features, then the pairs.
-            let qa = _mm_add_ps(_mm256_castps256_ps128(a), _mm256_extractf128_ps::<1>(a));
-            let qb = _mm_add_ps(_mm256_castps256_ps128(b), _mm256_extractf128_ps::<1>(b));
-            // [qa0+qa2, qa1+qa3, qb0+qb2, qb1+qb3]
-            let r = _mm_add_ps(
-                _mm_shuffle_ps::<0b01_00_01_00>(qa, qb),
-                _mm_shuffle_ps::<0b11_10_11_10>(qa, qb),
+            let p: [(__m256, __m256); 8] = std::array::from_fn(products);
+            let add = |a: (__m256, __m256), b: (__m256, __m256)| {
+                (_mm256_add_ps(a.0, b.0), _mm256_add_ps(a.1, b.1))
+            };
+            let (lo, hi) = add(
+                add(add(p[0], p[4]), add(p[2], p[6])),
+                add(add(p[1], p[5]), add(p[3], p[7])),
             );
-            let sa = _mm_cvtss_f32(r) + _mm_cvtss_f32(_mm_shuffle_ps::<1>(r, r));
-            let sb =
-                _mm_cvtss_f32(_mm_shuffle_ps::<2>(r, r)) + _mm_cvtss_f32(_mm_shuffle_ps::<3>(r, r));
-            let d = i * stride + o;
-            // SAFETY: the caller guarantees `out` holds row `i`'s columns `o`, `o + 1`.
-            unsafe {
-                *out.get_unchecked_mut(d) = sa;
-                *out.get_unchecked_mut(d + 1) = sb;
+            let first = g * LANES;
+            let halves = [
+                _mm256_castps256_ps128(lo),
+                _mm256_extractf128_ps::<1>(lo),
+                _mm256_castps256_ps128(hi),
+                _mm256_extractf128_ps::<1>(hi),
+            ];
+            for (h, pair) in halves.into_iter().enumerate() {
+                for (j, v) in [pair, _mm_movehl_ps(pair, pair)].into_iter().enumerate() {
+                    let i = first + 2 * h + j;
+                    if i < m {
+                        // SAFETY: the caller guarantees `out` holds row `i`'s columns `o`,
+                        // `o + 1`.
+                        unsafe {
+                            _mm_store_sd(
+                                out.as_mut_ptr().add(i * stride + o).cast(),
+                                _mm_castps_pd(v),
+                            )
+                        };
+                    }
+                }
             }
         });
+    }
+}
+
+/// [`FastLevel::corners`] of group `at..at + 8` in the layout of [`FastLevel::corners_x8`]
+/// (its fallback where a dense level wraps).
+#[cfg(target_arch = "x86_64")]
+fn scalar_corners_x8(
+    level: &FastLevel,
+    xs: &[f32],
+    ys: &[f32],
+    zs: &[f32],
+    at: usize,
+) -> (
+    [std::arch::x86_64::__m256i; 8],
+    [std::arch::x86_64::__m256; 8],
+) {
+    use std::arch::x86_64::*;
+    let mut idx = [[0u32; LANES]; 8];
+    let mut w = [[0f32; LANES]; 8];
+    for j in 0..LANES {
+        let (ij, wj) = level.corners([xs[at + j], ys[at + j], zs[at + j]]);
+        for k in 0..8 {
+            idx[k][j] = ij[k];
+            w[k][j] = wj[k];
+        }
+    }
+    // SAFETY: eight-element arrays read as eight lanes (SSE2/AVX loads need no AVX2).
+    unsafe {
+        (
+            idx.map(|v| _mm256_loadu_si256(v.as_ptr().cast())),
+            w.map(|v| _mm256_loadu_ps(v.as_ptr())),
+        )
     }
 }
 
@@ -324,7 +409,7 @@ pub fn scatter_level<'p, 'd>(
         }
         (idx, w)
     };
-    pipelined(n, ([0u32; 8], [0f32; 8]), fetch, |i, (idx, w)| {
+    pipelined::<_, AHEAD>(n, ([0u32; 8], [0f32; 8]), fetch, |i, (idx, w)| {
         let d = dout(i);
         for k in 0..8 {
             let e = idx[k] as usize;

@@ -304,77 +304,88 @@ impl FastLevel {
         (idx, w)
     }
 
-    /// [`FastLevel::corners`] in AVX2 registers (lane `k` is corner `k`), the same bits;
-    /// `None` for the wrapped corners of a dense level (the caller falls back to the scalar
-    /// version).
+    /// [`FastLevel::corners`] of eight samples at once, in AVX2 registers: lane `j` of
+    /// `idx[k]` and `w[k]` is corner `k` of sample `j` (positions `x`, `y`, `z`, one sample per
+    /// lane), the same bits as the scalar version; `None` where a dense level's corner wraps for
+    /// some lane (the caller falls back to the scalar version for that group).
     ///
     /// # Safety
     /// Callable only where the CPU has AVX2 and FMA (a `target_feature` function).
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,fma")]
     #[inline]
-    pub fn corners_avx2(
+    pub fn corners_x8(
         &self,
-        p: [f32; 3],
-    ) -> Option<(std::arch::x86_64::__m256i, std::arch::x86_64::__m256)> {
+        x: std::arch::x86_64::__m256,
+        y: std::arch::x86_64::__m256,
+        z: std::arch::x86_64::__m256,
+    ) -> Option<(
+        [std::arch::x86_64::__m256i; 8],
+        [std::arch::x86_64::__m256; 8],
+    )> {
         use std::arch::x86_64::*;
-        let (c, w1) = cell(self.scale, p);
-        // Weights: lane k takes w1[d] where bit d of k is set, 1 − w1[d] elsewhere.
-        let pick = |f: f32, mask: i32| -> __m256 {
-            let hi = _mm256_set1_ps(f);
-            let lo = _mm256_set1_ps(1.0 - f);
-            match mask {
-                0b1010_1010 => _mm256_blend_ps::<0b1010_1010>(lo, hi),
-                0b1100_1100 => _mm256_blend_ps::<0b1100_1100>(lo, hi),
-                _ => _mm256_blend_ps::<0b1111_0000>(lo, hi),
-            }
+        let one = _mm256_set1_ps(1.0);
+        // `cell`: clamp01 (max with 0 maps NaN and −0 to +0, as the scalar test does), then
+        // `pos = p·s + 0.5 ≥ 0.5`, whose truncation is the floor.
+        let cell = |p: __m256| {
+            let c = _mm256_min_ps(_mm256_max_ps(p, _mm256_setzero_ps()), one);
+            let pos = _mm256_add_ps(
+                _mm256_mul_ps(c, _mm256_set1_ps(self.scale)),
+                _mm256_set1_ps(0.5),
+            );
+            let i = _mm256_cvttps_epi32(pos);
+            (i, _mm256_sub_ps(pos, _mm256_cvtepi32_ps(i)))
         };
-        let w = _mm256_mul_ps(
-            _mm256_mul_ps(pick(w1[0], 0b1010_1010), pick(w1[1], 0b1100_1100)),
-            pick(w1[2], 0b1111_0000),
-        );
+        let (cx, fx) = cell(x);
+        let (cy, fy) = cell(y);
+        let (cz, fz) = cell(z);
+        let wx = [_mm256_sub_ps(one, fx), fx];
+        let wy = [_mm256_sub_ps(one, fy), fy];
+        let wz = [_mm256_sub_ps(one, fz), fz];
+        let wxy = [
+            _mm256_mul_ps(wx[0], wy[0]),
+            _mm256_mul_ps(wx[1], wy[0]),
+            _mm256_mul_ps(wx[0], wy[1]),
+            _mm256_mul_ps(wx[1], wy[1]),
+        ];
+        let w: [__m256; 8] = std::array::from_fn(|k| _mm256_mul_ps(wxy[k & 3], wz[k >> 2]));
         let offset = _mm256_set1_epi32(self.offset as i32);
-        let idx = if self.dense {
-            let (r, r2) = (self.res, self.res2);
-            let base = c[0]
-                .wrapping_add(c[1].wrapping_mul(r))
-                .wrapping_add(c[2].wrapping_mul(r2));
-            if base >= self.entries - (r2 + r + 1).min(self.entries) {
+        let idx: [__m256i; 8] = if self.dense {
+            let base = _mm256_add_epi32(
+                _mm256_add_epi32(
+                    cx,
+                    _mm256_mullo_epi32(cy, _mm256_set1_epi32(self.res as i32)),
+                ),
+                _mm256_mullo_epi32(cz, _mm256_set1_epi32(self.res2 as i32)),
+            );
+            // Every lane must satisfy base < entries − (r² + r + 1) (bases are far below 2³¹,
+            // so the signed comparison is the unsigned one).
+            let limit = self.entries - (self.res2 + self.res + 1).min(self.entries);
+            let ok = _mm256_cmpgt_epi32(_mm256_set1_epi32(limit as i32), base);
+            if _mm256_movemask_epi8(ok) != -1 {
                 return None;
             }
-            // SAFETY: `dense_offsets` holds eight u32.
-            let offs = unsafe { _mm256_loadu_si256(self.dense_offsets.as_ptr().cast()) };
-            _mm256_add_epi32(
-                _mm256_add_epi32(offset, _mm256_set1_epi32(base as i32)),
-                offs,
-            )
+            let first = _mm256_add_epi32(offset, base);
+            std::array::from_fn(|k| {
+                _mm256_add_epi32(first, _mm256_set1_epi32(self.dense_offsets[k] as i32))
+            })
         } else {
-            let bit = |k: i32| {
-                _mm256_set_epi32(
-                    (7 >> k) & 1,
-                    (6 >> k) & 1,
-                    (5 >> k) & 1,
-                    (4 >> k) & 1,
-                    (3 >> k) & 1,
-                    (2 >> k) & 1,
-                    (1 >> k) & 1,
-                    0,
-                )
-            };
-            let hx = _mm256_add_epi32(_mm256_set1_epi32(c[0] as i32), bit(0));
-            let hy = _mm256_mullo_epi32(
-                _mm256_add_epi32(_mm256_set1_epi32(c[1] as i32), bit(1)),
+            let ones = _mm256_set1_epi32(1);
+            let (p1, p2) = (
                 _mm256_set1_epi32(PRIMES[1] as i32),
-            );
-            let hz = _mm256_mullo_epi32(
-                _mm256_add_epi32(_mm256_set1_epi32(c[2] as i32), bit(2)),
                 _mm256_set1_epi32(PRIMES[2] as i32),
             );
-            let h = _mm256_xor_si256(_mm256_xor_si256(hx, hy), hz);
-            _mm256_add_epi32(
-                offset,
-                _mm256_and_si256(h, _mm256_set1_epi32((self.entries - 1) as i32)),
-            )
+            let hx = [cx, _mm256_add_epi32(cx, ones)];
+            let hy0 = _mm256_mullo_epi32(cy, p1);
+            let hz0 = _mm256_mullo_epi32(cz, p2);
+            // (c + 1)·P = c·P + P in wrapping arithmetic.
+            let hy = [hy0, _mm256_add_epi32(hy0, p1)];
+            let hz = [hz0, _mm256_add_epi32(hz0, p2)];
+            let mask = _mm256_set1_epi32((self.entries - 1) as i32);
+            std::array::from_fn(|k| {
+                let h = _mm256_xor_si256(_mm256_xor_si256(hx[k & 1], hy[(k >> 1) & 1]), hz[k >> 2]);
+                _mm256_add_epi32(offset, _mm256_and_si256(h, mask))
+            })
         };
         Some((idx, w))
     }
