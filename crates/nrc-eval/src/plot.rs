@@ -140,10 +140,38 @@ fn draw<DB: DrawingBackend>(
     root.present().map_err(e)
 }
 
+/// Label of a log-axis tick: only the mantissas 1, 2 and 5 are labelled (plotters puts a tick
+/// at every integer mantissa, and neighbours such as 90 and 100 would print over each other);
+/// the other ticks keep their grid line without text.
 fn format_tick(v: f64) -> String {
+    let mantissa = v.abs() / 10f64.powf(v.abs().log10().floor());
+    if ![1.0, 2.0, 5.0].iter().any(|m| (mantissa - m).abs() < 1e-6) {
+        return String::new();
+    }
     if (1e-2..1e4).contains(&v.abs()) {
         format!("{}", (v * 1e3).round() / 1e3)
     } else {
         format!("{v:.0e}")
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::format_tick;
+
+    #[test]
+    fn log_ticks_are_labelled_at_1_2_5_only() {
+        let labels: Vec<String> = [
+            10.0, 20.0, 30.0, 50.0, 90.0, 100.0, 200.0, 0.02, 0.07, 5e-5, 3e-5, 1e4,
+        ]
+        .iter()
+        .map(|&v| format_tick(v))
+        .collect();
+        assert_eq!(
+            labels,
+            [
+                "10", "20", "", "50", "", "100", "200", "0.02", "", "5e-5", "", "1e4"
+            ]
+        );
     }
 }
