@@ -25,11 +25,9 @@ pub fn encode_rows(
     k_in: usize,
 ) -> std::time::Duration {
     let m = rows.len() / row_len;
-    for (row, xi) in rows.chunks_exact(row_len).zip(x.chunks_exact_mut(k_in)) {
-        layout
-            .encoding
-            .forward_one_without_grid(&row[..crate::record::RAW_INPUT_DIMS], xi);
-    }
+    layout
+        .encoding
+        .forward_rows_without_grid(rows, row_len, x, k_in);
     let t_grid = std::time::Instant::now();
     if let Some((hg, part)) = layout.encoding.grid() {
         let at = part.in_offset;

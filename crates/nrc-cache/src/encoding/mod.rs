@@ -209,6 +209,61 @@ impl InputEncoding {
         out[self.unpadded_dims..self.padded_dims].fill(1.0);
     }
 
+    /// [`Self::forward_one_without_grid`] for the `m` rows of `raw` (`row_len` floats each, raw
+    /// inputs first) into the rows of `out` (`stride` floats each): the one-blob parts are
+    /// encoded a column at a time over all rows (vectorised, the same bits), the rest row by row.
+    pub fn forward_rows_without_grid(
+        &self,
+        raw: &[f32],
+        row_len: usize,
+        out: &mut [f32],
+        stride: usize,
+    ) {
+        let m = raw.len() / row_len;
+        let mut column = vec![0f32; m];
+        for part in &self.parts {
+            match &part.kind {
+                EncodingKind::HashGrid(_) => {}
+                EncodingKind::OneBlob { bins, wrap } => {
+                    for d in 0..part.in_dims {
+                        for (c, row) in column.iter_mut().zip(raw.chunks_exact(row_len)) {
+                            *c = row[part.in_offset + d];
+                        }
+                        one_blob::forward_many(
+                            &column,
+                            *wrap,
+                            *bins,
+                            out,
+                            stride,
+                            part.out_offset + d * bins,
+                        );
+                    }
+                }
+                EncodingKind::TriangleWave { frequencies } => {
+                    for (row, o) in raw.chunks_exact(row_len).zip(out.chunks_mut(stride)) {
+                        let x = &row[part.in_offset..part.in_offset + part.in_dims];
+                        for (d, xd) in x.iter().enumerate() {
+                            let at = part.out_offset + d * frequencies;
+                            triangle_wave::forward(*xd, &mut o[at..at + frequencies]);
+                        }
+                    }
+                }
+                EncodingKind::Identity { scale, offset } => {
+                    for (row, o) in raw.chunks_exact(row_len).zip(out.chunks_mut(stride)) {
+                        let x = &row[part.in_offset..part.in_offset + part.in_dims];
+                        let o = &mut o[part.out_offset..part.out_offset + part.out_dims];
+                        for (oj, xj) in o.iter_mut().zip(x) {
+                            *oj = identity::forward(*xj, *scale, *offset);
+                        }
+                    }
+                }
+            }
+        }
+        for o in out.chunks_mut(stride).take(m) {
+            o[self.unpadded_dims..self.padded_dims].fill(1.0);
+        }
+    }
+
     /// Gradient of `⟨dout, encode(raw)⟩` with respect to the raw inputs (for gradient checks).
     pub fn backward_input_one(
         &self,

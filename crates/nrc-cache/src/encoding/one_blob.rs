@@ -55,6 +55,32 @@ pub fn forward(x: f32, wrap: bool, out: &mut [f32]) {
     }
 }
 
+/// [`forward`] of many inputs at once: `x[r]` is encoded into `out[r·stride + col..][..bins]`.
+/// Each bin boundary's CDF is computed for all inputs in one loop (which the compiler
+/// vectorises), with the same operations per input as [`forward`], so the same bits.
+pub fn forward_many(
+    x: &[f32],
+    wrap: bool,
+    bins: usize,
+    out: &mut [f32],
+    stride: usize,
+    col: usize,
+) {
+    let n = bins as f32;
+    let mut left: Vec<f32> = x.iter().map(|&xi| cdf_sum(0.0, xi, n, wrap)).collect();
+    let mut right = vec![0f32; x.len()];
+    for i in 0..bins {
+        let boundary = (i + 1) as f32 / n;
+        for (r, &xi) in right.iter_mut().zip(x) {
+            *r = cdf_sum(boundary, xi, n, wrap);
+        }
+        for (row, (r, l)) in right.iter().zip(&left).enumerate() {
+            out[row * stride + col + i] = r - l;
+        }
+        std::mem::swap(&mut left, &mut right);
+    }
+}
+
 /// Derivative of `⟨dout, forward(x)⟩` with respect to `x`.
 #[inline]
 pub fn backward_input(x: f32, wrap: bool, dout: &[f32]) -> f32 {
