@@ -333,8 +333,10 @@ impl FastLevel {
                 _mm256_mul_ps(c, _mm256_set1_ps(self.scale)),
                 _mm256_set1_ps(0.5),
             );
-            let i = _mm256_cvttps_epi32(pos);
-            (i, _mm256_sub_ps(pos, _mm256_cvtepi32_ps(i)))
+            // `fl = (pos as u32) as f32` and `c = fl as u32`, as in `cell` (the round trip
+            // matters only past 2^24, where `fl` rounds).
+            let fl = _mm256_cvtepi32_ps(_mm256_cvttps_epi32(pos));
+            (_mm256_cvttps_epi32(fl), _mm256_sub_ps(pos, fl))
         };
         let (cx, fx) = cell(x);
         let (cy, fy) = cell(y);
