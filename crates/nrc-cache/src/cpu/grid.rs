@@ -305,7 +305,8 @@ fn scalar_corners_x8(
             w[k][j] = wj[k];
         }
     }
-    // SAFETY: eight-element arrays read as eight lanes (SSE2/AVX loads need no AVX2).
+    // SAFETY: eight-element arrays read as eight lanes; AVX loads, and this runs only inside
+    // the AVX2 kernel, whose caller detected the CPU features.
     unsafe {
         (
             idx.map(|v| _mm256_loadu_si256(v.as_ptr().cast())),

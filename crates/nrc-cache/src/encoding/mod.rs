@@ -178,40 +178,10 @@ impl InputEncoding {
         out[self.unpadded_dims..self.padded_dims].fill(1.0);
     }
 
-    /// Writes the non-grid columns of one sample (everything but the hash grid, plus padding).
-    #[inline]
-    pub fn forward_one_without_grid(&self, raw: &[f32], out: &mut [f32]) {
-        for part in &self.parts {
-            if matches!(part.kind, EncodingKind::HashGrid(_)) {
-                continue;
-            }
-            let x = &raw[part.in_offset..part.in_offset + part.in_dims];
-            let o = &mut out[part.out_offset..part.out_offset + part.out_dims];
-            match &part.kind {
-                EncodingKind::HashGrid(_) => {}
-                EncodingKind::OneBlob { bins, wrap } => {
-                    for (d, xd) in x.iter().enumerate() {
-                        one_blob::forward(*xd, *wrap, &mut o[d * bins..(d + 1) * bins]);
-                    }
-                }
-                EncodingKind::TriangleWave { frequencies } => {
-                    for (d, xd) in x.iter().enumerate() {
-                        triangle_wave::forward(*xd, &mut o[d * frequencies..(d + 1) * frequencies]);
-                    }
-                }
-                EncodingKind::Identity { scale, offset } => {
-                    for (oj, xj) in o.iter_mut().zip(x) {
-                        *oj = identity::forward(*xj, *scale, *offset);
-                    }
-                }
-            }
-        }
-        out[self.unpadded_dims..self.padded_dims].fill(1.0);
-    }
-
-    /// [`Self::forward_one_without_grid`] for the `m` rows of `raw` (`row_len` floats each, raw
-    /// inputs first) into the rows of `out` (`stride` floats each): the one-blob parts are
-    /// encoded a column at a time over all rows (vectorised, the same bits), the rest row by row.
+    /// The non-grid columns (everything but the hash grid, plus padding) of [`Self::forward_one`]
+    /// for the `m` rows of `raw` (`row_len` floats each, raw inputs first), into the rows of
+    /// `out` (`stride` floats each): the one-blob parts are encoded a column at a time over all
+    /// rows (vectorised, the same bits), the rest row by row.
     pub fn forward_rows_without_grid(
         &self,
         raw: &[f32],
