@@ -406,29 +406,16 @@ fn cpu_and_wgpu_fused_mlp_agree() {
 #[test]
 fn avx2_hash_grid_kernel_matches_the_portable_loop() {
     use nrc_cache::cpu::grid::{encode_tile, encode_tile_portable};
-    use nrc_cache::encoding::hash_grid::{HashGrid, HashGridParams};
     if !nrc_cache::cpu::gemm::has_avx2_fma() {
         println!("skipped: this CPU has no AVX2/FMA, so only the portable loop exists");
         return;
     }
     let mut rng = Pcg64Mcg::seed_from_u64(7);
     for log2t in [12u32, 19] {
-        let grid = HashGrid::new(HashGridParams {
-            n_levels: 16,
-            n_features_per_level: 2,
-            log2_hashmap_size: log2t,
-            base_resolution: 16.0,
-            per_level_scale: 1.38191,
-        });
+        let grid = preset_like_grid(log2t);
         let levels = grid.fast_levels();
         let m = 700;
-        let mut pos: Vec<f32> = (0..3 * m).map(|_| rng.random::<f32>()).collect();
-        for (i, v) in [0.0, 1.0, 1.0, 1.0, 0.0, 1.0, -0.5, 2.0, f32::NAN]
-            .into_iter()
-            .enumerate()
-        {
-            pos[i] = v;
-        }
+        let pos = hard_positions(&mut rng, m);
         let d = grid.output_dims();
         for table_stride in [2usize, 8] {
             let table: Vec<f32> = (0..grid.total_entries * table_stride)
@@ -477,31 +464,37 @@ fn avx2_hash_grid_kernel_matches_the_portable_loop() {
     }
 }
 
-/// The batch gradient scatter (per level, eight samples per register where AVX2 exists) gives
-/// the same bits as scattering one sample at a time with the scalar reference, including
+/// The hash-grid preset's levels with table size 2^`log2t`.
+fn preset_like_grid(log2t: u32) -> nrc_cache::encoding::hash_grid::HashGrid {
+    use nrc_cache::encoding::hash_grid::{HashGrid, HashGridParams};
+    HashGrid::new(HashGridParams {
+        n_levels: 16,
+        n_features_per_level: 2,
+        log2_hashmap_size: log2t,
+        base_resolution: 16.0,
+        per_level_scale: 1.38191,
+    })
+}
+
+/// `m` random positions (`[m][3]`), the first three on faces of the cube, outside it and NaN.
+fn hard_positions(rng: &mut Pcg64Mcg, m: usize) -> Vec<f32> {
+    let mut pos: Vec<f32> = (0..3 * m).map(|_| rng.random::<f32>()).collect();
+    pos[..9].copy_from_slice(&[0.0, 1.0, 1.0, 1.0, 0.0, 1.0, -0.5, 2.0, f32::NAN]);
+    pos
+}
+
+/// The batch gradient scatter (per level, software-pipelined) gives the same bits as
+/// scattering one sample at a time with the scalar reference, including
 /// positions on the faces of the cube, outside it and NaN, and a batch that is not a multiple
 /// of eight.
 #[test]
 fn batch_hash_grid_scatter_matches_the_per_sample_reference() {
     use nrc_cache::cpu::grid::backward_table;
-    use nrc_cache::encoding::hash_grid::{HashGrid, HashGridParams};
     let mut rng = Pcg64Mcg::seed_from_u64(11);
     for log2t in [12u32, 19] {
-        let grid = HashGrid::new(HashGridParams {
-            n_levels: 16,
-            n_features_per_level: 2,
-            log2_hashmap_size: log2t,
-            base_resolution: 16.0,
-            per_level_scale: 1.38191,
-        });
+        let grid = preset_like_grid(log2t);
         let m = 700;
-        let mut pos: Vec<f32> = (0..3 * m).map(|_| rng.random::<f32>()).collect();
-        for (i, v) in [0.0, 1.0, 1.0, 1.0, 0.0, 1.0, -0.5, 2.0, f32::NAN]
-            .into_iter()
-            .enumerate()
-        {
-            pos[i] = v;
-        }
+        let mut pos = hard_positions(&mut rng, m);
         // Clustered samples, so that entries collect several contributions.
         for v in pos[300..600].iter_mut() {
             *v = 0.5 + 0.01 * *v;
