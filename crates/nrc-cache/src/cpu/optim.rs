@@ -439,13 +439,99 @@ pub fn materialize_grid_into(
     };
     let inv = 1.0 / (1.0 - decay_pow(alpha, step));
     let table = DecayTable::new(alpha);
-    for (e, l) in last.iter().enumerate() {
+    let mut done = 0;
+    #[cfg(target_arch = "x86_64")]
+    if f == 2 && super::gemm::has_avx2_fma() {
+        // SAFETY: AVX2 was detected; the lengths of `records`, `last` and `out` were checked
+        // above.
+        done = unsafe { materialize_pairs_avx2(&table, step, inv, records, last, out) };
+    }
+    for (e, l) in last.iter().enumerate().skip(done) {
         let ak = table.get(step - *l);
         let r = &records[e * RECORD * f..(e + 1) * RECORD * f];
         for j in 0..f {
             out[e * f + j].write((ak * r[3 * f + j] + (1.0 - ak) * r[j]) * inv);
         }
     }
+}
+
+/// The AVX2 form of [`materialize_grid_into`]'s loop for two features, four entries per
+/// register and the same operations in the same order (the same bits); a block of four with a
+/// catch-up `step − last` beyond the power table takes the scalar form. Returns how many
+/// leading entries it wrote (all but the last `len % 4`, which the caller's loop finishes).
+///
+/// # Safety
+/// The CPU has AVX2; `records` holds `RECORD · 2` floats per entry of `last`, and `out` two
+/// per entry.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+unsafe fn materialize_pairs_avx2(
+    table: &DecayTable,
+    step: u32,
+    inv: f32,
+    records: &[f32],
+    last: &[u32],
+    out: &mut [std::mem::MaybeUninit<f32>],
+) -> usize {
+    use std::arch::x86_64::*;
+    const REC: usize = RECORD * 2;
+    let steps = _mm_set1_epi32(step as i32);
+    let limit = _mm_set1_epi32(DecayTable::LEN as i32 - 1);
+    let inv_scalar = inv;
+    let (one, inv) = (_mm256_set1_ps(1.0), _mm256_set1_ps(inv));
+    let pairs = _mm256_setr_epi32(0, 0, 1, 1, 2, 2, 3, 3);
+    let mut e = 0;
+    // SAFETY (whole loop): entries e..e + 4 exist in `last`, `records` and `out`.
+    unsafe {
+        while e + 4 <= last.len() {
+            let k = _mm_sub_epi32(steps, _mm_loadu_si128(last.as_ptr().add(e).cast()));
+            // Unsigned k ≤ LEN − 1 in every lane, else this block takes the scalar form.
+            if _mm_movemask_epi8(_mm_cmpeq_epi32(_mm_min_epu32(k, limit), k)) != 0xFFFF {
+                for i in e..e + 4 {
+                    let ak = table.get(step - last[i]);
+                    for j in 0..2 {
+                        let (w, ema) = (records[i * REC + j], records[i * REC + 6 + j]);
+                        out[i * 2 + j].write((ak * ema + (1.0 - ak) * w) * inv_scalar);
+                    }
+                }
+                e += 4;
+                continue;
+            }
+            let ak = _mm256_permutevar8x32_ps(
+                _mm256_castps128_ps256(_mm_i32gather_ps::<4>(table.powers.as_ptr(), k)),
+                pairs,
+            );
+            // Record = [w0 w1 m0 m1 | v0 v1 e0 e1]: the weights are the low 64 bits of the
+            // first half, the EMA the high 64 bits of the second.
+            let r = |i: usize| records.as_ptr().add((e + i) * REC);
+            let (w01, w23) = (
+                _mm_unpacklo_pd(_mm_loadu_pd(r(0).cast()), _mm_loadu_pd(r(1).cast())),
+                _mm_unpacklo_pd(_mm_loadu_pd(r(2).cast()), _mm_loadu_pd(r(3).cast())),
+            );
+            let (e01, e23) = (
+                _mm_unpackhi_pd(
+                    _mm_loadu_pd(r(0).add(4).cast()),
+                    _mm_loadu_pd(r(1).add(4).cast()),
+                ),
+                _mm_unpackhi_pd(
+                    _mm_loadu_pd(r(2).add(4).cast()),
+                    _mm_loadu_pd(r(3).add(4).cast()),
+                ),
+            );
+            let w = _mm256_castpd_ps(_mm256_set_m128d(w23, w01));
+            let ema = _mm256_castpd_ps(_mm256_set_m128d(e23, e01));
+            let v = _mm256_mul_ps(
+                _mm256_add_ps(
+                    _mm256_mul_ps(ak, ema),
+                    _mm256_mul_ps(_mm256_sub_ps(one, ak), w),
+                ),
+                inv,
+            );
+            _mm256_storeu_ps(out.as_mut_ptr().add(e * 2).cast(), v);
+            e += 4;
+        }
+    }
+    e
 }
 
 /// Bias-corrected EMA of a dense group: `e / (1 − α^t)`, or the weights at step 0.
