@@ -446,12 +446,28 @@ pub fn materialize_grid_into(
         // above.
         done = unsafe { materialize_pairs_avx2(&table, step, inv, records, last, out) };
     }
-    for (e, l) in last.iter().enumerate().skip(done) {
-        let ak = table.get(step - *l);
-        let r = &records[e * RECORD * f..(e + 1) * RECORD * f];
-        for j in 0..f {
-            out[e * f + j].write((ak * r[3 * f + j] + (1.0 - ak) * r[j]) * inv);
-        }
+    for e in done..last.len() {
+        materialize_entry(&table, step, inv, f, e, records, last, out);
+    }
+}
+
+/// Entry `e` of [`materialize_grid_into`]: `(α^k e + (1 − α^k) w) · inv` per feature.
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn materialize_entry(
+    table: &DecayTable,
+    step: u32,
+    inv: f32,
+    f: usize,
+    e: usize,
+    records: &[f32],
+    last: &[u32],
+    out: &mut [std::mem::MaybeUninit<f32>],
+) {
+    let ak = table.get(step - last[e]);
+    let r = &records[e * RECORD * f..(e + 1) * RECORD * f];
+    for j in 0..f {
+        out[e * f + j].write((ak * r[3 * f + j] + (1.0 - ak) * r[j]) * inv);
     }
 }
 
@@ -488,11 +504,7 @@ unsafe fn materialize_pairs_avx2(
             // Unsigned k ≤ LEN − 1 in every lane, else this block takes the scalar form.
             if _mm_movemask_epi8(_mm_cmpeq_epi32(_mm_min_epu32(k, limit), k)) != 0xFFFF {
                 for i in e..e + 4 {
-                    let ak = table.get(step - last[i]);
-                    for j in 0..2 {
-                        let (w, ema) = (records[i * REC + j], records[i * REC + 6 + j]);
-                        out[i * 2 + j].write((ak * ema + (1.0 - ak) * w) * inv_scalar);
-                    }
+                    materialize_entry(table, step, inv_scalar, 2, i, records, last, out);
                 }
                 e += 4;
                 continue;
