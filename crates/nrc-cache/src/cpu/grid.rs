@@ -423,3 +423,181 @@ pub fn scatter_level<'p, 'd>(
         }
     });
 }
+
+/// Entries per bin of [`scatter_binned`]: a bin's gradient (2¹³ · F floats, 64 KiB at two
+/// features) stays in L2 while its contributions are summed and its update runs.
+pub const BIN_ENTRIES: usize = 1 << 13;
+
+/// One sample's weighted gradient for one table entry (level-local index).
+#[derive(Clone, Copy, Debug)]
+struct Contribution<const F: usize> {
+    entry: u32,
+    grad: [f32; F],
+}
+
+/// Reusable buffers of [`scatter_binned`] (one per thread, so that steps do not page-fault
+/// fresh megabytes).
+#[derive(Debug, Default)]
+pub struct BinScratch {
+    /// Contributions sorted by bin, in sample and corner order within a bin (as raw words:
+    /// the record type depends on `F`).
+    sorted: Vec<u32>,
+    /// Contributions per bin, then the bins' starts.
+    starts: Vec<usize>,
+    /// One bin's gradient, zero between bins.
+    grad: Vec<f32>,
+    /// One bin's referenced entries, clear between bins.
+    touched: Vec<u64>,
+}
+
+/// Level `l`'s table gradient of a batch, bin by bin: the same sums as [`scatter_level`]
+/// (each entry's contributions added in sample and corner order, so the same bits), without
+/// read-modify-writes into a gradient table the size of the level. The samples' corners are
+/// computed twice: once to count each bin's contributions, once to write the weighted
+/// gradients straight into their bin's place; then each bin's contributions are summed into a
+/// bin-sized buffer that stays in L2.
+///
+/// `xyz` holds the positions one axis per slice, padded with zeros to whole groups of eight;
+/// `dout` holds the level's `F` output gradients per sample. `per_bin(first, grad, touched)`
+/// receives each bin that has contributions: the level entry it starts at, its gradient (`F`
+/// per entry) and its referenced entries; it must leave `grad` zero and `touched` clear (as
+/// [`super::optim::sparse_step`] does).
+pub fn scatter_binned<const F: usize>(
+    grid: &HashGrid,
+    l: usize,
+    xyz: [&[f32]; 3],
+    dout: &[f32],
+    scratch: &mut BinScratch,
+    mut per_bin: impl FnMut(usize, &mut [f32], &mut [u64]),
+) {
+    assert_eq!(grid.features(), F, "features per level");
+    let n = dout.len() / F;
+    let groups = n.div_ceil(LANES);
+    assert!(xyz.iter().all(|a| a.len() >= groups * LANES), "positions too short");
+    let level = &grid.levels[l];
+    let entries = level.entries as usize;
+    let fast = FastLevel::new(level);
+    let offset = level.offset as u32;
+    let bins = entries.div_ceil(BIN_ENTRIES);
+    let avx2 = super::gemm::has_avx2_fma();
+    let s = scratch;
+    s.starts.clear();
+    s.starts.resize(bins + 1, 0);
+    for g in 0..groups {
+        let (idx, _) = group_corners(&fast, xyz, g * LANES, avx2);
+        for j in 0..LANES.min(n - g * LANES) {
+            for corner in &idx {
+                s.starts[(corner[j] - offset) as usize / BIN_ENTRIES + 1] += 1;
+            }
+        }
+    }
+    for b in 0..bins {
+        s.starts[b + 1] += s.starts[b];
+    }
+    let words = std::mem::size_of::<Contribution<F>>() / 4;
+    s.sorted.resize(n * 8 * words, 0);
+    // SAFETY: `Contribution<F>` is plain data of `u32`/`f32` words (any bit pattern is
+    // valid, alignment 4), and `sorted` holds `8n` of them.
+    let sorted = unsafe {
+        std::slice::from_raw_parts_mut(s.sorted.as_mut_ptr().cast::<Contribution<F>>(), n * 8)
+    };
+    let mut next = s.starts[..bins].to_vec();
+    for g in 0..groups {
+        let (idx, w) = group_corners(&fast, xyz, g * LANES, avx2);
+        for j in 0..LANES.min(n - g * LANES) {
+            let i = g * LANES + j;
+            let d: [f32; F] = dout[i * F..(i + 1) * F].try_into().expect("F values");
+            for k in 0..8 {
+                let entry = idx[k][j] - offset;
+                let p = &mut next[entry as usize / BIN_ENTRIES];
+                sorted[*p] = Contribution {
+                    entry,
+                    grad: d.map(|dq| w[k][j] * dq),
+                };
+                *p += 1;
+            }
+        }
+    }
+    s.grad.resize(BIN_ENTRIES * F, 0.0);
+    s.touched.resize(BIN_ENTRIES / 64, 0);
+    for b in 0..bins {
+        let (lo, hi) = (s.starts[b], s.starts[b + 1]);
+        if lo == hi {
+            continue;
+        }
+        let first = b * BIN_ENTRIES;
+        for c in &sorted[lo..hi] {
+            let e = c.entry as usize - first;
+            for (g, v) in s.grad[e * F..(e + 1) * F].iter_mut().zip(c.grad) {
+                *g += v;
+            }
+            s.touched[e / 64] |= 1u64 << (e % 64);
+        }
+        let len = BIN_ENTRIES.min(entries - first);
+        per_bin(
+            first,
+            &mut s.grad[..len * F],
+            &mut s.touched[..len.div_ceil(64)],
+        );
+        debug_assert!(s.touched.iter().all(|&t| t == 0), "per_bin left bits set");
+    }
+}
+
+/// Corner indices and weights of samples `at..at + 8` (positions one axis per slice), as
+/// `[corner][lane]`: eight at once with AVX2 where `avx2` says the CPU has it.
+#[inline(always)]
+fn group_corners(
+    fast: &FastLevel,
+    xyz: [&[f32]; 3],
+    at: usize,
+    avx2: bool,
+) -> ([[u32; LANES]; 8], [[f32; LANES]; 8]) {
+    #[cfg(target_arch = "x86_64")]
+    if avx2 {
+        // SAFETY: the caller detected AVX2 and FMA; the slices hold `at + 8` floats.
+        return unsafe { group_corners_avx2(fast, xyz, at) };
+    }
+    let _ = avx2;
+    let mut idx = [[0u32; LANES]; 8];
+    let mut w = [[0f32; LANES]; 8];
+    for j in 0..LANES {
+        let (ij, wj) = fast.corners([xyz[0][at + j], xyz[1][at + j], xyz[2][at + j]]);
+        for k in 0..8 {
+            idx[k][j] = ij[k];
+            w[k][j] = wj[k];
+        }
+    }
+    (idx, w)
+}
+
+/// [`group_corners`] with [`FastLevel::corners_x8`].
+///
+/// # Safety
+/// The CPU has AVX2 and FMA; each slice of `xyz` holds `at + 8` floats.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+unsafe fn group_corners_avx2(
+    fast: &FastLevel,
+    xyz: [&[f32]; 3],
+    at: usize,
+) -> ([[u32; LANES]; 8], [[f32; LANES]; 8]) {
+    use std::arch::x86_64::*;
+    assert!(xyz.iter().all(|a| a.len() >= at + LANES));
+    // SAFETY: eight floats at `at` in each slice (checked above).
+    let (idx, w) = unsafe {
+        let load = |a: &[f32]| _mm256_loadu_ps(a.as_ptr().add(at));
+        match fast.corners_x8(load(xyz[0]), load(xyz[1]), load(xyz[2])) {
+            Some(c) => c,
+            None => scalar_corners_x8(fast, xyz[0], xyz[1], xyz[2], at),
+        }
+    };
+    let mut out = ([[0u32; LANES]; 8], [[0f32; LANES]; 8]);
+    for k in 0..8 {
+        // SAFETY: eight lanes into eight-element arrays.
+        unsafe {
+            _mm256_storeu_si256(out.0[k].as_mut_ptr().cast(), idx[k]);
+            _mm256_storeu_ps(out.1[k].as_mut_ptr(), w[k]);
+        }
+    }
+    out
+}

@@ -15,7 +15,7 @@
 use crate::config::AdamParams;
 
 /// Per-step constants of Adam and the EMA.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Debug)]
 pub struct StepConstants {
     /// Adam parameters.
     pub adam: AdamParams,
@@ -31,6 +31,8 @@ pub struct StepConstants {
     step_size: f32,
     /// `1 / (1 − β2^t)`.
     inv_bc2: f32,
+    /// `α^k` of the EMA catch-ups, built once per step rather than per sparse update.
+    decay: DecayTable,
 }
 
 impl StepConstants {
@@ -46,6 +48,7 @@ impl StepConstants {
             bc2,
             step_size: adam.learning_rate / bc1,
             inv_bc2: 1.0 / bc2,
+            decay: DecayTable::new(ema.unwrap_or(0.0)),
         }
     }
 
@@ -203,10 +206,7 @@ pub fn sparse_step_portable<const F: usize>(
     grad: &mut [f32],
     last: &mut [u32],
 ) {
-    let table = DecayTable::new(c.ema.unwrap_or(0.0));
-    drain_bits(touched, |e| {
-        update_entry::<F>(c, &table, e, records, grad, last)
-    });
+    drain_bits(touched, |e| update_entry::<F>(c, &c.decay, e, records, grad, last));
 }
 
 /// Calls `f` with the index of every set bit of `bits`, in increasing order, and clears them.
@@ -270,7 +270,7 @@ unsafe fn sparse_step_f2_avx2(
     last: &mut [u32],
 ) {
     use std::arch::x86_64::*;
-    let table = DecayTable::new(c.ema.unwrap_or(0.0));
+    let table = &c.decay;
     let a = &c.adam;
     let alpha = c.ema.unwrap_or(0.0);
     let set = _mm256_set1_ps;
@@ -364,7 +364,7 @@ unsafe fn sparse_step_f2_avx2(
         }
     });
     for &e in &group[..n] {
-        update_entry::<2>(c, &table, e, records, grad, last);
+        update_entry::<2>(c, table, e, records, grad, last);
     }
 }
 

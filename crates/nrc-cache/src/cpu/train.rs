@@ -7,9 +7,11 @@ use std::time::Instant;
 
 use rayon::prelude::*;
 
-use super::grid::{scatter_level, split_levels};
+use std::cell::RefCell;
+
+use super::grid::{BinScratch, scatter_binned, scatter_level, split_levels};
 use super::mlp::{MlpGrad, OUT_PAD, PreparedMlp, TILE, TileScratch, backward_tile, forward_tile};
-use super::optim::{StepConstants, dense_step, sparse_step};
+use super::optim::{RECORD, StepConstants, dense_step, sparse_step};
 use crate::batch::{FACTOR_AT, TARGET_AT, TRAIN_ROW, WEIGHT_AT};
 use crate::config::OutputActivation;
 use crate::loss::sample_loss;
@@ -21,6 +23,12 @@ use crate::model::ModelLayout;
 /// [`crate::RadianceCache::train`]), 5 hash-grid scatter and 6 sparse Adam/EMA (summed over
 /// threads).
 pub static PHASE_NANOS: [AtomicU64; 7] = [const { AtomicU64::new(0) }; 7];
+
+thread_local! {
+    /// Each thread's buffers for the binned gradient scatter, kept between steps (fresh
+    /// megabyte-sized buffers would page-fault on every step).
+    static SCRATCH: RefCell<BinScratch> = RefCell::default();
+}
 
 fn add_phase(i: usize, since: Instant) {
     PHASE_NANOS[i].fetch_add(since.elapsed().as_nanos() as u64, Ordering::Relaxed);
@@ -206,13 +214,8 @@ pub fn train_step(
     let t_grid = Instant::now();
     if let (Some(g), Some((hg, _))) = (grid, grid_part) {
         let f = hg.features();
-        let GridState {
-            records,
-            grad,
-            last,
-        } = g;
-        let rs = split_levels(hg, f * super::optim::RECORD, records);
-        let gs = split_levels(hg, f, grad);
+        let GridState { records, last, .. } = g;
+        let rs = split_levels(hg, f * RECORD, records);
         let ls = split_levels(hg, 1, last);
         // Level-major copies of the gradient columns and compact positions, so each level's
         // pass streams through ~130 KiB + 200 KiB instead of strided rows.
@@ -226,32 +229,46 @@ pub fn train_step(
                         .copy_from_slice(&dxg[i * grid_dims + l * f..i * grid_dims + (l + 1) * f]);
                 }
             });
-        let mut pos = vec![0f32; n * 3];
-        pos.par_chunks_mut(3).enumerate().for_each(|(i, p)| {
-            p.copy_from_slice(&rows[i * TRAIN_ROW + grid_in..i * TRAIN_ROW + grid_in + 3])
-        });
-        let (by_level, pos) = (&by_level, &pos);
+        // Positions one axis per array, padded to whole groups of eight.
+        let padded = n.next_multiple_of(8);
+        let mut xyz = vec![0f32; 3 * padded];
+        for (axis, out) in xyz.chunks_mut(padded).enumerate() {
+            for (i, o) in out[..n].iter_mut().enumerate() {
+                *o = rows[i * TRAIN_ROW + grid_in + axis];
+            }
+        }
+        let xyz = [
+            &xyz[..padded],
+            &xyz[padded..2 * padded],
+            &xyz[2 * padded..],
+        ];
+        let by_level = &by_level;
         rs.into_par_iter()
-            .zip(gs)
             .zip(ls)
             .enumerate()
-            .for_each(|(l, ((rec, gr), la))| {
-                let entries = hg.levels[l].entries as usize;
-                let mut touched = vec![0u64; entries.div_ceil(64)];
-                let t_scatter = Instant::now();
-                scatter_level(
-                    hg,
-                    l,
-                    n,
-                    |i| [pos[3 * i], pos[3 * i + 1], pos[3 * i + 2]],
-                    |i| &by_level[(l * n + i) * f..(l * n + i + 1) * f],
-                    gr,
-                    Some(&mut touched),
-                );
-                add_phase(5, t_scatter);
-                let t_adam = Instant::now();
-                sparse_step(c, f, &mut touched, rec, gr, la);
-                add_phase(6, t_adam);
+            .for_each(|(l, (rec, la))| {
+                SCRATCH.with_borrow_mut(|scratch| {
+                    let t_scatter = Instant::now();
+                    let mut adam_nanos = 0;
+                    let per_bin = |first: usize, gr: &mut [f32], touched: &mut [u64]| {
+                        let t_adam = Instant::now();
+                        let len = gr.len() / f;
+                        let rec = &mut rec[first * f * RECORD..(first + len) * f * RECORD];
+                        sparse_step(c, f, touched, rec, gr, &mut la[first..first + len]);
+                        adam_nanos += t_adam.elapsed().as_nanos() as u64;
+                    };
+                    let dout = &by_level[l * n * f..(l + 1) * n * f];
+                    match f {
+                        1 => scatter_binned::<1>(hg, l, xyz, dout, scratch, per_bin),
+                        2 => scatter_binned::<2>(hg, l, xyz, dout, scratch, per_bin),
+                        4 => scatter_binned::<4>(hg, l, xyz, dout, scratch, per_bin),
+                        8 => scatter_binned::<8>(hg, l, xyz, dout, scratch, per_bin),
+                        _ => panic!("unsupported features per level {f}"),
+                    }
+                    let all = t_scatter.elapsed().as_nanos() as u64;
+                    PHASE_NANOS[5].fetch_add(all - adam_nanos, Ordering::Relaxed);
+                    PHASE_NANOS[6].fetch_add(adam_nanos, Ordering::Relaxed);
+                });
             });
     }
 
