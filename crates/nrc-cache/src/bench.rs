@@ -4,7 +4,7 @@
 
 use std::time::{Duration, Instant};
 
-use burn::tensor::{Device, Tensor, TensorData};
+use burn::tensor::{Device, Tensor, TensorData, f16};
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64Mcg;
 
@@ -222,16 +222,17 @@ pub fn memory_limits() -> (f64, f64) {
 }
 
 /// The hash-grid encoding kernel alone, on one thread, over the hash-grid preset's grid
-/// (tables in huge pages): ns per query for the plain table (2 floats per entry, inference)
-/// and the training records (8 floats per entry), with random positions (the table's lines
-/// come from memory) and with every query at one position (all lines in L1: the arithmetic
-/// alone), for the dispatching kernel and the portable loop. Returns
-/// `[stride][random, one position][kernel, portable]`.
-pub fn hash_grid_kernel(min_time: Duration) -> [[[f64; 2]; 2]; 2] {
-    use crate::cpu::grid::{encode_tile, encode_tile_portable};
+/// (tables in huge pages): ns per query for the plain table (2 floats per entry), the
+/// half-precision table (2 halves per entry; both are inference tables) and the training
+/// records (8 floats per entry), with random positions (the table's lines come from memory)
+/// and with every query at one position (all lines in L1: the arithmetic alone), for the
+/// dispatching kernel and the portable loop. Returns
+/// `[f32 table, f16 table, records][random, one position][kernel, portable]`.
+pub fn hash_grid_kernel(min_time: Duration) -> [[[f64; 2]; 2]; 3] {
+    use crate::cpu::grid::{Table, encode_tile, encode_tile_portable};
     let layout = ModelLayout::new(&CacheConfig::hash_grid_preset());
     let Some((grid, _)) = layout.encoding.grid() else {
-        return [[[f64::NAN; 2]; 2]; 2];
+        return [[[f64::NAN; 2]; 2]; 3];
     };
     let levels = grid.fast_levels();
     let d = grid.output_dims();
@@ -239,12 +240,25 @@ pub fn hash_grid_kernel(min_time: Duration) -> [[[f64; 2]; 2]; 2] {
     let n = 1 << 14;
     let tile = 128;
     let mut out = vec![0f32; tile * d];
-    let mut figures = [[[0f64; 2]; 2]; 2];
-    for (si, stride) in [2usize, 8].into_iter().enumerate() {
+    let mut figures = [[[0f64; 2]; 2]; 3];
+    for (si, stride) in [2usize, 2, 8].into_iter().enumerate() {
         let mut table = crate::cpu::huge::huge_vec(grid.total_entries * stride, 0f32);
         table
             .iter_mut()
             .for_each(|v| *v = rng.random_range(-1.0..1.0));
+        let halves: Vec<f16> = if si == 1 {
+            let mut h = crate::cpu::huge::huge_vec(table.len(), f16::ZERO);
+            h.iter_mut().zip(&table).for_each(|(h, v)| *h = f16::from_f32(*v));
+            table = Vec::new();
+            h
+        } else {
+            Vec::new()
+        };
+        let view = if si == 1 {
+            Table::F16(&halves)
+        } else {
+            Table::F32(&table, stride)
+        };
         for (pi, one_position) in [false, true].into_iter().enumerate() {
             let pos: Vec<f32> = (0..3 * n)
                 .map(|i| {
@@ -261,9 +275,9 @@ pub fn hash_grid_kernel(min_time: Duration) -> [[[f64; 2]; 2]; 2] {
                         let p = |i: usize| [chunk[3 * i], chunk[3 * i + 1], chunk[3 * i + 2]];
                         let m = chunk.len() / 3;
                         if portable {
-                            encode_tile_portable(&levels, 2, &table, stride, m, p, &mut out, d, 0);
+                            encode_tile_portable(&levels, 2, view, m, p, &mut out, d, 0);
                         } else {
-                            encode_tile(grid, &levels, &table, stride, m, p, &mut out, d, 0);
+                            encode_tile(grid, &levels, view, m, p, &mut out, d, 0);
                         }
                     }
                     std::hint::black_box(&out);
@@ -294,7 +308,11 @@ pub fn run(options: &BenchOptions) -> Vec<BenchFigure> {
         random / 1e6
     );
     let k = hash_grid_kernel(options.min_time);
-    for (si, what) in ["table (inference)", "training records"]
+    for (si, what) in [
+        "f32 table (inference)",
+        "f16 table (inference)",
+        "training records",
+    ]
         .into_iter()
         .enumerate()
     {

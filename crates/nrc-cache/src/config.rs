@@ -8,7 +8,7 @@ use std::path::Path;
 
 use serde::{Deserialize, Serialize};
 
-use crate::encoding::hash_grid::{HashGrid, HashGridParams};
+use crate::encoding::hash_grid::{HashGrid, HashGridParams, TablePrecision};
 use crate::error::CacheError;
 use crate::record::RAW_INPUT_DIMS;
 
@@ -69,6 +69,8 @@ pub enum NestedEncoding {
         base_resolution: f32,
         /// Growth factor between levels.
         per_level_scale: f32,
+        /// Precision of the inference table (`"f32"` when absent, `"f16"`).
+        inference_precision: TablePrecision,
     },
     /// One-blob encoding with `n_bins` bins per dimension; `wrap` for periodic inputs (azimuth).
     OneBlob {
@@ -406,6 +408,7 @@ impl CacheConfig {
                     log2_hashmap_size,
                     base_resolution,
                     per_level_scale,
+                    ..
                 } => {
                     grids += 1;
                     if grids > 1 {
@@ -556,6 +559,7 @@ impl CacheConfig {
                 log2_hashmap_size,
                 base_resolution,
                 per_level_scale,
+                inference_precision,
                 ..
             } => Some(HashGridParams {
                 n_levels: *n_levels,
@@ -563,6 +567,7 @@ impl CacheConfig {
                 log2_hashmap_size: *log2_hashmap_size,
                 base_resolution: *base_resolution,
                 per_level_scale: *per_level_scale,
+                inference_precision: *inference_precision,
             }),
             _ => None,
         })

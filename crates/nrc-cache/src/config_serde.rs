@@ -11,6 +11,7 @@ use serde::ser::SerializeMap;
 use serde::{Deserialize, Deserializer, Serialize, Serializer};
 use serde_json::{Map, Value};
 
+use crate::encoding::hash_grid::TablePrecision;
 use crate::config::{NestedEncoding, OptimizerConfig, adam_eps, beta1, beta2, ema_decay, lr, one};
 
 /// Splits a path-tracked error into (field path, message), joining an inner `@path@` prefix.
@@ -66,6 +67,8 @@ struct HashGridFields {
     log2_hashmap_size: u32,
     base_resolution: f32,
     per_level_scale: f32,
+    #[serde(default)]
+    inference_precision: TablePrecision,
 }
 
 #[derive(Deserialize)]
@@ -109,6 +112,7 @@ impl<'de> Deserialize<'de> for NestedEncoding {
                     log2_hashmap_size: f.log2_hashmap_size,
                     base_resolution: f.base_resolution,
                     per_level_scale: f.per_level_scale,
+                    inference_precision: f.inference_precision,
                 }
             }
             "OneBlob" => {
@@ -154,6 +158,7 @@ impl Serialize for NestedEncoding {
                 log2_hashmap_size,
                 base_resolution,
                 per_level_scale,
+                inference_precision,
             } => {
                 m.serialize_entry("otype", "HashGrid")?;
                 m.serialize_entry("n_dims_to_encode", n_dims_to_encode)?;
@@ -162,6 +167,7 @@ impl Serialize for NestedEncoding {
                 m.serialize_entry("log2_hashmap_size", log2_hashmap_size)?;
                 m.serialize_entry("base_resolution", base_resolution)?;
                 m.serialize_entry("per_level_scale", per_level_scale)?;
+                m.serialize_entry("inference_precision", inference_precision)?;
             }
             Self::OneBlob {
                 n_dims_to_encode,

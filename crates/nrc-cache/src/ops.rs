@@ -25,13 +25,14 @@ use burn::backend::tensor::{FloatTensor, IntTensor};
 use burn::backend::{
     AutodiffBackend, Backend, Dispatch, ExtensionType, Flex, TensorMetadata, backend_extension,
 };
-use burn::tensor::{DType, Tensor, TensorData};
+use burn::tensor::{DType, Tensor, TensorData, f16};
 use rayon::prelude::*;
 
 use crate::cpu;
 use crate::cpu::mlp::{
     MlpGrad, OUT_PAD, PreparedMlp, TILE, TileScratch, backward_tile, forward_tile,
 };
+use crate::encoding::hash_grid::TablePrecision;
 use crate::model::{LayerShape, ModelLayout};
 
 /// Which gradients a backward op must produce.
@@ -369,6 +370,36 @@ fn flex_last(t: &FlexTensor) -> Cow<'_, [i32]> {
     })
 }
 
+/// The inference table, as `T`, of the records `records` with EMA steps `last`: the
+/// bias-corrected EMA at `step` (or the weights without EMA), level by level in parallel.
+fn materialize_table<T: cpu::optim::TableValue>(
+    layout: &ModelLayout,
+    records: &[f32],
+    last: &[u32],
+    ema: Option<f32>,
+    step: u32,
+) -> Vec<T> {
+    let n = layout.grid_params;
+    let mut g: Vec<T> = cpu::huge::huge_empty(n);
+    if let Some((hg, _)) = layout.encoding.grid() {
+        let f = hg.features();
+        assert_eq!(hg.total_entries * f, n, "the levels partition the table");
+        let rec = cpu::optim::RECORD * f;
+        let outs = cpu::grid::split_levels(hg, f, &mut g.spare_capacity_mut()[..n]);
+        outs.into_par_iter().enumerate().for_each(|(l, o)| {
+            let level = &hg.levels[l];
+            let (a, b) = (level.offset, level.offset + level.entries as usize);
+            cpu::optim::materialize_grid_into(ema, step, f, &records[a * rec..b * rec], &last[a..b], o);
+        });
+    } else {
+        assert_eq!(n, 0, "a table without a hash grid");
+    }
+    // SAFETY: the levels partition the `n` elements and `materialize_grid_into` wrote each of
+    // them (checked above and inside).
+    unsafe { g.set_len(n) };
+    g
+}
+
 impl NrcFusedOps for Flex {
     fn fused_train_steps(
         state: TrainState<Self>,
@@ -416,31 +447,19 @@ impl NrcFusedOps for Flex {
         let mlp = flex_f32(&state.mlp);
         let last_i32 = flex_last(&state.grid_last);
         let last: &[u32] = bytemuck::cast_slice(&last_i32);
-        let n = layout.grid_params;
-        let mut g: Vec<f32> = cpu::huge::huge_empty(n);
-        if let Some((hg, _)) = layout.encoding.grid() {
-            let f = hg.features();
-            assert_eq!(hg.total_entries * f, n, "the levels partition the table");
-            let rec = cpu::optim::RECORD * f;
-            let outs = cpu::grid::split_levels(hg, f, &mut g.spare_capacity_mut()[..n]);
-            outs.into_par_iter().enumerate().for_each(|(l, o)| {
-                let level = &hg.levels[l];
-                let (a, b) = (level.offset, level.offset + level.entries as usize);
-                cpu::optim::materialize_grid_into(
-                    ema,
-                    step,
-                    f,
-                    &records[a * rec..b * rec],
-                    &last[a..b],
-                    o,
-                );
-            });
+        let half = layout
+            .encoding
+            .grid()
+            .is_some_and(|(hg, _)| hg.params.inference_precision == TablePrecision::F16);
+        let grid = if half {
+            let g = materialize_table::<f16>(&layout, &records, last, ema, step);
+            let n = g.len();
+            FlexTensor::from_data(TensorData::new(g, [n]))
         } else {
-            assert_eq!(n, 0, "a table without a hash grid");
-        }
-        // SAFETY: the levels partition the `n` elements and `materialize_grid_into` wrote
-        // each of them (checked above and inside).
-        unsafe { g.set_len(n) };
+            let g = materialize_table::<f32>(&layout, &records, last, ema, step);
+            let n = g.len();
+            flex_from(g, &[n])
+        };
         let m = match ema {
             Some(alpha) => {
                 let mut m = vec![0f32; mlp.len()];
@@ -449,9 +468,9 @@ impl NrcFusedOps for Flex {
             }
             None => mlp.to_vec(),
         };
-        let (gl, ml) = (g.len(), m.len());
+        let ml = m.len();
         InferenceWeights {
-            grid: flex_from(g, &[gl]),
+            grid,
             mlp: flex_from(m, &[ml]),
         }
     }
@@ -479,7 +498,18 @@ impl NrcFusedOps for Flex {
         let rows = flex_f32(&queries);
         let n = rows.len() / crate::batch::QUERY_ROW;
         let mut out = vec![0f32; n * 3];
-        cpu::infer::infer(&layout, &flex_f32(&grid), &flex_f32(&mlp), &rows, &mut out);
+        let f = layout.encoding.grid().map_or(1, |(g, _)| g.features());
+        let halves = grid.as_slice::<f16>();
+        let floats = if halves.is_none() {
+            flex_f32(&grid)
+        } else {
+            Cow::Borrowed(&[][..])
+        };
+        let table = match halves {
+            Some(h) => cpu::grid::Table::F16(h),
+            None => cpu::grid::Table::F32(&floats, f),
+        };
+        cpu::infer::infer(&layout, table, &flex_f32(&mlp), &rows, &mut out);
         flex_from(out, &[n, 3])
     }
 }

@@ -401,11 +401,13 @@ fn cpu_and_wgpu_fused_mlp_agree() {
 }
 
 /// The AVX2 hash-grid kernel (two features per level) gives the same bits as the portable loop,
-/// on the plain table and on the training records, with positions inside, on the faces of the
-/// unit cube (where dense levels take the wrapped-corner fallback) and out of range.
+/// on the plain table, the half-precision table and the training records, with positions
+/// inside, on the faces of the unit cube (where dense levels take the wrapped-corner fallback)
+/// and out of range.
 #[test]
 fn avx2_hash_grid_kernel_matches_the_portable_loop() {
-    use nrc_cache::cpu::grid::{encode_tile, encode_tile_portable};
+    use burn::tensor::f16;
+    use nrc_cache::cpu::grid::{Table, encode_tile, encode_tile_portable};
     if !nrc_cache::cpu::gemm::has_avx2_fma() {
         println!("skipped: this CPU has no AVX2/FMA, so only the portable loop exists");
         return;
@@ -417,37 +419,23 @@ fn avx2_hash_grid_kernel_matches_the_portable_loop() {
         let m = 700;
         let pos = hard_positions(&mut rng, m);
         let d = grid.output_dims();
-        for table_stride in [2usize, 8] {
+        for (half, table_stride) in [(false, 2usize), (true, 2), (false, 8)] {
             let table: Vec<f32> = (0..grid.total_entries * table_stride)
                 .map(|_| rng.random_range(-1.0..1.0))
                 .collect();
+            let halves: Vec<f16> = table.iter().map(|v| f16::from_f32(*v)).collect();
+            let view = if half {
+                Table::F16(&halves)
+            } else {
+                Table::F32(&table, table_stride)
+            };
             let run = |avx: bool| {
                 let mut out = vec![0f32; m * (d + 3)];
                 let p = |i: usize| [pos[3 * i], pos[3 * i + 1], pos[3 * i + 2]];
                 if avx {
-                    encode_tile(
-                        &grid,
-                        &levels,
-                        &table,
-                        table_stride,
-                        m,
-                        p,
-                        &mut out,
-                        d + 3,
-                        3,
-                    );
+                    encode_tile(&grid, &levels, view, m, p, &mut out, d + 3, 3);
                 } else {
-                    encode_tile_portable(
-                        &levels,
-                        2,
-                        &table,
-                        table_stride,
-                        m,
-                        p,
-                        &mut out,
-                        d + 3,
-                        3,
-                    );
+                    encode_tile_portable(&levels, 2, view, m, p, &mut out, d + 3, 3);
                 }
                 out
             };
@@ -457,7 +445,7 @@ fn avx2_hash_grid_kernel_matches_the_portable_loop() {
                 assert_eq!(
                     x.to_bits(),
                     y.to_bits(),
-                    "log2T {log2t}, stride {table_stride}, value {i}: {x} vs {y}"
+                    "log2T {log2t}, stride {table_stride}, half {half}, value {i}: {x} vs {y}"
                 );
             }
         }
@@ -473,6 +461,7 @@ fn preset_like_grid(log2t: u32) -> nrc_cache::encoding::hash_grid::HashGrid {
         log2_hashmap_size: log2t,
         base_resolution: 16.0,
         per_level_scale: 1.38191,
+        inference_precision: Default::default(),
     })
 }
 

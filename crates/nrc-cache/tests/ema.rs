@@ -246,6 +246,18 @@ fn avx2_sparse_step_matches_the_portable_loop() {
     }
 }
 
+/// The step each of `entries` table entries' EMA is current at, for a table at `step`: blocks
+/// of eight inside the power table (under 1024 steps stale), beyond it, and never touched.
+fn stale_steps(r: &mut Pcg64Mcg, entries: usize, step: u32) -> Vec<u32> {
+    (0..entries)
+        .map(|e| match (e / 8 % 4, e % 8) {
+            (0, _) => step - r.random_range(1024..4000),
+            (1, 3) => 0,
+            _ => step - r.random_range(0..1024),
+        })
+        .collect()
+}
+
 /// The materialised average of a two-feature table (four entries per AVX2 register where the
 /// CPU has it) gives the same bits as the formula entry by entry, with catch-ups inside and
 /// beyond the power table (over 1024 steps stale, and never touched) and a length that is not
@@ -261,13 +273,7 @@ fn materialised_grid_matches_the_formula_bit_for_bit() {
     };
     let (w, m, v, ema) = (value(&mut r), value(&mut r), value(&mut r), value(&mut r));
     let records = pack_records(f, &w, &m, &v, &ema);
-    let last: Vec<u32> = (0..entries)
-        .map(|e| match (e / 8 % 4, e % 8) {
-            (0, _) => step - r.random_range(1024..4000),
-            (1, 3) => 0,
-            _ => step - r.random_range(0..1024),
-        })
-        .collect();
+    let last = stale_steps(&mut r, entries, step);
     let mut got = vec![0f32; entries * f];
     materialize_grid(Some(alpha), step, f, &records, &last, &mut got);
     let inv = 1.0 / (1.0 - decay_pow(alpha, step));
@@ -282,5 +288,47 @@ fn materialised_grid_matches_the_formula_bit_for_bit() {
                 "entry {e} feature {j}: {g} vs {want}"
             );
         }
+    }
+}
+
+/// The half-precision inference table (AVX2/F16C where the CPU has it, eight values per
+/// conversion) holds each f32 value of the materialised table rounded to the nearest half,
+/// bit for bit: values from 1e-9 (below the smallest half subnormal) to 1e6 (beyond the largest
+/// half, clamped to ±65504, never infinite), catch-ups inside and beyond the power table, a
+/// length that is not a multiple of four; with and without the EMA.
+#[test]
+fn half_table_is_the_f32_table_rounded_to_nearest() {
+    use burn::tensor::f16;
+    use nrc_cache::cpu::optim::materialize_grid_into;
+    let mut r = Pcg64Mcg::seed_from_u64(22);
+    let (f, entries, step) = (2usize, 1003usize, 5000u32);
+    let value = |r: &mut Pcg64Mcg| -> Vec<f32> {
+        (0..entries * f)
+            .map(|_| {
+                let sign = if r.random::<bool>() { 1.0 } else { -1.0 };
+                sign * 10f32.powf(r.random_range(-9.0..6.0))
+            })
+            .collect()
+    };
+    let (w, m, v, ema) = (value(&mut r), value(&mut r), value(&mut r), value(&mut r));
+    let records = pack_records(f, &w, &m, &v, &ema);
+    let last = stale_steps(&mut r, entries, step);
+    for alpha in [Some(0.99f32), None] {
+        let mut full = vec![0f32; entries * f];
+        materialize_grid(alpha, step, f, &records, &last, &mut full);
+        let mut halves = vec![std::mem::MaybeUninit::<f16>::uninit(); entries * f];
+        materialize_grid_into(alpha, step, f, &records, &last, &mut halves);
+        let (mut clamped, mut subnormal) = (0, 0);
+        for (i, (h, x)) in halves.iter().zip(&full).enumerate() {
+            // SAFETY: `materialize_grid_into` writes every element.
+            let h = unsafe { h.assume_init() };
+            let want = f16::from_f32(x.clamp(-65504.0, 65504.0));
+            assert!(h.is_finite(), "value {i}: {x} became {h}");
+            assert_eq!(h.to_bits(), want.to_bits(), "value {i}: {x} gave {h}, not {want}");
+            clamped += usize::from(x.abs() > 65504.0);
+            subnormal += usize::from(h.to_bits() & 0x7c00 == 0 && h.to_bits() & 0x03ff != 0);
+        }
+        // The data exercise both ends of the half range.
+        assert!(clamped > 10 && subnormal > 10, "{clamped} clamped, {subnormal} subnormal");
     }
 }

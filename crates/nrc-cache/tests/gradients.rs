@@ -33,6 +33,7 @@ fn small_grid() -> HashGrid {
         log2_hashmap_size: 12,
         base_resolution: 4.0,
         per_level_scale: 2.0,
+        inference_precision: Default::default(),
     })
 }
 
@@ -54,6 +55,7 @@ fn all_encodings() -> InputEncoding {
             log2_hashmap_size: 12,
             base_resolution: 4.0,
             per_level_scale: 2.0,
+            inference_precision: Default::default(),
         },
         NestedEncoding::OneBlob {
             n_dims_to_encode: 2,

@@ -5,6 +5,8 @@
 
 use rayon::prelude::*;
 
+use burn::tensor::f16;
+
 use crate::encoding::hash_grid::{FastLevel, HashGrid};
 
 /// Hints the cache to fetch the line holding `p` (a no-op off x86-64).
@@ -46,21 +48,48 @@ fn pipelined<T: Copy, const N: usize>(
     }
 }
 
+/// A hash table as the encoding reads it.
+#[derive(Clone, Copy, Debug)]
+pub enum Table<'a> {
+    /// Single-precision features, `stride` floats per entry with the entry's features first
+    /// (the plain table: `F`; the training records `[w | m | v | ema]`: `4F`).
+    F32(&'a [f32], usize),
+    /// `F` half-precision features per entry (the inference table at
+    /// [`crate::encoding::hash_grid::TablePrecision::F16`]).
+    F16(&'a [f16]),
+}
+
+impl Table<'_> {
+    /// Values the table holds (floats or halves).
+    fn len(&self) -> usize {
+        match self {
+            Self::F32(t, _) => t.len(),
+            Self::F16(t) => t.len(),
+        }
+    }
+
+    /// Values per entry.
+    fn stride(&self, f: usize) -> usize {
+        match self {
+            Self::F32(_, s) => *s,
+            Self::F16(_) => f,
+        }
+    }
+}
+
 /// Encodes the hash grid of `m` samples into columns `col..col + L·F` of `out` (row stride
-/// `stride`), level by level. Entry `e`'s features are `table[e·table_stride..][..F]` (the
-/// plain table has `table_stride = F`, the training records `4F`). Software-pipelined: while
-/// sample `i` is interpolated, the vertices of sample `i + AHEAD` are computed and their table
-/// lines prefetched, so the cache misses of the fine levels overlap.
+/// `stride`), level by level, from `table`. Software-pipelined: while sample `i` is
+/// interpolated, the vertices of sample `i + AHEAD` are computed and their table lines
+/// prefetched, so the cache misses of the fine levels overlap.
 ///
 /// With two features per level (the presets) on a CPU with AVX2, eight samples are encoded
-/// per register ([`encode_tile_avx2`]); the portable loop sums the eight products in the same
-/// tree order, so both give the same bits.
+/// per register ([`encode_tile_avx2`]; a half-precision table also needs F16C); the portable
+/// loop sums the eight products in the same tree order, so both give the same bits.
 #[inline(always)]
 pub fn encode_tile(
     grid: &HashGrid,
     levels: &[FastLevel],
-    table: &[f32],
-    table_stride: usize,
+    table: Table,
     m: usize,
     position: impl Fn(usize) -> [f32; 3],
     out: &mut [f32],
@@ -72,32 +101,40 @@ pub fn encode_tile(
         .levels
         .last()
         .map_or(0, |l| l.offset + l.entries as usize);
+    let table_stride = table.stride(f);
     assert!(
         table.len() >= entries * table_stride && table_stride >= f,
         "hash table too short"
     );
     assert!(m == 0 || (m - 1) * stride + col + levels.len() * f <= out.len());
     #[cfg(target_arch = "x86_64")]
-    if f == 2 && (entries * table_stride) < i32::MAX as usize && super::gemm::has_avx2_fma() {
-        // SAFETY: AVX2 was detected; every corner index is below `entries` (hashed indices are
-        // masked to the level, dense ones range-checked), so the gathers stay inside `table`,
-        // whose length was checked above, as was `out`'s.
+    if f == 2
+        && (entries * table_stride) < i32::MAX as usize
+        && super::gemm::has_avx2_fma()
+        && has_f16c()
+    {
+        // SAFETY (both calls): AVX2, FMA and F16C were detected; every corner index is below
+        // `entries` (hashed indices are masked to the level, dense ones range-checked), so the
+        // gathers stay inside `table`, whose length was checked above, as was `out`'s.
         unsafe {
-            encode_tile_avx2(levels, table, table_stride, m, position, out, stride, col);
+            match table {
+                Table::F32(t, s) => {
+                    encode_tile_avx2::<false>(levels, t.as_ptr(), s, m, position, out, stride, col)
+                }
+                Table::F16(t) => {
+                    encode_tile_avx2::<true>(levels, t.as_ptr().cast(), 1, m, position, out, stride, col)
+                }
+            }
         }
         return;
     }
-    encode_tile_portable(
-        levels,
-        f,
-        table,
-        table_stride,
-        m,
-        position,
-        out,
-        stride,
-        col,
-    );
+    encode_tile_portable(levels, f, table, m, position, out, stride, col);
+}
+
+/// Whether the CPU converts halves in hardware (F16C; every CPU with AVX2 has it).
+#[cfg(target_arch = "x86_64")]
+pub fn has_f16c() -> bool {
+    std::is_x86_feature_detected!("f16c")
 }
 
 /// The portable loop of [`encode_tile`] (used where AVX2 is missing, or the features per
@@ -106,19 +143,47 @@ pub fn encode_tile(
 pub fn encode_tile_portable(
     levels: &[FastLevel],
     f: usize,
-    table: &[f32],
-    table_stride: usize,
+    table: Table,
     m: usize,
     position: impl Fn(usize) -> [f32; 3],
     out: &mut [f32],
     stride: usize,
     col: usize,
 ) {
+    match table {
+        Table::F32(t, s) => {
+            let at = |e: usize| t.as_ptr().wrapping_add(e * s).cast::<u8>();
+            encode_levels(levels, f, m, &position, out, stride, col, at, |e, j| t[e * s + j]);
+        }
+        Table::F16(t) => {
+            let at = |e: usize| t.as_ptr().wrapping_add(e * f).cast::<u8>();
+            encode_levels(levels, f, m, &position, out, stride, col, at, |e, j| {
+                t[e * f + j].to_f32()
+            });
+        }
+    }
+}
+
+/// [`encode_tile_portable`] for a table whose entry `e` starts at `at(e)` and whose feature
+/// `j` of entry `e` is `feature(e, j)`.
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn encode_levels(
+    levels: &[FastLevel],
+    f: usize,
+    m: usize,
+    position: &impl Fn(usize) -> [f32; 3],
+    out: &mut [f32],
+    stride: usize,
+    col: usize,
+    at: impl Fn(usize) -> *const u8,
+    feature: impl Fn(usize, usize) -> f32,
+) {
     for (l, level) in levels.iter().enumerate() {
         let fetch = |i: usize| {
             let c = level.corners(position(i));
             for &e in &c.0 {
-                prefetch(table.as_ptr().wrapping_add(e as usize * table_stride));
+                prefetch(at(e as usize));
             }
             c
         };
@@ -129,18 +194,18 @@ pub fn encode_tile_portable(
                 let mut a = [0f32; 8];
                 let mut b = [0f32; 8];
                 for k in 0..8 {
-                    let e = idx[k] as usize * table_stride;
-                    a[k] = w[k] * table[e];
-                    b[k] = w[k] * table[e + 1];
+                    let e = idx[k] as usize;
+                    a[k] = w[k] * feature(e, 0);
+                    b[k] = w[k] * feature(e, 1);
                 }
                 dst[0] = tree_sum(a);
                 dst[1] = tree_sum(b);
             } else {
                 dst.fill(0.0);
                 for k in 0..8 {
-                    let e = idx[k] as usize * table_stride;
+                    let e = idx[k] as usize;
                     for (j, d) in dst.iter_mut().enumerate() {
-                        *d += w[k] * table[e + j];
+                        *d += w[k] * feature(e, j);
                     }
                 }
             }
@@ -160,18 +225,22 @@ const LANES: usize = 8;
 
 /// The AVX2 form of [`encode_tile`] for two features per level, eight samples per register:
 /// lane `j` of every vector belongs to sample `j` of a group, so the cell, weights and hashes
-/// of eight samples take one instruction each; each corner's two features of four samples
-/// come with one 64-bit gather. Groups are software-pipelined like the portable loop: the
-/// table lines of group `g + AHEAD/8` are prefetched while group `g` is interpolated.
+/// of eight samples take one instruction each; each corner's two f32 features of four samples
+/// come with one 64-bit gather, or (`HALF`) its two half features of eight samples with one
+/// 32-bit gather and two conversions. Groups are software-pipelined like the portable loop:
+/// the table lines of group `g + AHEAD/8` are prefetched while group `g` is interpolated.
 ///
 /// # Safety
-/// The CPU has AVX2 and FMA; every corner index of `levels` times `table_stride`, plus 1, is
-/// inside `table` and below `i32::MAX`; `out` holds `m` rows of `stride` from `col` on.
+/// The CPU has AVX2 and FMA, and F16C when `HALF`; `base` is the table, entry `e` starting at
+/// byte `4 · e · table_stride` (an entry of two halves is 4 bytes: `table_stride` 1); every
+/// corner index of `levels` times `table_stride` is below `i32::MAX` and its entry's two
+/// features are inside the table; `out` holds `m` rows of `stride` from `col` on.
 #[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,fma")]
-unsafe fn encode_tile_avx2(
+#[target_feature(enable = "avx2,fma,f16c")]
+#[allow(clippy::too_many_arguments)]
+unsafe fn encode_tile_avx2<const HALF: bool>(
     levels: &[FastLevel],
-    table: &[f32],
+    base: *const f32,
     table_stride: usize,
     m: usize,
     position: impl Fn(usize) -> [f32; 3],
@@ -190,7 +259,6 @@ unsafe fn encode_tile_avx2(
         [xs[i], ys[i], zs[i]] = position(i);
     }
     let scale = _mm256_set1_epi32(table_stride as i32);
-    let base = table.as_ptr();
     // Lanes 0–3 and 4–7 of a weight vector, each repeated for the entry's two features.
     let (dup_lo, dup_hi) = (
         _mm256_setr_epi32(0, 0, 1, 1, 2, 2, 3, 3),
@@ -209,7 +277,11 @@ unsafe fn encode_tile_avx2(
                     )
                     .unwrap_or_else(|| scalar_corners_x8(level, xs, ys, zs, at))
             };
-            let idx = idx.map(|v| _mm256_mullo_epi32(v, scale));
+            let idx = if table_stride == 1 {
+                idx
+            } else {
+                idx.map(|v| _mm256_mullo_epi32(v, scale))
+            };
             // Corners k and k ^ 1 differ in the lowest hash bit, so they share a line: four
             // prefetches per sample.
             let mut lanes = [0i32; 4 * LANES];
@@ -228,8 +300,22 @@ unsafe fn encode_tile_avx2(
             // Per corner: (feature 0, feature 1) of samples 0–3 in `lo`, of 4–7 in `hi`,
             // weighted; summed over the corners in the portable loop's tree order.
             let products = |k: usize| {
-                // SAFETY: the caller guarantees the gathered entries are inside `table`.
+                // SAFETY: the caller guarantees the gathered entries are inside the table.
                 unsafe {
+                    if HALF {
+                        // Lanes hold (feature 0, feature 1) of samples 0–7 as two halves.
+                        let g = _mm256_i32gather_epi32::<4>(base.cast(), idx[k]);
+                        return (
+                            _mm256_mul_ps(
+                                _mm256_permutevar8x32_ps(w[k], dup_lo),
+                                _mm256_cvtph_ps(_mm256_castsi256_si128(g)),
+                            ),
+                            _mm256_mul_ps(
+                                _mm256_permutevar8x32_ps(w[k], dup_hi),
+                                _mm256_cvtph_ps(_mm256_extracti128_si256::<1>(g)),
+                            ),
+                        );
+                    }
                     let lo =
                         _mm256_i32gather_epi64::<4>(base.cast(), _mm256_castsi256_si128(idx[k]));
                     let hi = _mm256_i32gather_epi64::<4>(
@@ -337,8 +423,7 @@ pub fn forward(grid: &HashGrid, table: &[f32], positions: &[f32], out: &mut [f32
             encode_tile(
                 grid,
                 &levels,
-                table,
-                grid.features(),
+                Table::F32(table, grid.features()),
                 m,
                 |i| [p[3 * i], p[3 * i + 1], p[3 * i + 2]],
                 o,

@@ -5,6 +5,7 @@ use std::time::Instant;
 
 use rayon::prelude::*;
 
+use super::grid::Table;
 use super::mlp::{OUT_PAD, PreparedMlp, TILE, TileScratch, forward_tile};
 use crate::batch::{FACTOR_AT, QUERY_ROW};
 use crate::loss::activate;
@@ -23,7 +24,7 @@ pub fn add_infer_phase(i: usize, since: Instant) {
 
 /// Radiance of the packed query rows (`n · QUERY_ROW` floats) into `out` (`n · 3`), with the
 /// hash table `grid` and MLP weights `mlp` (the bias-corrected EMA weights for inference).
-pub fn infer(layout: &ModelLayout, grid: &[f32], mlp: &[f32], rows: &[f32], out: &mut [f32]) {
+pub fn infer(layout: &ModelLayout, grid: Table, mlp: &[f32], rows: &[f32], out: &mut [f32]) {
     let t_kernel = Instant::now();
     let prepared = PreparedMlp::new(&layout.layers, mlp);
     let network_out = network_outputs(layout, &prepared, grid, rows);
@@ -42,7 +43,7 @@ pub fn infer(layout: &ModelLayout, grid: &[f32], mlp: &[f32], rows: &[f32], out:
 pub fn network_outputs(
     layout: &ModelLayout,
     prepared: &PreparedMlp,
-    grid: &[f32],
+    grid: Table,
     rows: &[f32],
 ) -> Vec<f32> {
     let n = rows.len() / QUERY_ROW;
@@ -64,7 +65,6 @@ pub fn network_outputs(
                     layout,
                     &fast,
                     grid,
-                    layout.encoding.grid().map_or(1, |(g, _)| g.features()),
                     r,
                     QUERY_ROW,
                     &mut s.x,

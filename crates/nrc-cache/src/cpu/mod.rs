@@ -12,13 +12,11 @@ pub mod train;
 
 /// Encodes the packed rows `rows` (`row_len` floats each, the raw inputs first) into a tile's
 /// network inputs `x` (`k_in` per sample): the per-sample encodings, then the hash grid level
-/// by level from `table` (`table_stride` floats per entry, see [`grid::encode_tile`]). Returns
-/// the time spent in the hash grid.
+/// by level from `table` (see [`grid::encode_tile`]). Returns the time spent in the hash grid.
 pub fn encode_rows(
     layout: &crate::model::ModelLayout,
     levels: &[crate::encoding::hash_grid::FastLevel],
-    table: &[f32],
-    table_stride: usize,
+    table: grid::Table,
     rows: &[f32],
     row_len: usize,
     x: &mut [f32],
@@ -35,7 +33,6 @@ pub fn encode_rows(
             hg,
             levels,
             table,
-            table_stride,
             m,
             |i| {
                 let p = &rows[i * row_len + at..];

@@ -12,6 +12,8 @@
 //! its EMA is current at; the catch-up happens when the entry is next updated, and for all
 //! entries when inference weights are materialised or a snapshot is written.
 
+use burn::tensor::f16;
+
 use crate::config::AdamParams;
 
 /// Per-step constants of Adam and the EMA.
@@ -406,16 +408,44 @@ pub fn materialize_grid(
     materialize_grid_into(alpha, step, f, records, last, out);
 }
 
-/// [`materialize_grid`] into memory not yet initialised: writes every element of `out`
+/// A value type of the materialised inference table: `f32`, or `f16` (see
+/// [`crate::encoding::hash_grid::TablePrecision`]).
+pub trait TableValue: Copy + Send + Sync {
+    /// Whether the value is a half (the AVX2 loop converts eight at once).
+    const HALF: bool;
+    /// The value nearest `v` (halves clamp to ±65504 rather than overflow).
+    fn from_f32(v: f32) -> Self;
+}
+
+impl TableValue for f32 {
+    const HALF: bool = false;
+    #[inline(always)]
+    fn from_f32(v: f32) -> Self {
+        v
+    }
+}
+
+impl TableValue for f16 {
+    const HALF: bool = true;
+    #[inline(always)]
+    fn from_f32(v: f32) -> Self {
+        f16::from_f32(v.clamp(-HALF_MAX, HALF_MAX))
+    }
+}
+
+/// The largest finite half.
+const HALF_MAX: f32 = 65504.0;
+
+/// [`materialize_grid`] into memory not yet initialised, as `T`: writes every element of `out`
 /// (`last.len() · f` of them), so a fresh buffer needs no zero fill (whose page faults, on one
 /// thread, cost more than the pass itself on a 2^19 table).
-pub fn materialize_grid_into(
+pub fn materialize_grid_into<T: TableValue>(
     alpha: Option<f32>,
     step: u32,
     f: usize,
     records: &[f32],
     last: &[u32],
-    out: &mut [std::mem::MaybeUninit<f32>],
+    out: &mut [std::mem::MaybeUninit<T>],
 ) {
     assert_eq!(
         out.len(),
@@ -432,7 +462,7 @@ pub fn materialize_grid_into(
             .zip(records.chunks_exact(RECORD * f))
         {
             for (o, r) in o.iter_mut().zip(&r[..f]) {
-                o.write(*r);
+                o.write(T::from_f32(*r));
             }
         }
         return;
@@ -441,9 +471,9 @@ pub fn materialize_grid_into(
     let table = DecayTable::new(alpha);
     let mut done = 0;
     #[cfg(target_arch = "x86_64")]
-    if f == 2 && super::gemm::has_avx2_fma() {
-        // SAFETY: AVX2 was detected; the lengths of `records`, `last` and `out` were checked
-        // above.
+    if f == 2 && super::gemm::has_avx2_fma() && super::grid::has_f16c() {
+        // SAFETY: AVX2, FMA and F16C were detected; the lengths of `records`, `last` and `out`
+        // were checked above.
         done = unsafe { materialize_pairs_avx2(&table, step, inv, records, last, out) };
     }
     for e in done..last.len() {
@@ -454,7 +484,7 @@ pub fn materialize_grid_into(
 /// Entry `e` of [`materialize_grid_into`]: `(α^k e + (1 − α^k) w) · inv` per feature.
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
-fn materialize_entry(
+fn materialize_entry<T: TableValue>(
     table: &DecayTable,
     step: u32,
     inv: f32,
@@ -462,32 +492,33 @@ fn materialize_entry(
     e: usize,
     records: &[f32],
     last: &[u32],
-    out: &mut [std::mem::MaybeUninit<f32>],
+    out: &mut [std::mem::MaybeUninit<T>],
 ) {
     let ak = table.get(step - last[e]);
     let r = &records[e * RECORD * f..(e + 1) * RECORD * f];
     for j in 0..f {
-        out[e * f + j].write((ak * r[3 * f + j] + (1.0 - ak) * r[j]) * inv);
+        out[e * f + j].write(T::from_f32((ak * r[3 * f + j] + (1.0 - ak) * r[j]) * inv));
     }
 }
 
 /// The AVX2 form of [`materialize_grid_into`]'s loop for two features, four entries per
-/// register and the same operations in the same order (the same bits); a block of four with a
-/// catch-up `step − last` beyond the power table takes the scalar form. Returns how many
-/// leading entries it wrote (all but the last `len % 4`, which the caller's loop finishes).
+/// register and the same operations in the same order (the same bits; halves are clamped and
+/// rounded to nearest even, as [`TableValue::from_f32`]); a block of four with a catch-up
+/// `step − last` beyond the power table takes the scalar form. Returns how many leading
+/// entries it wrote (all but the last `len % 4`, which the caller's loop finishes).
 ///
 /// # Safety
-/// The CPU has AVX2; `records` holds `RECORD · 2` floats per entry of `last`, and `out` two
-/// per entry.
+/// The CPU has AVX2, FMA and F16C; `records` holds `RECORD · 2` floats per entry of `last`, and
+/// `out` two per entry.
 #[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,fma")]
-unsafe fn materialize_pairs_avx2(
+#[target_feature(enable = "avx2,fma,f16c")]
+unsafe fn materialize_pairs_avx2<T: TableValue>(
     table: &DecayTable,
     step: u32,
     inv: f32,
     records: &[f32],
     last: &[u32],
-    out: &mut [std::mem::MaybeUninit<f32>],
+    out: &mut [std::mem::MaybeUninit<T>],
 ) -> usize {
     use std::arch::x86_64::*;
     const REC: usize = RECORD * 2;
@@ -495,6 +526,7 @@ unsafe fn materialize_pairs_avx2(
     let limit = _mm_set1_epi32(DecayTable::LEN as i32 - 1);
     let inv_scalar = inv;
     let (one, inv) = (_mm256_set1_ps(1.0), _mm256_set1_ps(inv));
+    let (lowest, highest) = (_mm256_set1_ps(-HALF_MAX), _mm256_set1_ps(HALF_MAX));
     let pairs = _mm256_setr_epi32(0, 0, 1, 1, 2, 2, 3, 3);
     let mut e = 0;
     // SAFETY (whole loop): entries e..e + 4 exist in `last`, `records` and `out`.
@@ -539,7 +571,16 @@ unsafe fn materialize_pairs_avx2(
                 ),
                 inv,
             );
-            _mm256_storeu_ps(out.as_mut_ptr().add(e * 2).cast(), v);
+            let dst = out.as_mut_ptr().add(e * 2);
+            if T::HALF {
+                let v = _mm256_min_ps(_mm256_max_ps(v, lowest), highest);
+                _mm_storeu_si128(
+                    dst.cast(),
+                    _mm256_cvtps_ph::<_MM_FROUND_TO_NEAREST_INT>(v),
+                );
+            } else {
+                _mm256_storeu_ps(dst.cast(), v);
+            }
             e += 4;
         }
     }

@@ -111,8 +111,7 @@ fn forward_backward(
                 super::encode_rows(
                     layout,
                     &fast,
-                    grid_w,
-                    grid_stride,
+                    super::grid::Table::F32(grid_w, grid_stride),
                     rows_t,
                     TRAIN_ROW,
                     &mut s.x,
@@ -243,33 +242,40 @@ pub fn train_step(
             &xyz[2 * padded..],
         ];
         let by_level = &by_level;
-        rs.into_par_iter()
-            .zip(ls)
-            .enumerate()
-            .for_each(|(l, (rec, la))| {
-                SCRATCH.with_borrow_mut(|scratch| {
-                    let t_scatter = Instant::now();
-                    let mut adam_nanos = 0;
-                    let per_bin = |first: usize, gr: &mut [f32], touched: &mut [u64]| {
-                        let t_adam = Instant::now();
-                        let len = gr.len() / f;
-                        let rec = &mut rec[first * f * RECORD..(first + len) * f * RECORD];
-                        sparse_step(c, f, touched, rec, gr, &mut la[first..first + len]);
-                        adam_nanos += t_adam.elapsed().as_nanos() as u64;
-                    };
-                    let dout = &by_level[l * n * f..(l + 1) * n * f];
-                    match f {
-                        1 => scatter_binned::<1>(hg, l, xyz, dout, scratch, per_bin),
-                        2 => scatter_binned::<2>(hg, l, xyz, dout, scratch, per_bin),
-                        4 => scatter_binned::<4>(hg, l, xyz, dout, scratch, per_bin),
-                        8 => scatter_binned::<8>(hg, l, xyz, dout, scratch, per_bin),
-                        _ => panic!("unsupported features per level {f}"),
-                    }
-                    let all = t_scatter.elapsed().as_nanos() as u64;
-                    PHASE_NANOS[5].fetch_add(all - adam_nanos, Ordering::Relaxed);
-                    PHASE_NANOS[6].fetch_add(adam_nanos, Ordering::Relaxed);
-                });
+        let level_step = |l: usize, rec: &mut [f32], la: &mut [u32]| {
+            SCRATCH.with_borrow_mut(|scratch| {
+                let t_scatter = Instant::now();
+                let mut adam_nanos = 0;
+                let per_bin = |first: usize, gr: &mut [f32], touched: &mut [u64]| {
+                    let t_adam = Instant::now();
+                    let len = gr.len() / f;
+                    let rec = &mut rec[first * f * RECORD..(first + len) * f * RECORD];
+                    sparse_step(c, f, touched, rec, gr, &mut la[first..first + len]);
+                    adam_nanos += t_adam.elapsed().as_nanos() as u64;
+                };
+                let dout = &by_level[l * n * f..(l + 1) * n * f];
+                match f {
+                    1 => scatter_binned::<1>(hg, l, xyz, dout, scratch, per_bin),
+                    2 => scatter_binned::<2>(hg, l, xyz, dout, scratch, per_bin),
+                    4 => scatter_binned::<4>(hg, l, xyz, dout, scratch, per_bin),
+                    8 => scatter_binned::<8>(hg, l, xyz, dout, scratch, per_bin),
+                    _ => panic!("unsupported features per level {f}"),
+                }
+                let all = t_scatter.elapsed().as_nanos() as u64;
+                PHASE_NANOS[5].fetch_add(all - adam_nanos, Ordering::Relaxed);
+                PHASE_NANOS[6].fetch_add(adam_nanos, Ordering::Relaxed);
             });
+        };
+        // Largest levels first (longest-processing-time order): the tasks left when a thread
+        // runs out of work are the small coarse levels, so the threads finish together.
+        let mut tasks: Vec<_> = rs.into_iter().zip(ls).enumerate().collect();
+        tasks.sort_by_key(|(l, _)| std::cmp::Reverse(hg.levels[*l].entries));
+        let level_step = &level_step;
+        rayon::scope_fifo(|s| {
+            for (l, (rec, la)) in tasks {
+                s.spawn_fifo(move |_| level_step(l, rec, la));
+            }
+        });
     }
 
     add_phase(2, t_grid);

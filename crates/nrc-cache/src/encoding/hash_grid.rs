@@ -41,6 +41,25 @@ pub struct HashGridParams {
     pub base_resolution: f32,
     /// Growth factor b between levels.
     pub per_level_scale: f32,
+    /// Precision of the table the fused CPU inference reads.
+    pub inference_precision: TablePrecision,
+}
+
+/// Precision of the materialised inference table (training always keeps f32 weights, moments
+/// and EMA, and snapshots store f32).
+///
+/// `f16` rounds each bias-corrected EMA feature to the nearest half (clamped to ±65504): half
+/// the bytes, so the table's random reads hit the last-level cache more often (tiny-cuda-nn
+/// keeps its hash grid in half precision); answers move by about 2^-11 relative per feature.
+/// It applies to the fused CPU path; the other paths read f32.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum TablePrecision {
+    /// Single precision (the default): inference reads the values training produced.
+    #[default]
+    F32,
+    /// Half precision, rounded to nearest even.
+    F16,
 }
 
 /// One level of a hash grid, derived from [`HashGridParams`].

@@ -85,6 +85,7 @@ impl InputEncoding {
                     log2_hashmap_size,
                     base_resolution,
                     per_level_scale,
+                    inference_precision,
                     ..
                 } => {
                     let g = HashGrid::new(hash_grid::HashGridParams {
@@ -93,6 +94,7 @@ impl InputEncoding {
                         log2_hashmap_size: *log2_hashmap_size,
                         base_resolution: *base_resolution,
                         per_level_scale: *per_level_scale,
+                        inference_precision: *inference_precision,
                     });
                     let d = g.output_dims();
                     (EncodingKind::HashGrid(g), d)
