@@ -18,6 +18,7 @@ use rand_pcg::Pcg64Mcg;
 
 use crate::config::{CacheConfig, OutputActivation};
 use crate::encoding::InputEncoding;
+use crate::encoding::hash_grid::TablePrecision;
 
 /// Width of every hidden layer.
 pub const WIDTH: usize = 64;
@@ -106,10 +107,18 @@ impl ModelLayout {
         self.encoding.grid().map_or(0, |(g, _)| g.total_entries)
     }
 
-    /// Bytes held for training: weights, two Adam moments, EMA and gradient scratch (5 × 4 bytes
-    /// per parameter) plus one u32 per hash-table entry (the step its EMA is current at).
+    /// Bytes the cache holds: weights, two Adam moments and EMA (4 × 4 bytes per parameter),
+    /// one u32 per hash-table entry (the step its EMA is current at) and the inference weights
+    /// (the table at its inference precision, 2 or 4 bytes per parameter, and the MLP's).
     pub fn training_memory_bytes(&self) -> usize {
-        self.total_params * 5 * 4 + self.grid_entries() * 4
+        let table_bytes = match self.encoding.grid().map(|(g, _)| g.params.inference_precision) {
+            Some(TablePrecision::F16) => 2,
+            _ => 4,
+        };
+        self.total_params * 4 * 4
+            + self.grid_entries() * 4
+            + self.grid_params * table_bytes
+            + self.mlp_params() * 4
     }
 
     /// Initial parameters: hash table uniform in ±1e-4, weight matrices Xavier-uniform

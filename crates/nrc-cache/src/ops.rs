@@ -68,8 +68,7 @@ pub trait MlpOps: burn::backend::Backend {
 }
 
 /// The complete training state on the device: the two parameter groups with their Adam
-/// moments and raw EMA, the hash-table gradient scratch (zero between steps) and, per table
-/// entry, the step its EMA is current at (i32 storage of a u32 step count). The fused ops keep
+/// moments and raw EMA and, per table entry, the step its EMA is current at (i32 storage of a u32 step count). The fused ops keep
 /// the table as per-entry records `[w | m | v | ema]` in `grid` (see [`crate::cpu::optim`]),
 /// with `grid_m`, `grid_v`, `grid_ema` empty.
 #[derive(ExtensionType)]
@@ -82,8 +81,6 @@ pub struct TrainState<B: Backend> {
     pub grid_v: FloatTensor<B>,
     /// Unused by the fused ops (empty).
     pub grid_ema: FloatTensor<B>,
-    /// Gradient scratch of the table.
-    pub grid_grad: FloatTensor<B>,
     /// Step each table entry's EMA is current at `[entries]`.
     pub grid_last: IntTensor<B>,
     /// MLP weights `[W]`.
@@ -311,27 +308,25 @@ impl MlpOps for Flex {
 /// mlp_ema]` and the step table), runs `f`, and packs it again.
 fn with_flex_state<R>(
     state: TrainState<Flex>,
-    f: impl FnOnce(&mut [&mut [f32]; 6], &mut [u32]) -> R,
+    f: impl FnOnce(&mut [&mut [f32]; 5], &mut [u32]) -> R,
 ) -> (TrainState<Flex>, R) {
     let TrainState {
         grid,
         grid_m,
         grid_v,
         grid_ema,
-        grid_grad,
         grid_last,
         mlp,
         mlp_m,
         mlp_v,
         mlp_ema,
     } = state;
-    let mut tensors = [grid, grid_grad, mlp, mlp_m, mlp_v, mlp_ema].map(flex_owned_f32);
+    let mut tensors = [grid, mlp, mlp_m, mlp_v, mlp_ema].map(flex_owned_f32);
     let mut last = grid_last;
     let r = {
-        let [a, b, c, d, e, g] = &mut tensors;
+        let [a, c, d, e, g] = &mut tensors;
         let mut slices = [
             flex_mut_f32(a),
-            flex_mut_f32(b),
             flex_mut_f32(c),
             flex_mut_f32(d),
             flex_mut_f32(e),
@@ -339,14 +334,13 @@ fn with_flex_state<R>(
         ];
         f(&mut slices, flex_last_mut(&mut last))
     };
-    let [grid, grid_grad, mlp, mlp_m, mlp_v, mlp_ema] = tensors;
+    let [grid, mlp, mlp_m, mlp_v, mlp_ema] = tensors;
     (
         TrainState {
             grid,
             grid_m,
             grid_v,
             grid_ema,
-            grid_grad,
             grid_last: last,
             mlp,
             mlp_m,
@@ -408,13 +402,12 @@ impl NrcFusedOps for Flex {
     ) -> TrainOutcome<Self> {
         let rows = flex_f32(&batch);
         let (state, losses) = with_flex_state(state, |s, last| {
-            let [records, grid_grad, mlp, mlp_m, mlp_v, mlp_ema] = s;
+            let [records, mlp, mlp_m, mlp_v, mlp_ema] = s;
             let mut losses = Vec::with_capacity(spec.steps as usize);
             for k in 1..=spec.steps {
                 let c = cpu::optim::StepConstants::new(spec.adam, spec.ema, spec.first_step + k);
                 let grid_state = (spec.layout.grid_params > 0).then_some(cpu::train::GridState {
                     records,
-                    grad: grid_grad,
                     last: &mut *last,
                 });
                 let mlp_state = cpu::train::GroupState {

@@ -22,8 +22,6 @@ pub struct TensorState {
     pub grid_v: Tensor<1>,
     /// Raw EMA of the table.
     pub grid_ema: Tensor<1>,
-    /// Gradient scratch of the table (fused path; empty otherwise).
-    pub grid_grad: Tensor<1>,
     /// Step each table entry's EMA is current at (fused path).
     pub grid_last: Tensor<1, Int>,
     /// MLP weights.
@@ -73,7 +71,7 @@ pub fn tensor_vec(t: Tensor<1>) -> Vec<f32> {
 
 impl TensorState {
     /// Uploads a host state; every table entry's EMA is current at `step`. `packed = Some(F)`
-    /// stores the table as records with a gradient scratch (the fused path).
+    /// stores the table as records (the fused path).
     pub fn from_host(
         h: HostState,
         entries: usize,
@@ -81,7 +79,6 @@ impl TensorState {
         packed: Option<usize>,
         device: &Device,
     ) -> Self {
-        let grid_len = h.grid.len();
         let last = crate::cpu::huge::huge_vec(entries, step as i32);
         let (grid, grid_m, grid_v, grid_ema) = match packed {
             Some(f) => (
@@ -98,10 +95,6 @@ impl TensorState {
             grid_m: vec_tensor(grid_m, device),
             grid_v: vec_tensor(grid_v, device),
             grid_ema: vec_tensor(grid_ema, device),
-            grid_grad: vec_tensor(
-                crate::cpu::huge::huge_vec(if packed.is_some() { grid_len } else { 0 }, 0.0),
-                device,
-            ),
             grid_last: Tensor::from_data(
                 TensorData::new(last, [entries]),
                 TensorCreationOptions::new(device.clone()).with_dtype(DType::I32),
@@ -147,7 +140,6 @@ impl TensorState {
             grid_m: self.grid_m.into_dispatch(),
             grid_v: self.grid_v.into_dispatch(),
             grid_ema: self.grid_ema.into_dispatch(),
-            grid_grad: self.grid_grad.into_dispatch(),
             grid_last: self.grid_last.into_dispatch(),
             mlp: self.mlp.into_dispatch(),
             mlp_m: self.mlp_m.into_dispatch(),
@@ -164,7 +156,6 @@ impl TensorState {
             grid_m: Tensor::from_dispatch(s.grid_m),
             grid_v: Tensor::from_dispatch(s.grid_v),
             grid_ema: Tensor::from_dispatch(s.grid_ema),
-            grid_grad: Tensor::from_dispatch(s.grid_grad),
             grid_last: Tensor::from_dispatch(s.grid_last),
             mlp: Tensor::from_dispatch(s.mlp),
             mlp_m: Tensor::from_dispatch(s.mlp_m),

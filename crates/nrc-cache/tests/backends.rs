@@ -501,14 +501,61 @@ fn batch_hash_grid_scatter_matches_the_per_sample_reference() {
             );
         }
         assert!(batch.iter().filter(|v| **v != 0.0).count() > 1000);
-        for (i, (x, y)) in batch.iter().zip(&reference).enumerate() {
+        let binned = binned_gradient(&grid, &pos, &dout);
+        for (i, ((x, y), z)) in batch.iter().zip(&reference).zip(&binned).enumerate() {
             assert_eq!(
                 x.to_bits(),
                 y.to_bits(),
                 "log2T {log2t}, value {i}: {x} vs {y}"
             );
+            assert_eq!(
+                z.to_bits(),
+                y.to_bits(),
+                "log2T {log2t}, binned value {i}: {z} vs {y}"
+            );
         }
     }
+}
+
+/// The table gradient as the training step forms it: level by level with
+/// [`nrc_cache::cpu::grid::scatter_binned`], each bin copied out and cleared as the sparse
+/// update does; checks that every entry with a nonzero gradient is marked referenced (a
+/// referenced entry's sum may be zero: corners with weight zero on the cube's faces).
+fn binned_gradient(
+    grid: &nrc_cache::encoding::hash_grid::HashGrid,
+    pos: &[f32],
+    dout: &[f32],
+) -> Vec<f32> {
+    use nrc_cache::cpu::grid::{BinScratch, scatter_binned};
+    let m = pos.len() / 3;
+    let d = grid.output_dims();
+    let padded = m.next_multiple_of(8);
+    let axes: Vec<Vec<f32>> = (0..3)
+        .map(|a| {
+            let mut v: Vec<f32> = (0..m).map(|i| pos[3 * i + a]).collect();
+            v.resize(padded, 0.0);
+            v
+        })
+        .collect();
+    let xyz = [&axes[0][..], &axes[1][..], &axes[2][..]];
+    let mut out = vec![0f32; grid.total_entries * 2];
+    let mut scratch = BinScratch::default();
+    for (l, level) in grid.levels.iter().enumerate() {
+        let level_dout: Vec<f32> = (0..m)
+            .flat_map(|i| [dout[i * d + 2 * l], dout[i * d + 2 * l + 1]])
+            .collect();
+        let base = level.offset * 2;
+        scatter_binned::<2>(grid, l, xyz, &level_dout, &mut scratch, |first, g, touched| {
+            for (e, pair) in g.chunks_exact_mut(2).enumerate() {
+                let bit = touched[e / 64] >> (e % 64) & 1 == 1;
+                assert!(bit || pair == [0.0, 0.0], "level {l}, entry {}", first + e);
+                out[base + 2 * (first + e)..][..2].copy_from_slice(pair);
+            }
+            g.fill(0.0);
+            touched.fill(0);
+        });
+    }
+    out
 }
 
 /// The per-sample encodings of a whole tile (one-blob a column at a time) give the same bits as

@@ -47,14 +47,12 @@ pub struct GroupState<'a> {
     pub ema: &'a mut [f32],
 }
 
-/// Hash-table state: the per-entry records (see [`super::optim::RECORD`]), the gradient
-/// scratch (all zeros between steps) and the step each entry's EMA is current at.
+/// Hash-table state: the per-entry records (see [`super::optim::RECORD`]) and the step each
+/// entry's EMA is current at.
 #[derive(Debug)]
 pub struct GridState<'a> {
     /// Records `[w | m | v | ema]` per entry.
     pub records: &'a mut [f32],
-    /// Gradient accumulator, zero between steps.
-    pub grad: &'a mut [f32],
     /// Step each entry's EMA is current at.
     pub last: &'a mut [u32],
 }
