@@ -248,7 +248,9 @@ pub fn hash_grid_kernel(min_time: Duration) -> [[[f64; 2]; 2]; 3] {
             .for_each(|v| *v = rng.random_range(-1.0..1.0));
         let halves: Vec<f16> = if si == 1 {
             let mut h = crate::cpu::huge::huge_vec(table.len(), f16::ZERO);
-            h.iter_mut().zip(&table).for_each(|(h, v)| *h = f16::from_f32(*v));
+            h.iter_mut()
+                .zip(&table)
+                .for_each(|(h, v)| *h = f16::from_f32(*v));
             table = Vec::new();
             h
         } else {
@@ -313,8 +315,8 @@ pub fn run(options: &BenchOptions) -> Vec<BenchFigure> {
         "f16 table (inference)",
         "training records",
     ]
-        .into_iter()
-        .enumerate()
+    .into_iter()
+    .enumerate()
     {
         println!(
             "hash-grid encode, one thread, {what}: {:.0} ns/query with random positions, {:.0} at one position (kernel); portable loop {:.0} / {:.0}",

@@ -11,8 +11,8 @@ use serde::ser::SerializeMap;
 use serde::{Deserialize, Deserializer, Serialize, Serializer};
 use serde_json::{Map, Value};
 
-use crate::encoding::hash_grid::TablePrecision;
 use crate::config::{NestedEncoding, OptimizerConfig, adam_eps, beta1, beta2, ema_decay, lr, one};
+use crate::encoding::hash_grid::TablePrecision;
 
 /// Splits a path-tracked error into (field path, message), joining an inner `@path@` prefix.
 pub(crate) fn split_error(outer: &str, message: &str) -> (String, String) {

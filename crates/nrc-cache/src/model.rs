@@ -111,7 +111,11 @@ impl ModelLayout {
     /// one u32 per hash-table entry (the step its EMA is current at) and the inference weights
     /// (the table at its inference precision, 2 or 4 bytes per parameter, and the MLP's).
     pub fn training_memory_bytes(&self) -> usize {
-        let table_bytes = match self.encoding.grid().map(|(g, _)| g.params.inference_precision) {
+        let table_bytes = match self
+            .encoding
+            .grid()
+            .map(|(g, _)| g.params.inference_precision)
+        {
             Some(TablePrecision::F16) => 2,
             _ => 4,
         };

@@ -383,7 +383,14 @@ fn materialize_table<T: cpu::optim::TableValue>(
         outs.into_par_iter().enumerate().for_each(|(l, o)| {
             let level = &hg.levels[l];
             let (a, b) = (level.offset, level.offset + level.entries as usize);
-            cpu::optim::materialize_grid_into(ema, step, f, &records[a * rec..b * rec], &last[a..b], o);
+            cpu::optim::materialize_grid_into(
+                ema,
+                step,
+                f,
+                &records[a * rec..b * rec],
+                &last[a..b],
+                o,
+            );
         });
     } else {
         assert_eq!(n, 0, "a table without a hash grid");

@@ -545,15 +545,22 @@ fn binned_gradient(
             .flat_map(|i| [dout[i * d + 2 * l], dout[i * d + 2 * l + 1]])
             .collect();
         let base = level.offset * 2;
-        scatter_binned::<2>(grid, l, xyz, &level_dout, &mut scratch, |first, g, touched| {
-            for (e, pair) in g.chunks_exact_mut(2).enumerate() {
-                let bit = touched[e / 64] >> (e % 64) & 1 == 1;
-                assert!(bit || pair == [0.0, 0.0], "level {l}, entry {}", first + e);
-                out[base + 2 * (first + e)..][..2].copy_from_slice(pair);
-            }
-            g.fill(0.0);
-            touched.fill(0);
-        });
+        scatter_binned::<2>(
+            grid,
+            l,
+            xyz,
+            &level_dout,
+            &mut scratch,
+            |first, g, touched| {
+                for (e, pair) in g.chunks_exact_mut(2).enumerate() {
+                    let bit = touched[e / 64] >> (e % 64) & 1 == 1;
+                    assert!(bit || pair == [0.0, 0.0], "level {l}, entry {}", first + e);
+                    out[base + 2 * (first + e)..][..2].copy_from_slice(pair);
+                }
+                g.fill(0.0);
+                touched.fill(0);
+            },
+        );
     }
     out
 }

@@ -324,11 +324,18 @@ fn half_table_is_the_f32_table_rounded_to_nearest() {
             let h = unsafe { h.assume_init() };
             let want = f16::from_f32(x.clamp(-65504.0, 65504.0));
             assert!(h.is_finite(), "value {i}: {x} became {h}");
-            assert_eq!(h.to_bits(), want.to_bits(), "value {i}: {x} gave {h}, not {want}");
+            assert_eq!(
+                h.to_bits(),
+                want.to_bits(),
+                "value {i}: {x} gave {h}, not {want}"
+            );
             clamped += usize::from(x.abs() > 65504.0);
             subnormal += usize::from(h.to_bits() & 0x7c00 == 0 && h.to_bits() & 0x03ff != 0);
         }
         // The data exercise both ends of the half range.
-        assert!(clamped > 10 && subnormal > 10, "{clamped} clamped, {subnormal} subnormal");
+        assert!(
+            clamped > 10 && subnormal > 10,
+            "{clamped} clamped, {subnormal} subnormal"
+        );
     }
 }

@@ -137,9 +137,16 @@ pub fn encode_tile(
                 Table::F32(t, s) => {
                     encode_tile_avx2::<false>(levels, t.as_ptr(), s, m, position, out, stride, col)
                 }
-                Table::F16(t) => {
-                    encode_tile_avx2::<true>(levels, t.as_ptr().cast(), 1, m, position, out, stride, col)
-                }
+                Table::F16(t) => encode_tile_avx2::<true>(
+                    levels,
+                    t.as_ptr().cast(),
+                    1,
+                    m,
+                    position,
+                    out,
+                    stride,
+                    col,
+                ),
             }
         }
         return;
@@ -169,7 +176,9 @@ pub fn encode_tile_portable(
     match table {
         Table::F32(t, s) => {
             let at = |e: usize| t.as_ptr().wrapping_add(e * s).cast::<u8>();
-            encode_levels(levels, f, m, &position, out, stride, col, at, |e, j| t[e * s + j]);
+            encode_levels(levels, f, m, &position, out, stride, col, at, |e, j| {
+                t[e * s + j]
+            });
         }
         Table::F16(t) => {
             let at = |e: usize| t.as_ptr().wrapping_add(e * f).cast::<u8>();
@@ -574,7 +583,10 @@ pub fn scatter_binned<const F: usize>(
     assert_eq!(grid.features(), F, "features per level");
     let n = dout.len() / F;
     let groups = n.div_ceil(LANES);
-    assert!(xyz.iter().all(|a| a.len() >= groups * LANES), "positions too short");
+    assert!(
+        xyz.iter().all(|a| a.len() >= groups * LANES),
+        "positions too short"
+    );
     let level = &grid.levels[l];
     let entries = level.entries as usize;
     let fast = FastLevel::new(level);

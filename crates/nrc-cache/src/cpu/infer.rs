@@ -61,15 +61,8 @@ pub fn network_outputs(
             |s, (o, r)| {
                 let m = r.len() / QUERY_ROW;
                 let t_encode = Instant::now();
-                let grid_time = super::encode_rows(
-                    layout,
-                    &fast,
-                    grid,
-                    r,
-                    QUERY_ROW,
-                    &mut s.x,
-                    k_in,
-                );
+                let grid_time =
+                    super::encode_rows(layout, &fast, grid, r, QUERY_ROW, &mut s.x, k_in);
                 INFER_PHASE_NANOS[4].fetch_add(grid_time.as_nanos() as u64, Ordering::Relaxed);
                 add_infer_phase(0, t_encode);
                 let t_mlp = Instant::now();

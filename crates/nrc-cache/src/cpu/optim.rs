@@ -208,7 +208,9 @@ pub fn sparse_step_portable<const F: usize>(
     grad: &mut [f32],
     last: &mut [u32],
 ) {
-    drain_bits(touched, |e| update_entry::<F>(c, &c.decay, e, records, grad, last));
+    drain_bits(touched, |e| {
+        update_entry::<F>(c, &c.decay, e, records, grad, last)
+    });
 }
 
 /// Calls `f` with the index of every set bit of `bits`, in increasing order, and clears them.
@@ -574,10 +576,7 @@ unsafe fn materialize_pairs_avx2<T: TableValue>(
             let dst = out.as_mut_ptr().add(e * 2);
             if T::HALF {
                 let v = _mm256_min_ps(_mm256_max_ps(v, lowest), highest);
-                _mm_storeu_si128(
-                    dst.cast(),
-                    _mm256_cvtps_ph::<_MM_FROUND_TO_NEAREST_INT>(v),
-                );
+                _mm_storeu_si128(dst.cast(), _mm256_cvtps_ph::<_MM_FROUND_TO_NEAREST_INT>(v));
             } else {
                 _mm256_storeu_ps(dst.cast(), v);
             }

@@ -234,11 +234,7 @@ pub fn train_step(
                 *o = rows[i * TRAIN_ROW + grid_in + axis];
             }
         }
-        let xyz = [
-            &xyz[..padded],
-            &xyz[padded..2 * padded],
-            &xyz[2 * padded..],
-        ];
+        let xyz = [&xyz[..padded], &xyz[padded..2 * padded], &xyz[2 * padded..]];
         let by_level = &by_level;
         let level_step = |l: usize, rec: &mut [f32], la: &mut [u32]| {
             SCRATCH.with_borrow_mut(|scratch| {
