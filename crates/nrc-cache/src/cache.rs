@@ -236,7 +236,7 @@ impl RadianceCache {
             self.layout.output_activation
         ));
         s.push_str(&format!(
-            "parameters: {} (hash table {}, MLP {}), training memory {:.1} MiB\n",
+            "parameters: {} (hash table {}, MLP {}), memory {:.1} MiB (training state and inference copy)\n",
             self.param_count(),
             self.layout.grid_params,
             self.layout.mlp_params(),
