@@ -357,18 +357,24 @@ unsafe fn sparse_step_f2_avx2(
             store(es[3], _mm256_permute2f128_pd::<0x31>(u1, u3));
         }
     };
-    let mut group = [0usize; 4];
-    let mut n = 0;
-    drain_bits(touched, |e| {
-        group[n] = e;
-        n += 1;
-        if n == 4 {
-            update4(group, last, grad);
-            n = 0;
+    // The touched entries in increasing order, each group's records requested 64 entries
+    // (about 9 KiB of records) before they are updated: with the hardware prefetchers alone the
+    // loads of the records waited on memory (most of this loop's time, by `perf`); the software
+    // requests cut the update's time by 10–25 % (BENCHMARKS.md). The order, and so every bit of
+    // the result, is unchanged.
+    let mut order = Vec::with_capacity(touched.len() * 16);
+    drain_bits(touched, |e| order.push(e as u32));
+    const AHEAD_ENTRIES: usize = 64;
+    let groups = order.len() / 4;
+    for q in 0..groups {
+        for &e in order.iter().skip(4 * q + AHEAD_ENTRIES).take(4) {
+            super::grid::prefetch(rec.wrapping_add(8 * e as usize).cast_const());
         }
-    });
-    for &e in &group[..n] {
-        update_entry::<2>(c, table, e, records, grad, last);
+        let g = &order[4 * q..4 * q + 4];
+        update4([g[0], g[1], g[2], g[3]].map(|e| e as usize), last, grad);
+    }
+    for &e in &order[4 * groups..] {
+        update_entry::<2>(c, table, e as usize, records, grad, last);
     }
 }
 
