@@ -68,9 +68,9 @@ pub trait MlpOps: burn::backend::Backend {
 }
 
 /// The complete training state on the device: the two parameter groups with their Adam
-/// moments and raw EMA and, per table entry, the step its EMA is current at (i32 storage of a u32 step count). The fused ops keep
-/// the table as per-entry records `[w | m | v | ema]` in `grid` (see [`crate::cpu::optim`]),
-/// with `grid_m`, `grid_v`, `grid_ema` empty.
+/// moments and raw EMA and, per table entry, the step its EMA is current at (i32 storage of a
+/// u32 step count). The fused ops keep the table as per-entry records `[w | m | v | ema]` in
+/// `grid` (see [`crate::cpu::optim`]), with `grid_m`, `grid_v`, `grid_ema` empty.
 #[derive(ExtensionType)]
 pub struct TrainState<B: Backend> {
     /// Hash table records `[entries·4F]` (empty without a hash grid).
@@ -304,8 +304,8 @@ impl MlpOps for Flex {
     }
 }
 
-/// Unpacks a Flex training state into mutable slices (`[records, grad, mlp, mlp_m, mlp_v,
-/// mlp_ema]` and the step table), runs `f`, and packs it again.
+/// Unpacks a Flex training state into mutable slices (`[records, mlp, mlp_m, mlp_v, mlp_ema]`
+/// and the step table), runs `f`, and packs it again.
 fn with_flex_state<R>(
     state: TrainState<Flex>,
     f: impl FnOnce(&mut [&mut [f32]; 5], &mut [u32]) -> R,

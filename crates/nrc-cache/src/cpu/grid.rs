@@ -9,16 +9,10 @@ use burn::tensor::f16;
 
 use crate::encoding::hash_grid::{FastLevel, HashGrid};
 
-/// Hints the cache to fetch the line holding `p` (a no-op off x86-64).
+/// Hints the cache to fetch the line holding `p` into L1 (a no-op off x86-64).
 #[inline(always)]
 pub fn prefetch<T>(p: *const T) {
-    #[cfg(target_arch = "x86_64")]
-    // SAFETY: prefetching never faults, whatever the address.
-    unsafe {
-        std::arch::x86_64::_mm_prefetch::<{ std::arch::x86_64::_MM_HINT_T0 }>(p.cast());
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    let _ = p;
+    prefetch_hint::<3, T>(p); // _MM_HINT_T0
 }
 
 /// Hints the cache to fetch the line holding `p` into L2 (and the levels above it), not L1
@@ -28,10 +22,22 @@ pub fn prefetch<T>(p: *const T) {
 /// few L1 miss buffers while it waits on memory, so more of them are in flight.
 #[inline(always)]
 pub fn prefetch_l2<T>(p: *const T) {
+    prefetch_hint::<2, T>(p); // _MM_HINT_T1
+}
+
+#[cfg(target_arch = "x86_64")]
+const _: () = assert!(
+    std::arch::x86_64::_MM_HINT_T0 == 3 && std::arch::x86_64::_MM_HINT_T1 == 2,
+    "the hints above"
+);
+
+/// `prefetch` with the x86 hint `HINT`.
+#[inline(always)]
+fn prefetch_hint<const HINT: i32, T>(p: *const T) {
     #[cfg(target_arch = "x86_64")]
     // SAFETY: prefetching never faults, whatever the address.
     unsafe {
-        std::arch::x86_64::_mm_prefetch::<{ std::arch::x86_64::_MM_HINT_T1 }>(p.cast());
+        std::arch::x86_64::_mm_prefetch::<HINT>(p.cast());
     }
     #[cfg(not(target_arch = "x86_64"))]
     let _ = p;
