@@ -362,20 +362,28 @@ unsafe fn sparse_step_f2_avx2(
     // loads of the records waited on memory (most of this loop's time, by `perf`); the software
     // requests cut the update's time by 10–25 % (BENCHMARKS.md). The order, and so every bit of
     // the result, is unchanged.
-    let mut order = Vec::with_capacity(touched.len() * 16);
-    drain_bits(touched, |e| order.push(e as u32));
     const AHEAD_ENTRIES: usize = 64;
-    let groups = order.len() / 4;
-    for q in 0..groups {
-        for &e in order.iter().skip(4 * q + AHEAD_ENTRIES).take(4) {
-            super::grid::prefetch(rec.wrapping_add(8 * e as usize).cast_const());
+    ORDER.with_borrow_mut(|order| {
+        order.clear();
+        drain_bits(touched, |e| order.push(e as u32));
+        let groups = order.len() / 4;
+        for q in 0..groups {
+            for &e in order.iter().skip(4 * q + AHEAD_ENTRIES).take(4) {
+                super::grid::prefetch(rec.wrapping_add(8 * e as usize).cast_const());
+            }
+            let g = &order[4 * q..4 * q + 4];
+            update4([g[0], g[1], g[2], g[3]].map(|e| e as usize), last, grad);
         }
-        let g = &order[4 * q..4 * q + 4];
-        update4([g[0], g[1], g[2], g[3]].map(|e| e as usize), last, grad);
-    }
-    for &e in &order[4 * groups..] {
-        update_entry::<2>(c, table, e as usize, records, grad, last);
-    }
+        for &e in &order[4 * groups..] {
+            update_entry::<2>(c, table, e as usize, records, grad, last);
+        }
+    });
+}
+
+thread_local! {
+    /// Each thread's list of touched entries for [`sparse_step_f2_avx2`], kept between calls
+    /// (one call per bin, hundreds per step).
+    static ORDER: std::cell::RefCell<Vec<u32>> = const { std::cell::RefCell::new(Vec::new()) };
 }
 
 /// Brings every entry's EMA of one level up to `step` (`e ← α^k e + (1 − α^k) w`).
