@@ -499,15 +499,13 @@ impl NrcFusedOps for Flex {
         let n = rows.len() / crate::batch::QUERY_ROW;
         let mut out = vec![0f32; n * 3];
         let f = layout.encoding.grid().map_or(1, |(g, _)| g.features());
-        let halves = grid.as_slice::<f16>();
-        let floats = if halves.is_none() {
-            flex_f32(&grid)
-        } else {
-            Cow::Borrowed(&[][..])
-        };
-        let table = match halves {
+        let floats;
+        let table = match grid.as_slice::<f16>() {
             Some(h) => cpu::grid::Table::F16(h),
-            None => cpu::grid::Table::F32(&floats, f),
+            None => {
+                floats = flex_f32(&grid);
+                cpu::grid::Table::F32(&floats, f)
+            }
         };
         cpu::infer::infer(&layout, table, &flex_f32(&mlp), &rows, &mut out);
         flex_from(out, &[n, 3])

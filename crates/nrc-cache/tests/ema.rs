@@ -140,10 +140,14 @@ fn batch(n: usize, seed: u64) -> TrainingBatch {
 fn cache_inference_weights_are_the_closed_form_average() {
     let mut config = CacheConfig::hash_grid_preset();
     if let Some(NestedEncoding::HashGrid {
-        log2_hashmap_size, ..
+        log2_hashmap_size,
+        inference_precision,
+        ..
     }) = config.encoding.nested.first_mut()
     {
         *log2_hashmap_size = 12;
+        // The average itself, not its half-precision rounding (tested on its own below).
+        *inference_precision = nrc_cache::encoding::hash_grid::TablePrecision::F32;
     }
     if let nrc_cache::config::OptimizerConfig::EMA { decay, .. } = &mut config.optimizer {
         *decay = 0.8;
