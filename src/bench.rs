@@ -62,6 +62,15 @@ pub struct CacheBenchArgs {
     /// Skip the unfused and custom-op paths (slow) and the fused-vs-unfused ratios.
     #[arg(long)]
     pub no_compare: bool,
+
+    /// Measure these configurations (a preset name, `hashgrid` or `trianglewave`, or a JSON
+    /// file; repeatable) instead of both presets.
+    #[arg(long = "config", value_name = "CONFIG")]
+    pub configs: Vec<String>,
+
+    /// Batch sizes to measure (repeatable; default 16384 and 65536).
+    #[arg(long = "batch", value_name = "N", value_parser = clap::value_parser!(u32).range(1..=(1 << 22)))]
+    pub batches: Vec<u32>,
 }
 
 /// `nrc bench cache`: prints its table as it measures (nrc_cache::bench).
@@ -78,7 +87,20 @@ fn cache(a: &CacheBenchArgs) -> Result<()> {
         },
         min_time: std::time::Duration::from_millis(a.min_ms),
         compare_paths: !a.no_compare,
+        configs: a
+            .configs
+            .iter()
+            .map(|c| Ok((c.clone(), crate::cache_args::named_config(c)?)))
+            .collect::<Result<_>>()?,
         ..Default::default()
+    };
+    let options = nrc_cache::bench::BenchOptions {
+        batches: if a.batches.is_empty() {
+            options.batches
+        } else {
+            a.batches.iter().map(|&b| b as usize).collect()
+        },
+        ..options
     };
     nrc_cache::bench::run(&options);
     Ok(())

@@ -96,15 +96,21 @@ pub struct RadianceCacheArgs {
     pub sppc_no_normal_reject: bool,
 }
 
+/// A cache configuration named on the command line: a preset (`hashgrid`, `trianglewave`) or a
+/// JSON file.
+pub fn named_config(name: &str) -> Result<CacheConfig> {
+    Ok(match name {
+        "hashgrid" => CacheConfig::hash_grid_preset(),
+        "trianglewave" => CacheConfig::triangle_wave_preset(),
+        path => CacheConfig::from_file(&PathBuf::from(path))
+            .with_context(|| format!("--config {path}"))?,
+    })
+}
+
 impl RadianceCacheArgs {
     /// The configuration named by `--config`.
     pub fn config(&self) -> Result<CacheConfig> {
-        Ok(match self.config.as_str() {
-            "hashgrid" => CacheConfig::hash_grid_preset(),
-            "trianglewave" => CacheConfig::triangle_wave_preset(),
-            path => CacheConfig::from_file(&PathBuf::from(path))
-                .with_context(|| format!("--config {path}"))?,
-        })
+        named_config(&self.config)
     }
 
     /// The settings of cache methods, checked; `print` reports the device chosen.

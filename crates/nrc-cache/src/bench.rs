@@ -26,6 +26,8 @@ pub struct BenchOptions {
     pub min_time: Duration,
     /// Also measure the unfused and custom-op paths and the MLP alone (slow).
     pub compare_paths: bool,
+    /// Configurations to measure, by name; empty: the two presets.
+    pub configs: Vec<(String, CacheConfig)>,
 }
 
 impl Default for BenchOptions {
@@ -35,6 +37,7 @@ impl Default for BenchOptions {
             batches: vec![1 << 14, 1 << 16],
             min_time: Duration::from_secs(2),
             compare_paths: true,
+            configs: Vec::new(),
         }
     }
 }
@@ -293,10 +296,17 @@ pub fn hash_grid_kernel(min_time: Duration) -> [[[f64; 2]; 2]; 3] {
 
 /// Runs the benchmark, printing a table as it goes; returns the figures.
 pub fn run(options: &BenchOptions) -> Vec<BenchFigure> {
-    let presets = [
-        ("hashgrid", CacheConfig::hash_grid_preset()),
-        ("trianglewave", CacheConfig::triangle_wave_preset()),
-    ];
+    let presets = if options.configs.is_empty() {
+        vec![
+            ("hashgrid".to_string(), CacheConfig::hash_grid_preset()),
+            (
+                "trianglewave".to_string(),
+                CacheConfig::triangle_wave_preset(),
+            ),
+        ]
+    } else {
+        options.configs.clone()
+    };
     let mut figures = Vec::new();
     println!(
         "nrc-cache benchmark (threads: {}, AVX2+FMA kernels: {})",

@@ -71,6 +71,9 @@ pub enum NestedEncoding {
         per_level_scale: f32,
         /// Precision of the inference table (`"f32"` when absent, `"f16"`).
         inference_precision: TablePrecision,
+        /// Precision of the weights the training forward pass reads (`"f32"` when absent,
+        /// `"f16"`).
+        training_precision: TablePrecision,
     },
     /// One-blob encoding with `n_bins` bins per dimension; `wrap` for periodic inputs (azimuth).
     OneBlob {
@@ -560,6 +563,7 @@ impl CacheConfig {
                 base_resolution,
                 per_level_scale,
                 inference_precision,
+                training_precision,
                 ..
             } => Some(HashGridParams {
                 n_levels: *n_levels,
@@ -568,6 +572,7 @@ impl CacheConfig {
                 base_resolution: *base_resolution,
                 per_level_scale: *per_level_scale,
                 inference_precision: *inference_precision,
+                training_precision: *training_precision,
             }),
             _ => None,
         })

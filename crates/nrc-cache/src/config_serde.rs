@@ -69,6 +69,8 @@ struct HashGridFields {
     per_level_scale: f32,
     #[serde(default)]
     inference_precision: TablePrecision,
+    #[serde(default)]
+    training_precision: TablePrecision,
 }
 
 #[derive(Deserialize)]
@@ -113,6 +115,7 @@ impl<'de> Deserialize<'de> for NestedEncoding {
                     base_resolution: f.base_resolution,
                     per_level_scale: f.per_level_scale,
                     inference_precision: f.inference_precision,
+                    training_precision: f.training_precision,
                 }
             }
             "OneBlob" => {
@@ -159,6 +162,7 @@ impl Serialize for NestedEncoding {
                 base_resolution,
                 per_level_scale,
                 inference_precision,
+                training_precision,
             } => {
                 m.serialize_entry("otype", "HashGrid")?;
                 m.serialize_entry("n_dims_to_encode", n_dims_to_encode)?;
@@ -168,6 +172,7 @@ impl Serialize for NestedEncoding {
                 m.serialize_entry("base_resolution", base_resolution)?;
                 m.serialize_entry("per_level_scale", per_level_scale)?;
                 m.serialize_entry("inference_precision", inference_precision)?;
+                m.serialize_entry("training_precision", training_precision)?;
             }
             Self::OneBlob {
                 n_dims_to_encode,

@@ -108,20 +108,23 @@ impl ModelLayout {
     }
 
     /// Bytes the cache holds: weights, two Adam moments and EMA (4 × 4 bytes per parameter),
-    /// one u32 per hash-table entry (the step its EMA is current at) and the inference weights
-    /// (the table at its inference precision, 2 or 4 bytes per parameter, and the MLP's).
+    /// one u32 per hash-table entry (the step its EMA is current at), the half-precision copy of
+    /// the table the training forward reads (2 bytes per parameter, with
+    /// `"training_precision": "f16"`) and the inference weights (the table at its inference
+    /// precision, 2 or 4 bytes per parameter, and the MLP's).
     pub fn training_memory_bytes(&self) -> usize {
-        let table_bytes = match self
-            .encoding
-            .grid()
-            .map(|(g, _)| g.params.inference_precision)
-        {
+        let params = self.encoding.grid().map(|(g, _)| &g.params);
+        let inference_bytes = match params.map(|p| p.inference_precision) {
             Some(TablePrecision::F16) => 2,
             _ => 4,
         };
+        let forward_copy_bytes = match params.map(|p| p.training_precision) {
+            Some(TablePrecision::F16) => 2,
+            _ => 0,
+        };
         self.total_params * 4 * 4
             + self.grid_entries() * 4
-            + self.grid_params * table_bytes
+            + self.grid_params * (inference_bytes + forward_copy_bytes)
             + self.mlp_params() * 4
     }
 

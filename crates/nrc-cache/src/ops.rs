@@ -83,6 +83,10 @@ pub struct TrainState<B: Backend> {
     pub grid_ema: FloatTensor<B>,
     /// Step each table entry's EMA is current at `[entries]`.
     pub grid_last: IntTensor<B>,
+    /// The table's weights in half precision `[entries·F]`, which the fused training forward
+    /// reads with `"training_precision": "f16"` (kept equal to the records' weights, rounded, by
+    /// every update); empty otherwise, and rebuilt from the records when empty.
+    pub grid_half: FloatTensor<B>,
     /// MLP weights `[W]`.
     pub mlp: FloatTensor<B>,
     /// Adam first moment of the MLP.
@@ -305,10 +309,10 @@ impl MlpOps for Flex {
 }
 
 /// Unpacks a Flex training state into mutable slices (`[records, mlp, mlp_m, mlp_v, mlp_ema]`
-/// and the step table), runs `f`, and packs it again.
+/// and the step table) and the half-precision weights tensor, runs `f`, and packs it again.
 fn with_flex_state<R>(
     state: TrainState<Flex>,
-    f: impl FnOnce(&mut [&mut [f32]; 5], &mut [u32]) -> R,
+    f: impl FnOnce(&mut [&mut [f32]; 5], &mut [u32], &mut FlexTensor) -> R,
 ) -> (TrainState<Flex>, R) {
     let TrainState {
         grid,
@@ -316,6 +320,7 @@ fn with_flex_state<R>(
         grid_v,
         grid_ema,
         grid_last,
+        mut grid_half,
         mlp,
         mlp_m,
         mlp_v,
@@ -332,7 +337,7 @@ fn with_flex_state<R>(
             flex_mut_f32(e),
             flex_mut_f32(g),
         ];
-        f(&mut slices, flex_last_mut(&mut last))
+        f(&mut slices, flex_last_mut(&mut last), &mut grid_half)
     };
     let [grid, mlp, mlp_m, mlp_v, mlp_ema] = tensors;
     (
@@ -342,6 +347,7 @@ fn with_flex_state<R>(
             grid_v,
             grid_ema,
             grid_last: last,
+            grid_half,
             mlp,
             mlp_m,
             mlp_v,
@@ -349,6 +355,16 @@ fn with_flex_state<R>(
         },
         r,
     )
+}
+
+/// The half-precision weights of the records (`f` features per entry) in `t`: `t` itself when it
+/// already holds them (every update keeps it equal), else built from the records.
+fn flex_half_weights<'a>(t: &'a mut FlexTensor, records: &[f32], f: usize) -> &'a mut [f16] {
+    let n = records.len() / cpu::optim::RECORD;
+    if t.dtype() != DType::F16 || t.shape().num_elements() != n {
+        *t = FlexTensor::from_data(TensorData::new(cpu::optim::half_weights(f, records), [n]));
+    }
+    &mut t.storage_mut::<f16>()[..n]
 }
 
 /// The step table of a Flex state, read-only.
@@ -408,14 +424,19 @@ impl NrcFusedOps for Flex {
         spec: StepSpec,
     ) -> TrainOutcome<Self> {
         let rows = flex_f32(&batch);
-        let (state, losses) = with_flex_state(state, |s, last| {
+        let half_features = spec.layout.encoding.grid().and_then(|(hg, _)| {
+            (hg.params.training_precision == TablePrecision::F16).then_some(hg.features())
+        });
+        let (state, losses) = with_flex_state(state, |s, last, half| {
             let [records, mlp, mlp_m, mlp_v, mlp_ema] = s;
+            let mut half = half_features.map(|f| flex_half_weights(half, records, f));
             let mut losses = Vec::with_capacity(spec.steps as usize);
             for k in 1..=spec.steps {
                 let c = cpu::optim::StepConstants::new(spec.adam, spec.ema, spec.first_step + k);
                 let grid_state = (spec.layout.grid_params > 0).then_some(cpu::train::GridState {
                     records,
                     last: &mut *last,
+                    half: half.as_deref_mut(),
                 });
                 let mlp_state = cpu::train::GroupState {
                     w: mlp,
@@ -481,7 +502,7 @@ impl NrcFusedOps for Flex {
         ema: f32,
         step: u32,
     ) -> TrainState<Self> {
-        with_flex_state(state, |s, last| {
+        with_flex_state(state, |s, last, _| {
             if let Some((hg, _)) = layout.encoding.grid() {
                 cpu::optim::catch_up(ema, step, hg.features(), s[0], last);
             }

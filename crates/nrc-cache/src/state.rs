@@ -24,6 +24,9 @@ pub struct TensorState {
     pub grid_ema: Tensor<1>,
     /// Step each table entry's EMA is current at (fused path).
     pub grid_last: Tensor<1, Int>,
+    /// Half-precision copy of the table's weights for the fused training forward (built by the
+    /// first fused step that needs it; empty until then and on the other paths).
+    pub grid_half: Tensor<1>,
     /// MLP weights.
     pub mlp: Tensor<1>,
     /// Adam first moment of the MLP.
@@ -99,6 +102,7 @@ impl TensorState {
                 TensorData::new(last, [entries]),
                 TensorCreationOptions::new(device.clone()).with_dtype(DType::I32),
             ),
+            grid_half: vec_tensor(Vec::new(), device),
             mlp: vec_tensor(h.mlp, device),
             mlp_m: vec_tensor(h.mlp_m, device),
             mlp_v: vec_tensor(h.mlp_v, device),
@@ -141,6 +145,7 @@ impl TensorState {
             grid_v: self.grid_v.into_dispatch(),
             grid_ema: self.grid_ema.into_dispatch(),
             grid_last: self.grid_last.into_dispatch(),
+            grid_half: self.grid_half.into_dispatch(),
             mlp: self.mlp.into_dispatch(),
             mlp_m: self.mlp_m.into_dispatch(),
             mlp_v: self.mlp_v.into_dispatch(),
@@ -157,6 +162,7 @@ impl TensorState {
             grid_v: Tensor::from_dispatch(s.grid_v),
             grid_ema: Tensor::from_dispatch(s.grid_ema),
             grid_last: Tensor::from_dispatch(s.grid_last),
+            grid_half: Tensor::from_dispatch(s.grid_half),
             mlp: Tensor::from_dispatch(s.mlp),
             mlp_m: Tensor::from_dispatch(s.mlp_m),
             mlp_v: Tensor::from_dispatch(s.mlp_v),

@@ -462,6 +462,7 @@ fn preset_like_grid(log2t: u32) -> nrc_cache::encoding::hash_grid::HashGrid {
         base_resolution: 16.0,
         per_level_scale: 1.38191,
         inference_precision: Default::default(),
+        training_precision: Default::default(),
     })
 }
 

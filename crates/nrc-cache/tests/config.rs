@@ -114,6 +114,13 @@ fn malformed_documents_name_the_field() {
     assert!(m.contains("f16"), "the message lists the choices: {m}");
 
     let mut v = preset_json();
+    *v.pointer_mut("/encoding/nested/0/training_precision")
+        .unwrap() = "bf16".into();
+    let (f, m) = field_of(CacheConfig::from_json_str(&v.to_string()));
+    assert_eq!(f, "encoding.nested[0].training_precision", "{m}");
+    assert!(m.contains("f32"), "the message lists the choices: {m}");
+
+    let mut v = preset_json();
     v["network"]["n_neuronz"] = 64.into();
     let (f, m) = field_of(CacheConfig::from_json_str(&v.to_string()));
     assert!(f.starts_with("network"), "{f}: {m}");

@@ -1,6 +1,7 @@
 //! The weight EMA: its bias-corrected average equals the closed form
 //! `ê_t = Σ_{i≤t} (1 − α) α^(t−i) w_i / (1 − α^t)` of the weights after each step.
 
+use burn::tensor::f16;
 use nrc_cache::config::{AdamParams, NestedEncoding};
 use nrc_cache::cpu::optim::{
     StepConstants, catch_up, decay_pow, dense_step, materialize_dense, materialize_grid,
@@ -66,7 +67,15 @@ fn lazy_sparse_and_dense_ema_match_the_closed_form_on_a_toy_sequence() {
                 }
             }
         }
-        sparse_step(&c, f, &mut touched, &mut records, &mut grad, &mut last);
+        sparse_step(
+            &c,
+            f,
+            &mut touched,
+            &mut records,
+            &mut grad,
+            &mut last,
+            None,
+        );
         assert!(
             grad.iter().all(|g| *g == 0.0),
             "the step consumes the gradient"
@@ -181,13 +190,16 @@ fn cache_inference_weights_are_the_closed_form_average() {
 }
 
 /// The AVX2 sparse update (four entries of two features at once) gives the same bits as the
-/// portable loop: weights, moments, EMA, zeroed gradients, EMA step table and cleared bitmap,
-/// with non-finite gradients and an L2 term in the mix, with and without the EMA.
+/// portable loop: weights, moments, EMA, zeroed gradients, EMA step table, cleared bitmap and
+/// the half-precision copy of the weights (each updated entry's weights rounded as
+/// `half_weights` rounds them, clamped to ±65504; the other entries' halves untouched), with
+/// non-finite gradients, an L2 term and weights beyond the half range in the mix, with and
+/// without the EMA.
 #[test]
 fn avx2_sparse_step_matches_the_portable_loop() {
-    use nrc_cache::cpu::optim::{RECORD, sparse_step_portable};
-    if !nrc_cache::cpu::gemm::has_avx2_fma() {
-        println!("skipped: this CPU has no AVX2/FMA, so only the portable loop exists");
+    use nrc_cache::cpu::optim::{RECORD, half_weights, sparse_step_portable};
+    if !nrc_cache::cpu::gemm::has_avx2_fma() || !nrc_cache::cpu::grid::has_f16c() {
+        println!("skipped: this CPU has no AVX2/FMA/F16C, so only the portable loop exists");
         return;
     }
     let mut rng = Pcg64Mcg::seed_from_u64(3);
@@ -204,9 +216,14 @@ fn avx2_sparse_step_matches_the_portable_loop() {
         let c = StepConstants::new(adam, ema, step);
         let records: Vec<f32> = (0..entries * RECORD * f)
             .map(|i| match i % 8 {
-                4 | 5 => rng.random_range(0.0..2.0), // v ≥ 0
+                4 | 5 => rng.random_range(0.0..2.0),                 // v ≥ 0
+                0 | 1 if i % 13 == 0 => rng.random_range(-1e5..1e5), // beyond ±65504 too
                 _ => rng.random_range(-3.0..3.0),
             })
+            .collect();
+        // A stale half copy, so that an entry left alone is seen to keep its halves.
+        let half: Vec<f16> = (0..entries * f)
+            .map(|_| f16::from_f32(rng.random_range(-1.0..1.0)))
             .collect();
         let grad: Vec<f32> = (0..entries * f)
             .map(|i| match i % 97 {
@@ -223,17 +240,46 @@ fn avx2_sparse_step_matches_the_portable_loop() {
                 touched[e / 64] |= 1 << (e % 64);
             }
         }
-        let run = |avx: bool| {
-            let (mut r, mut g, mut l, mut t) =
-                (records.clone(), grad.clone(), last.clone(), touched.clone());
+        let run = |avx: bool, with_half: bool| {
+            let (mut r, mut g, mut l, mut t, mut h) = (
+                records.clone(),
+                grad.clone(),
+                last.clone(),
+                touched.clone(),
+                half.clone(),
+            );
+            let hs = with_half.then_some(&mut h[..]);
             if avx {
-                sparse_step(&c, f, &mut t, &mut r, &mut g, &mut l);
+                sparse_step(&c, f, &mut t, &mut r, &mut g, &mut l, hs);
             } else {
-                sparse_step_portable::<2>(&c, &mut t, &mut r, &mut g, &mut l);
+                sparse_step_portable::<2>(&c, &mut t, &mut r, &mut g, &mut l, hs);
             }
-            (r, g, l, t)
+            (r, g, l, t, h)
         };
-        let (a, b) = (run(true), run(false));
+        let (a, b) = (run(true, true), run(false, true));
+        let without = run(true, false);
+        assert_eq!(without.0, a.0, "the half copy changes the update");
+        assert_eq!(without.4, half, "no half copy given, none written");
+        let rounded = half_weights(f, &a.0);
+        for e in 0..entries {
+            let hit = touched[e / 64] >> (e % 64) & 1 == 1;
+            let want = if hit { &rounded } else { &half };
+            let span = e * f..(e + 1) * f;
+            let got = a.4[span.clone()].iter().zip(&b.4[span.clone()]);
+            for ((x, portable), w) in got.zip(&want[span]) {
+                assert_eq!(
+                    x.to_bits(),
+                    w.to_bits(),
+                    "ema {ema:?}: entry {e} (touched {hit}): half {x} vs {w}"
+                );
+                assert_eq!(
+                    x.to_bits(),
+                    portable.to_bits(),
+                    "entry {e}: AVX2 vs portable"
+                );
+            }
+        }
+        assert!(rounded.iter().all(|h| h.is_finite()), "halves clamp");
         assert_ne!(a.0, records, "the step changed nothing");
         let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
         for (i, (x, y)) in a.0.iter().zip(&b.0).enumerate() {

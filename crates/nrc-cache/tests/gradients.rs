@@ -34,6 +34,7 @@ fn small_grid() -> HashGrid {
         base_resolution: 4.0,
         per_level_scale: 2.0,
         inference_precision: Default::default(),
+        training_precision: Default::default(),
     })
 }
 
@@ -56,6 +57,7 @@ fn all_encodings() -> InputEncoding {
             base_resolution: 4.0,
             per_level_scale: 2.0,
             inference_precision: Default::default(),
+            training_precision: Default::default(),
         },
         NestedEncoding::OneBlob {
             n_dims_to_encode: 2,

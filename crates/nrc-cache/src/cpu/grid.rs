@@ -602,10 +602,12 @@ pub fn scatter_binned<const F: usize>(
     let s = scratch;
     s.starts.clear();
     s.starts.resize(bins + 1, 0);
+    let mut corners = ([[0u32; LANES]; 8], [[0f32; LANES]; 8]);
     for g in 0..groups {
-        let (idx, _) = group_corners(&fast, xyz, g * LANES, avx2);
+        group_corners(&fast, xyz, g * LANES, avx2, &mut corners);
+        let idx = &corners.0;
         for j in 0..LANES.min(n - g * LANES) {
-            for corner in &idx {
+            for corner in idx {
                 s.starts[(corner[j] - offset) as usize / BIN_ENTRIES + 1] += 1;
             }
         }
@@ -622,7 +624,8 @@ pub fn scatter_binned<const F: usize>(
     };
     let mut next = s.starts[..bins].to_vec();
     for g in 0..groups {
-        let (idx, w) = group_corners(&fast, xyz, g * LANES, avx2);
+        group_corners(&fast, xyz, g * LANES, avx2, &mut corners);
+        let (idx, w) = &corners;
         for j in 0..LANES.min(n - g * LANES) {
             let i = g * LANES + j;
             let d: [f32; F] = dout[i * F..(i + 1) * F].try_into().expect("F values");
@@ -666,31 +669,34 @@ pub fn scatter_binned<const F: usize>(
     }
 }
 
-/// Corner indices and weights of samples `at..at + 8` (positions one axis per slice), as
-/// `[corner][lane]`: eight at once with AVX2 where `avx2` says the CPU has it.
+/// Corner indices and weights of eight samples, as `[corner][lane]`.
+type GroupCorners = ([[u32; LANES]; 8], [[f32; LANES]; 8]);
+
+/// Writes the corner indices and weights of samples `at..at + 8` (positions one axis per
+/// slice) into `out`: eight at once with AVX2 where `avx2` says the CPU has it. (An out
+/// parameter: returned by value, the 512 bytes were copied by `memcpy` on every call.)
 #[inline(always)]
 fn group_corners(
     fast: &FastLevel,
     xyz: [&[f32]; 3],
     at: usize,
     avx2: bool,
-) -> ([[u32; LANES]; 8], [[f32; LANES]; 8]) {
+    out: &mut GroupCorners,
+) {
     #[cfg(target_arch = "x86_64")]
     if avx2 {
         // SAFETY: the caller detected AVX2 and FMA; the slices hold `at + 8` floats.
-        return unsafe { group_corners_avx2(fast, xyz, at) };
+        unsafe { group_corners_avx2(fast, xyz, at, out) };
+        return;
     }
     let _ = avx2;
-    let mut idx = [[0u32; LANES]; 8];
-    let mut w = [[0f32; LANES]; 8];
     for j in 0..LANES {
         let (ij, wj) = fast.corners([xyz[0][at + j], xyz[1][at + j], xyz[2][at + j]]);
         for k in 0..8 {
-            idx[k][j] = ij[k];
-            w[k][j] = wj[k];
+            out.0[k][j] = ij[k];
+            out.1[k][j] = wj[k];
         }
     }
-    (idx, w)
 }
 
 /// [`group_corners`] with [`FastLevel::corners_x8`].
@@ -703,7 +709,8 @@ unsafe fn group_corners_avx2(
     fast: &FastLevel,
     xyz: [&[f32]; 3],
     at: usize,
-) -> ([[u32; LANES]; 8], [[f32; LANES]; 8]) {
+    out: &mut GroupCorners,
+) {
     use std::arch::x86_64::*;
     assert!(xyz.iter().all(|a| a.len() >= at + LANES));
     // SAFETY: eight floats at `at` in each slice (checked above).
@@ -714,7 +721,6 @@ unsafe fn group_corners_avx2(
             None => scalar_corners_x8(fast, xyz[0], xyz[1], xyz[2], at),
         }
     };
-    let mut out = ([[0u32; LANES]; 8], [[0f32; LANES]; 8]);
     for k in 0..8 {
         // SAFETY: eight lanes into eight-element arrays.
         unsafe {
@@ -722,5 +728,4 @@ unsafe fn group_corners_avx2(
             _mm256_storeu_ps(out.1[k].as_mut_ptr(), w[k]);
         }
     }
-    out
 }

@@ -155,9 +155,29 @@ pub fn unpack_records(f: usize, records: &[f32]) -> [Vec<f32>; 4] {
     out
 }
 
+/// The weights of the records (`f` features per entry) rounded to half precision, as
+/// [`TableValue::from_f32`] rounds them: the table the training forward reads with
+/// `"training_precision": "f16"`.
+pub fn half_weights(f: usize, records: &[f32]) -> Vec<f16> {
+    use rayon::prelude::*;
+    const CHUNK: usize = 1 << 14;
+    let mut out = vec![f16::ZERO; records.len() / RECORD];
+    out.par_chunks_mut(CHUNK * f)
+        .zip(records.par_chunks(CHUNK * f * RECORD))
+        .for_each(|(o, r)| {
+            for (o, r) in o.chunks_exact_mut(f).zip(r.chunks_exact(RECORD * f)) {
+                for (o, w) in o.iter_mut().zip(&r[..f]) {
+                    *o = TableValue::from_f32(*w);
+                }
+            }
+        });
+    out
+}
+
 /// Sparse Adam + lazy EMA over one hash-grid level: for every entry whose bit is set in
 /// `touched`, updates its record (`f` features) from `grad` (which is zeroed), catches its EMA
-/// up and records the step in `last`. The bitmap is cleared.
+/// up and records the step in `last`; with `half`, also stores the new weights there rounded
+/// to half precision (as [`half_weights`]). The bitmap is cleared.
 pub fn sparse_step(
     c: &StepConstants,
     f: usize,
@@ -165,12 +185,16 @@ pub fn sparse_step(
     records: &mut [f32],
     grad: &mut [f32],
     last: &mut [u32],
+    half: Option<&mut [f16]>,
 ) {
+    if let Some(h) = &half {
+        assert_eq!(h.len(), last.len() * f, "one half per entry and feature");
+    }
     match f {
-        1 => sparse_step_f::<1>(c, touched, records, grad, last),
-        2 => sparse_step_f::<2>(c, touched, records, grad, last),
-        4 => sparse_step_f::<4>(c, touched, records, grad, last),
-        8 => sparse_step_f::<8>(c, touched, records, grad, last),
+        1 => sparse_step_f::<1>(c, touched, records, grad, last, half),
+        2 => sparse_step_f::<2>(c, touched, records, grad, last, half),
+        4 => sparse_step_f::<4>(c, touched, records, grad, last, half),
+        8 => sparse_step_f::<8>(c, touched, records, grad, last, half),
         _ => panic!("unsupported features per level {f}"),
     }
 }
@@ -184,19 +208,20 @@ fn sparse_step_f<const F: usize>(
     records: &mut [f32],
     grad: &mut [f32],
     last: &mut [u32],
+    half: Option<&mut [f16]>,
 ) {
     let entries = last.len();
     assert!(records.len() >= entries * RECORD * F && grad.len() >= entries * F);
     assert!(touched.len() * 64 <= entries.next_multiple_of(64));
     #[cfg(target_arch = "x86_64")]
-    if F == 2 && super::gemm::has_avx2_fma() {
-        // SAFETY: AVX2 was detected; every touched entry is below `entries` (the bitmap's
-        // bits beyond the last entry are never set by the scatter, and the indices are
-        // checked again inside), and the slices' lengths were checked above.
-        unsafe { sparse_step_f2_avx2(c, touched, records, grad, last) };
+    if F == 2 && super::gemm::has_avx2_fma() && super::grid::has_f16c() {
+        // SAFETY: AVX2, FMA and F16C were detected; every touched entry is below `entries`
+        // (the bitmap's bits beyond the last entry are never set by the scatter, and the
+        // indices are checked again inside), and the slices' lengths were checked above.
+        unsafe { sparse_step_f2_avx2(c, touched, records, grad, last, half) };
         return;
     }
-    sparse_step_portable::<F>(c, touched, records, grad, last);
+    sparse_step_portable::<F>(c, touched, records, grad, last, half);
 }
 
 /// The portable loop of [`sparse_step`] for `F` features (public for the test that compares it
@@ -207,9 +232,10 @@ pub fn sparse_step_portable<const F: usize>(
     records: &mut [f32],
     grad: &mut [f32],
     last: &mut [u32],
+    mut half: Option<&mut [f16]>,
 ) {
     drain_bits(touched, |e| {
-        update_entry::<F>(c, &c.decay, e, records, grad, last)
+        update_entry::<F>(c, &c.decay, e, records, grad, last, half.as_deref_mut())
     });
 }
 
@@ -225,7 +251,7 @@ fn drain_bits(bits: &mut [u64], mut f: impl FnMut(usize)) {
     }
 }
 
-/// Adam and the EMA catch-up of one table entry.
+/// Adam and the EMA catch-up of one table entry (and its half-precision weights).
 #[inline(always)]
 fn update_entry<const F: usize>(
     c: &StepConstants,
@@ -234,6 +260,7 @@ fn update_entry<const F: usize>(
     records: &mut [f32],
     grad: &mut [f32],
     last: &mut [u32],
+    half: Option<&mut [f16]>,
 ) {
     let k = c.step - last[e];
     last[e] = c.step;
@@ -253,6 +280,11 @@ fn update_entry<const F: usize>(
             r[3 * F + j] = ak * r[3 * F + j] + (alpha - ak) * w_old + (1.0 - alpha) * w;
         }
     }
+    if let Some(h) = half {
+        for (h, w) in h[e * F..(e + 1) * F].iter_mut().zip(&r[..F]) {
+            *h = TableValue::from_f32(*w);
+        }
+    }
 }
 
 /// [`sparse_step_portable`] for two features, four touched entries at a time: their records
@@ -263,15 +295,17 @@ fn update_entry<const F: usize>(
 /// entries takes the scalar update.
 ///
 /// # Safety
-/// The CPU has AVX2; `records` holds `8·last.len()` floats and `grad` `2·last.len()`.
+/// The CPU has AVX2 and F16C; `records` holds `8·last.len()` floats and `grad` `2·last.len()`
+/// (and `half`, if any, `2·last.len()` halves).
 #[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,fma")]
+#[target_feature(enable = "avx2,fma,f16c")]
 unsafe fn sparse_step_f2_avx2(
     c: &StepConstants,
     touched: &mut [u64],
     records: &mut [f32],
     grad: &mut [f32],
     last: &mut [u32],
+    mut half: Option<&mut [f16]>,
 ) {
     use std::arch::x86_64::*;
     let table = &c.decay;
@@ -288,8 +322,9 @@ unsafe fn sparse_step_f2_avx2(
     let (step_size, inv_bc2, eps) = (set(c.step_size), set(c.inv_bc2), set(a.epsilon));
     let (alpha_v, one_minus_alpha) = (set(alpha), set(1.0 - alpha));
     let zero = _mm256_setzero_ps();
+    let (half_lowest, half_highest) = (set(-HALF_MAX), set(HALF_MAX));
     let rec = records.as_mut_ptr();
-    let update4 = |es: [usize; 4], last: &mut [u32], grad: &mut [f32]| {
+    let update4 = |es: [usize; 4], last: &mut [u32], grad: &mut [f32], half: Option<&mut [f16]>| {
         let mut ak = [0f32; 4];
         let mut g = [0f64; 4];
         for (q, &e) in es.iter().enumerate() {
@@ -328,6 +363,17 @@ unsafe fn sparse_step_f2_avx2(
                 _mm256_add_ps(_mm256_sqrt_ps(_mm256_mul_ps(v, inv_bc2)), eps),
             );
             let w_new = _mm256_blendv_ps(w, _mm256_sub_ps(w, upd), finite(upd));
+            if let Some(h) = half {
+                // The four entries' two weights as halves, clamped and rounded to nearest even
+                // as `TableValue::from_f32`.
+                let clamped = _mm256_min_ps(_mm256_max_ps(w_new, half_lowest), half_highest);
+                let pairs = _mm256_cvtps_ph::<_MM_FROUND_TO_NEAREST_INT>(clamped);
+                let h = bytemuck::cast_slice_mut::<f16, u32>(h);
+                h[es[0]] = _mm_extract_epi32::<0>(pairs) as u32;
+                h[es[1]] = _mm_extract_epi32::<1>(pairs) as u32;
+                h[es[2]] = _mm_extract_epi32::<2>(pairs) as u32;
+                h[es[3]] = _mm_extract_epi32::<3>(pairs) as u32;
+            }
             let e = if c.ema.is_some() {
                 _mm256_add_ps(
                     _mm256_add_ps(
@@ -372,10 +418,23 @@ unsafe fn sparse_step_f2_avx2(
                 super::grid::prefetch(rec.wrapping_add(8 * e as usize).cast_const());
             }
             let g = &order[4 * q..4 * q + 4];
-            update4([g[0], g[1], g[2], g[3]].map(|e| e as usize), last, grad);
+            update4(
+                [g[0], g[1], g[2], g[3]].map(|e| e as usize),
+                last,
+                grad,
+                half.as_deref_mut(),
+            );
         }
         for &e in &order[4 * groups..] {
-            update_entry::<2>(c, table, e as usize, records, grad, last);
+            update_entry::<2>(
+                c,
+                table,
+                e as usize,
+                records,
+                grad,
+                last,
+                half.as_deref_mut(),
+            );
         }
     });
 }

@@ -5,6 +5,7 @@
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Instant;
 
+use burn::tensor::f16;
 use rayon::prelude::*;
 
 use std::cell::RefCell;
@@ -47,14 +48,18 @@ pub struct GroupState<'a> {
     pub ema: &'a mut [f32],
 }
 
-/// Hash-table state: the per-entry records (see [`super::optim::RECORD`]) and the step each
-/// entry's EMA is current at.
+/// Hash-table state: the per-entry records (see [`super::optim::RECORD`]), the step each
+/// entry's EMA is current at, and optionally the weights in half precision.
 #[derive(Debug)]
 pub struct GridState<'a> {
     /// Records `[w | m | v | ema]` per entry.
     pub records: &'a mut [f32],
     /// Step each entry's EMA is current at.
     pub last: &'a mut [u32],
+    /// The weights rounded to half precision (`F` per entry, equal to
+    /// [`super::optim::half_weights`] of the records): when present, the forward pass reads
+    /// them instead of the records, and the update keeps them equal.
+    pub half: Option<&'a mut [f16]>,
 }
 
 /// Loss settings of a step.
@@ -66,13 +71,12 @@ pub struct LossSettings {
     pub epsilon: f32,
 }
 
-/// Phase A of a step, parallel over tiles: forward, loss and backward of every tile. Returns
-/// the summed loss, the MLP weight gradients, and ∂L/∂(hash-grid columns) `[n][L·F]`.
-/// `grid_w` holds entry `e`'s features at `grid_w[e·grid_stride..]`.
+/// Phase A of a step, parallel over tiles: forward, loss and backward of every tile, the hash
+/// grid read from `table`. Returns the summed loss, the MLP weight gradients, and
+/// ∂L/∂(hash-grid columns) `[n][L·F]`.
 fn forward_backward(
     layout: &ModelLayout,
-    grid_w: &[f32],
-    grid_stride: usize,
+    table: super::grid::Table,
     mlp_w: &[f32],
     rows: &[f32],
     loss: LossSettings,
@@ -106,15 +110,7 @@ fn forward_backward(
             |(mut loss_acc, mut grad, mut s), (rows_t, dxg_t)| {
                 let m = rows_t.len() / TRAIN_ROW;
                 let t_encode = Instant::now();
-                super::encode_rows(
-                    layout,
-                    &fast,
-                    super::grid::Table::F32(grid_w, grid_stride),
-                    rows_t,
-                    TRAIN_ROW,
-                    &mut s.x,
-                    k_in,
-                );
+                super::encode_rows(layout, &fast, table, rows_t, TRAIN_ROW, &mut s.x, k_in);
                 add_phase(0, t_encode);
                 let t_mlp = Instant::now();
                 forward_tile(&prepared, m, &mut s);
@@ -164,7 +160,8 @@ pub fn gradients(
 ) -> (f64, Vec<f32>, Vec<f32>) {
     let n = rows.len() / TRAIN_ROW;
     let f = layout.encoding.grid().map_or(1, |(g, _)| g.features());
-    let (loss_sum, mgrad, dxg) = forward_backward(layout, grid_w, f, mlp_w, rows, loss);
+    let table = super::grid::Table::F32(grid_w, f);
+    let (loss_sum, mgrad, dxg) = forward_backward(layout, table, mlp_w, rows, loss);
     let mut mlp = vec![0f32; mlp_w.len()];
     mgrad.write_flat(&layout.layers, &mut mlp);
     let mut grid = vec![0f32; grid_w.len()];
@@ -203,17 +200,29 @@ pub fn train_step(
     let n = rows.len() / TRAIN_ROW;
     let grid_part = layout.encoding.grid();
     let (grid_dims, grid_in) = grid_part.map_or((0, 0), |(g, p)| (g.output_dims(), p.in_offset));
-    let grid_w: &[f32] = grid.as_ref().map_or(&[], |g| &*g.records);
     let stride = grid_part.map_or(1, |(g, _)| g.features() * super::optim::RECORD);
-    let (loss_sum, mgrad, dxg) = forward_backward(layout, grid_w, stride, mlp.w, rows, loss);
+    let table = match &grid {
+        Some(GridState { half: Some(h), .. }) => super::grid::Table::F16(h),
+        Some(g) => super::grid::Table::F32(g.records, stride),
+        None => super::grid::Table::F32(&[], stride),
+    };
+    let (loss_sum, mgrad, dxg) = forward_backward(layout, table, mlp.w, rows, loss);
 
     // Phase C: hash-grid scatter + sparse Adam/EMA, one task per level.
     let t_grid = Instant::now();
     if let (Some(g), Some((hg, _))) = (grid, grid_part) {
         let f = hg.features();
-        let GridState { records, last, .. } = g;
+        let GridState {
+            records,
+            last,
+            half,
+        } = g;
         let rs = split_levels(hg, f * RECORD, records);
         let ls = split_levels(hg, 1, last);
+        let hs: Vec<Option<&mut [f16]>> = match half {
+            Some(h) => split_levels(hg, f, h).into_iter().map(Some).collect(),
+            None => (0..hg.levels.len()).map(|_| None).collect(),
+        };
         // Level-major copies of the gradient columns and compact positions, so each level's
         // pass streams through ~130 KiB + 200 KiB instead of strided rows.
         let mut by_level = vec![0f32; n * grid_dims];
@@ -236,7 +245,7 @@ pub fn train_step(
         }
         let xyz = [&xyz[..padded], &xyz[padded..2 * padded], &xyz[2 * padded..]];
         let by_level = &by_level;
-        let level_step = |l: usize, rec: &mut [f32], la: &mut [u32]| {
+        let level_step = |l: usize, rec: &mut [f32], la: &mut [u32], mut hl: Option<&mut [f16]>| {
             SCRATCH.with_borrow_mut(|scratch| {
                 let t_scatter = Instant::now();
                 let mut adam_nanos = 0;
@@ -244,7 +253,10 @@ pub fn train_step(
                     let t_adam = Instant::now();
                     let len = gr.len() / f;
                     let rec = &mut rec[first * f * RECORD..(first + len) * f * RECORD];
-                    sparse_step(c, f, touched, rec, gr, &mut la[first..first + len]);
+                    let half = hl
+                        .as_deref_mut()
+                        .map(|h| &mut h[first * f..(first + len) * f]);
+                    sparse_step(c, f, touched, rec, gr, &mut la[first..first + len], half);
                     adam_nanos += t_adam.elapsed().as_nanos() as u64;
                 };
                 let dout = &by_level[l * n * f..(l + 1) * n * f];
@@ -262,12 +274,12 @@ pub fn train_step(
         };
         // Largest levels first (longest-processing-time order): the tasks left when a thread
         // runs out of work are the small coarse levels, so the threads finish together.
-        let mut tasks: Vec<_> = rs.into_iter().zip(ls).enumerate().collect();
+        let mut tasks: Vec<_> = rs.into_iter().zip(ls).zip(hs).enumerate().collect();
         tasks.sort_by_key(|(l, _)| std::cmp::Reverse(hg.levels[*l].entries));
         let level_step = &level_step;
         rayon::scope_fifo(|s| {
-            for (l, (rec, la)) in tasks {
-                s.spawn_fifo(move |_| level_step(l, rec, la));
+            for (l, ((rec, la), hl)) in tasks {
+                s.spawn_fifo(move |_| level_step(l, rec, la, hl));
             }
         });
     }

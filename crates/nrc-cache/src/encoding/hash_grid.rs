@@ -43,15 +43,21 @@ pub struct HashGridParams {
     pub per_level_scale: f32,
     /// Precision of the table the fused CPU inference reads.
     pub inference_precision: TablePrecision,
+    /// Precision of the weights the fused CPU training forward pass reads (Adam's master
+    /// weights, moments and EMA stay f32).
+    pub training_precision: TablePrecision,
 }
 
-/// Precision of the materialised inference table (training always keeps f32 weights, moments
-/// and EMA, and snapshots store f32).
+/// Precision of a table the fused CPU path reads: the materialised inference table
+/// (`inference_precision`) or the copy of the weights the training forward pass reads
+/// (`training_precision`). Adam's master weights, moments and EMA are always f32, and snapshots
+/// store f32.
 ///
-/// `f16` rounds each bias-corrected EMA feature to the nearest half (clamped to ±65504): half
-/// the bytes, so the table's random reads hit the last-level cache more often (tiny-cuda-nn
-/// keeps its hash grid in half precision); answers move by about 2^-11 relative per feature.
-/// It applies to the fused CPU path; the other paths read f32.
+/// `f16` rounds each feature to the nearest half (clamped to ±65504): half the bytes per entry
+/// and an eighth of the bytes of a training record, so the table's random reads touch fewer
+/// lines and hit the last-level cache more often. This is tiny-cuda-nn's mixed precision: its
+/// hash grid is read in half precision while the optimizer keeps full-precision master
+/// weights. Values move by about 2^-11 relative per feature. The other paths read f32.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum TablePrecision {

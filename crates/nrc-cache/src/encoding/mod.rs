@@ -86,6 +86,7 @@ impl InputEncoding {
                     base_resolution,
                     per_level_scale,
                     inference_precision,
+                    training_precision,
                     ..
                 } => {
                     let g = HashGrid::new(hash_grid::HashGridParams {
@@ -95,6 +96,7 @@ impl InputEncoding {
                         base_resolution: *base_resolution,
                         per_level_scale: *per_level_scale,
                         inference_precision: *inference_precision,
+                        training_precision: *training_precision,
                     });
                     let d = g.output_dims();
                     (EncodingKind::HashGrid(g), d)
