@@ -466,6 +466,9 @@ impl RadianceCache {
             }
             None => vec_tensor(grid, &self.burn_device),
         };
+        // The half-precision copy of the old weights (if any) is stale: the next fused step
+        // builds a new one.
+        s.grid_half = vec_tensor(Vec::new(), &self.burn_device);
         s.mlp = vec_tensor(mlp, &self.burn_device);
         *self.inference.lock().expect("inference lock") = None;
         Ok(())

@@ -173,3 +173,24 @@ fn damaged_foreign_and_mismatched_files_are_rejected() {
         Err(CacheError::Io { .. })
     ));
 }
+
+/// Weights set from outside take effect in the next step, also in the half-precision copy the
+/// preset's training forward reads: a cache given new weights trains exactly as one loaded
+/// from a snapshot holding them (which builds its copy afresh).
+#[test]
+fn set_weights_reaches_the_training_forward() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("cache.nrc");
+    let mut a = trained(ComputePath::Fused);
+    let (grid, mlp) = a.weights();
+    let grid: Vec<f32> = grid.iter().map(|w| 2.0 * w + 1e-3).collect();
+    a.set_weights(grid, mlp).unwrap();
+    a.save(&file).unwrap();
+    let mut b = RadianceCache::load(&file, CacheDevice::Cpu).unwrap();
+    b.set_path(ComputePath::Fused).unwrap();
+    let next = batch(1024, 11);
+    let (sa, sb) = (a.train(&next, 2).unwrap(), b.train(&next, 2).unwrap());
+    assert_eq!(sa.first_loss.to_bits(), sb.first_loss.to_bits());
+    assert_eq!(sa.loss.to_bits(), sb.loss.to_bits());
+    assert_eq!(a.weights(), b.weights());
+}
