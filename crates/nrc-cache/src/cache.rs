@@ -13,7 +13,7 @@ use crate::cpu::train::LossSettings;
 use crate::device::{CacheDevice, ComputePath};
 use crate::error::CacheError;
 use crate::model::ModelLayout;
-use crate::ops::{NrcFusedOps, StepSpec};
+use crate::ops::{EmaConversion, NrcFusedOps, StepSpec};
 use crate::record::{CacheQuery, TrainingBatch};
 use crate::snapshot;
 use crate::state::{HostState, TensorState, tensor_vec, vec_tensor};
@@ -58,6 +58,10 @@ pub struct RadianceCache {
     adam: AdamParams,
     ema: Option<f32>,
     step: u32,
+    /// On the fused path with EMA, the base step of the table's EMA gap in the records (see
+    /// [`crate::cpu::optim`]); `None` while the records hold the raw EMA at the current step
+    /// (after loading, and after a download until the next training step), and off that path.
+    ema_base: Option<u32>,
     state: Option<TensorState>,
     inference: Mutex<Option<InferenceWeights>>,
 }
@@ -132,7 +136,7 @@ impl RadianceCache {
         let packed = (path == ComputePath::Fused)
             .then(|| layout.encoding.grid().map(|(g, _)| g.features()))
             .flatten();
-        let state = TensorState::from_host(host, layout.grid_entries(), step, packed, &burn_device);
+        let state = TensorState::from_host(host, packed, &burn_device);
         Ok(Self {
             config,
             layout,
@@ -143,6 +147,7 @@ impl RadianceCache {
             adam,
             ema,
             step,
+            ema_base: None,
             state: Some(state),
             inference: Mutex::new(None),
         })
@@ -284,10 +289,16 @@ impl RadianceCache {
             t_pack.elapsed().as_nanos() as u64,
             std::sync::atomic::Ordering::Relaxed,
         );
+        if self.path == ComputePath::Fused && self.ema.is_some() && self.ema_base.is_none() {
+            // The fused step keeps the table's EMA as a gap, based here at the current step.
+            self.convert_ema(EmaConversion::ToGap);
+            self.ema_base = Some(self.step);
+        }
         let state = self.state.take().expect("state present between calls");
         let state_packed = state.packed;
         let losses: Vec<f64> = match self.path {
             ComputePath::Fused => {
+                let ema_base = self.ema_base.unwrap_or(self.step);
                 let spec = StepSpec {
                     layout: self.layout.clone(),
                     adam: self.adam,
@@ -297,6 +308,7 @@ impl RadianceCache {
                         epsilon: self.config.loss.epsilon,
                     },
                     first_step: self.step,
+                    ema_base,
                     steps,
                 };
                 let out = <Dispatch as NrcFusedOps>::fused_train_steps(
@@ -305,6 +317,7 @@ impl RadianceCache {
                     spec,
                 );
                 self.state = Some(TensorState::from_dispatch(out.state, state_packed));
+                self.ema_base = self.ema.map(|_| out.ema_base);
                 out.losses
             }
             ComputePath::CustomOps | ComputePath::Unfused => {
@@ -392,6 +405,7 @@ impl RadianceCache {
                     self.layout.clone(),
                     ema,
                     self.step,
+                    self.ema_base,
                 );
                 (Tensor::from_dispatch(w.grid), Tensor::from_dispatch(w.mlp))
             }
@@ -416,20 +430,35 @@ impl RadianceCache {
         (grid, mlp)
     }
 
-    /// The state on the host with every EMA entry current (the form snapshots store).
+    /// The state on the host with the raw EMA (the form snapshots store).
+    ///
+    /// On the fused path the records' table EMA gap is turned into the raw EMA first, and stays
+    /// so until the next training step, as in a cache loaded from the snapshot: the two hold the
+    /// same bits and go on identically.
     pub fn host_state(&mut self) -> HostState {
-        if let (ComputePath::Fused, Some(alpha)) = (self.path, self.ema) {
-            let state = self.state.take().expect("state present");
-            let packed = state.packed;
-            let s = <Dispatch as NrcFusedOps>::catch_up_ema(
-                state.into_dispatch(),
-                self.layout.clone(),
-                alpha,
-                self.step,
-            );
-            self.state = Some(TensorState::from_dispatch(s, packed));
-        }
+        self.ema_to_raw();
         self.state.as_ref().expect("state present").to_host()
+    }
+
+    /// Puts the fused records' table EMA into raw form (see [`RadianceCache::host_state`]).
+    fn ema_to_raw(&mut self) {
+        if let (Some(alpha), Some(base)) = (self.ema, self.ema_base.take()) {
+            let shift = self.step - base;
+            self.convert_ema(EmaConversion::ToRaw { alpha, shift });
+            *self.inference.lock().expect("inference lock") = None;
+        }
+    }
+
+    /// Applies an EMA conversion to the fused state.
+    fn convert_ema(&mut self, conversion: EmaConversion) {
+        let state = self.state.take().expect("state present");
+        let packed = state.packed;
+        let s = <Dispatch as NrcFusedOps>::convert_ema(
+            state.into_dispatch(),
+            self.layout.clone(),
+            conversion,
+        );
+        self.state = Some(TensorState::from_dispatch(s, packed));
     }
 
     /// The current weights (hash table, MLP), not averaged.
@@ -454,6 +483,8 @@ impl RadianceCache {
             )));
         }
         *self.inference.lock().expect("inference lock") = None;
+        // A gap to the old weights would move the EMA with them.
+        self.ema_to_raw();
         let s = self.state.as_mut().expect("state present");
         s.grid = match s.packed {
             Some(f) => {

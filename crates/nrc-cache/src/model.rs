@@ -108,7 +108,7 @@ impl ModelLayout {
     }
 
     /// Bytes the cache holds: weights, two Adam moments and EMA (4 × 4 bytes per parameter),
-    /// one u32 per hash-table entry (the step its EMA is current at), the half-precision copy of
+    /// the half-precision copy of
     /// the table the training forward reads (2 bytes per parameter, with
     /// `"training_precision": "f16"`) and the inference weights (the table at its inference
     /// precision, 2 or 4 bytes per parameter, and the MLP's).
@@ -123,7 +123,6 @@ impl ModelLayout {
             _ => 0,
         };
         self.total_params * 4 * 4
-            + self.grid_entries() * 4
             + self.grid_params * (inference_bytes + forward_copy_bytes)
             + self.mlp_params() * 4
     }

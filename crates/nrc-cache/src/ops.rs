@@ -21,7 +21,7 @@ use burn::backend::autodiff::{
     ops::{Backward, Ops, OpsKind},
 };
 use burn::backend::flex::FlexTensor;
-use burn::backend::tensor::{FloatTensor, IntTensor};
+use burn::backend::tensor::FloatTensor;
 use burn::backend::{
     AutodiffBackend, Backend, Dispatch, ExtensionType, Flex, TensorMetadata, backend_extension,
 };
@@ -68,9 +68,9 @@ pub trait MlpOps: burn::backend::Backend {
 }
 
 /// The complete training state on the device: the two parameter groups with their Adam
-/// moments and raw EMA and, per table entry, the step its EMA is current at (i32 storage of a
-/// u32 step count). The fused ops keep the table as per-entry records `[w | m | v | ema]` in
-/// `grid` (see [`crate::cpu::optim`]), with `grid_m`, `grid_v`, `grid_ema` empty.
+/// moments and EMA. The fused ops keep the table as per-entry records `[w | m | v | q]` in
+/// `grid` (`q`: the EMA gap, see [`crate::cpu::optim`]), with `grid_m`, `grid_v`, `grid_ema`
+/// empty.
 #[derive(ExtensionType)]
 pub struct TrainState<B: Backend> {
     /// Hash table records `[entries·4F]` (empty without a hash grid).
@@ -81,8 +81,6 @@ pub struct TrainState<B: Backend> {
     pub grid_v: FloatTensor<B>,
     /// Unused by the fused ops (empty).
     pub grid_ema: FloatTensor<B>,
-    /// Step each table entry's EMA is current at `[entries]`.
-    pub grid_last: IntTensor<B>,
     /// The table's weights in half precision `[entries·F]`, which the fused training forward
     /// reads with `"training_precision": "f16"` (kept equal to the records' weights, rounded, by
     /// every update); empty otherwise, and rebuilt from the records when empty.
@@ -105,6 +103,8 @@ pub struct TrainOutcome<B: Backend> {
     pub state: TrainState<B>,
     /// Mean loss of each step (before its update).
     pub losses: Vec<f64>,
+    /// The base step of the table's EMA gap after the steps (see [`crate::cpu::optim`]).
+    pub ema_base: u32,
 }
 
 /// Constants of a run of training steps.
@@ -120,6 +120,8 @@ pub struct StepSpec {
     pub loss: cpu::train::LossSettings,
     /// Step count before the first step of this run.
     pub first_step: u32,
+    /// The base step of the table's EMA gap (at most `first_step`).
+    pub ema_base: u32,
     /// Steps to take.
     pub steps: u32,
 }
@@ -133,6 +135,20 @@ pub struct InferenceWeights<B: Backend> {
     pub mlp: FloatTensor<B>,
 }
 
+/// A conversion of the table's EMA in the fused path's records (see [`crate::cpu::optim`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum EmaConversion {
+    /// Gap → raw EMA `shift` steps after the gap's base: `e = w + α^shift·q`.
+    ToRaw {
+        /// EMA decay.
+        alpha: f32,
+        /// Steps since the base.
+        shift: u32,
+    },
+    /// Raw EMA → gap based at the current step: `q = e − w`.
+    ToGap,
+}
+
 /// Fused, non-differentiable custom ops of the training loop.
 #[backend_extension(Flex)]
 pub trait NrcFusedOps: burn::backend::Backend {
@@ -143,21 +159,23 @@ pub trait NrcFusedOps: burn::backend::Backend {
         spec: StepSpec,
     ) -> TrainOutcome<Self>;
 
-    /// The inference weights at step `step`: bias-corrected EMA (lazy table entries caught up on
-    /// the fly) or, with `ema = None`, the weights. Reads the state only.
+    /// The inference weights at step `step`: bias-corrected EMA (the table's from its EMA gap
+    /// based at `ema_base`, or from the raw EMA where that is `None`) or, with `ema = None`, the
+    /// weights. Reads the state only.
     fn inference_weights(
         #[extension_type] state: TrainState<Self>,
         layout: Arc<ModelLayout>,
         ema: Option<f32>,
         step: u32,
+        ema_base: Option<u32>,
     ) -> InferenceWeights<Self>;
 
-    /// Brings every table entry's EMA up to `step` (before a snapshot).
-    fn catch_up_ema(
+    /// Converts the table's EMA between the raw form (hosts, snapshots) and the gap form of the
+    /// fused step.
+    fn convert_ema(
         #[extension_type] state: TrainState<Self>,
         layout: Arc<ModelLayout>,
-        ema: f32,
-        step: u32,
+        conversion: EmaConversion,
     ) -> TrainState<Self>;
 
     /// Fused inference on packed query rows `[N, 17]` → radiance `[N, 3]`.
@@ -204,12 +222,6 @@ fn flex_mut_f32(t: &mut FlexTensor) -> &mut [f32] {
 
 fn flex_from(values: Vec<f32>, shape: &[usize]) -> FlexTensor {
     FlexTensor::from_data(TensorData::new(values, shape.to_vec()))
-}
-
-fn flex_last_mut(t: &mut FlexTensor) -> &mut [u32] {
-    let n = t.shape().num_elements();
-    assert_eq!(t.dtype(), DType::I32, "the EMA step table is stored as i32");
-    bytemuck::cast_slice_mut(&mut t.storage_mut::<i32>()[..n])
 }
 
 impl MlpOps for Flex {
@@ -308,18 +320,17 @@ impl MlpOps for Flex {
     }
 }
 
-/// Unpacks a Flex training state into mutable slices (`[records, mlp, mlp_m, mlp_v, mlp_ema]`
-/// and the step table) and the half-precision weights tensor, runs `f`, and packs it again.
+/// Unpacks a Flex training state into mutable slices (`[records, mlp, mlp_m, mlp_v, mlp_ema]`)
+/// and the half-precision weights tensor, runs `f`, and packs it again.
 fn with_flex_state<R>(
     state: TrainState<Flex>,
-    f: impl FnOnce(&mut [&mut [f32]; 5], &mut [u32], &mut FlexTensor) -> R,
+    f: impl FnOnce(&mut [&mut [f32]; 5], &mut FlexTensor) -> R,
 ) -> (TrainState<Flex>, R) {
     let TrainState {
         grid,
         grid_m,
         grid_v,
         grid_ema,
-        grid_last,
         mut grid_half,
         mlp,
         mlp_m,
@@ -327,7 +338,6 @@ fn with_flex_state<R>(
         mlp_ema,
     } = state;
     let mut tensors = [grid, mlp, mlp_m, mlp_v, mlp_ema].map(flex_owned_f32);
-    let mut last = grid_last;
     let r = {
         let [a, c, d, e, g] = &mut tensors;
         let mut slices = [
@@ -337,7 +347,7 @@ fn with_flex_state<R>(
             flex_mut_f32(e),
             flex_mut_f32(g),
         ];
-        f(&mut slices, flex_last_mut(&mut last), &mut grid_half)
+        f(&mut slices, &mut grid_half)
     };
     let [grid, mlp, mlp_m, mlp_v, mlp_ema] = tensors;
     (
@@ -346,7 +356,6 @@ fn with_flex_state<R>(
             grid_m,
             grid_v,
             grid_ema,
-            grid_last: last,
             grid_half,
             mlp,
             mlp_m,
@@ -367,27 +376,15 @@ fn flex_half_weights<'a>(t: &'a mut FlexTensor, records: &[f32], f: usize) -> &'
     &mut t.storage_mut::<f16>()[..n]
 }
 
-/// The step table of a Flex state, read-only.
-fn flex_last(t: &FlexTensor) -> Cow<'_, [i32]> {
-    t.as_slice::<i32>().map(Cow::Borrowed).unwrap_or_else(|| {
-        Cow::Owned(
-            t.clone()
-                .into_data()
-                .convert::<i32>()
-                .try_to_vec::<i32>()
-                .expect("i32 data"),
-        )
-    })
-}
-
-/// The inference table, as `T`, of the records `records` with EMA steps `last`: the
-/// bias-corrected EMA at `step` (or the weights without EMA), level by level in parallel.
+/// The inference table, as `T`, of the records `records` (EMA gap based at `ema_base`, or the
+/// raw EMA where that is `None`): the bias-corrected EMA at `step` (or the weights without
+/// EMA), level by level in parallel.
 fn materialize_table<T: cpu::optim::TableValue>(
     layout: &ModelLayout,
     records: &[f32],
-    last: &[u32],
     ema: Option<f32>,
     step: u32,
+    ema_base: Option<u32>,
 ) -> Vec<T> {
     let n = layout.grid_params;
     let mut g: Vec<T> = cpu::huge::huge_empty(n);
@@ -402,9 +399,9 @@ fn materialize_table<T: cpu::optim::TableValue>(
             cpu::optim::materialize_grid_into(
                 ema,
                 step,
+                ema_base,
                 f,
                 &records[a * rec..b * rec],
-                &last[a..b],
                 o,
             );
         });
@@ -427,15 +424,23 @@ impl NrcFusedOps for Flex {
         let half_features = spec.layout.encoding.grid().and_then(|(hg, _)| {
             (hg.params.training_precision == TablePrecision::F16).then_some(hg.features())
         });
-        let (state, losses) = with_flex_state(state, |s, last, half| {
+        let features = spec.layout.encoding.grid().map(|(hg, _)| hg.features());
+        let mut ema_base = spec.ema_base;
+        let (state, losses) = with_flex_state(state, |s, half| {
             let [records, mlp, mlp_m, mlp_v, mlp_ema] = s;
             let mut half = half_features.map(|f| flex_half_weights(half, records, f));
             let mut losses = Vec::with_capacity(spec.steps as usize);
             for k in 1..=spec.steps {
-                let c = cpu::optim::StepConstants::new(spec.adam, spec.ema, spec.first_step + k);
+                let done = spec.first_step + k - 1;
+                if let (Some(alpha), Some(f)) = (spec.ema, features)
+                    && done - ema_base >= cpu::optim::ema_rebase_interval(alpha)
+                {
+                    cpu::optim::rebase_ema_gap(alpha, done - ema_base, f, records);
+                    ema_base = done;
+                }
+                let c = cpu::optim::StepConstants::new(spec.adam, spec.ema, done + 1, ema_base);
                 let grid_state = (spec.layout.grid_params > 0).then_some(cpu::train::GridState {
                     records,
-                    last: &mut *last,
                     half: half.as_deref_mut(),
                 });
                 let mlp_state = cpu::train::GroupState {
@@ -455,7 +460,11 @@ impl NrcFusedOps for Flex {
             }
             losses
         });
-        TrainOutcome { state, losses }
+        TrainOutcome {
+            state,
+            losses,
+            ema_base,
+        }
     }
 
     fn inference_weights(
@@ -463,21 +472,20 @@ impl NrcFusedOps for Flex {
         layout: Arc<ModelLayout>,
         ema: Option<f32>,
         step: u32,
+        ema_base: Option<u32>,
     ) -> InferenceWeights<Self> {
         let records = flex_f32(&state.grid);
         let mlp = flex_f32(&state.mlp);
-        let last_i32 = flex_last(&state.grid_last);
-        let last: &[u32] = bytemuck::cast_slice(&last_i32);
         let half = layout
             .encoding
             .grid()
             .is_some_and(|(hg, _)| hg.params.inference_precision == TablePrecision::F16);
         let grid = if half {
-            let g = materialize_table::<f16>(&layout, &records, last, ema, step);
+            let g = materialize_table::<f16>(&layout, &records, ema, step, ema_base);
             let n = g.len();
             FlexTensor::from_data(TensorData::new(g, [n]))
         } else {
-            let g = materialize_table::<f32>(&layout, &records, last, ema, step);
+            let g = materialize_table::<f32>(&layout, &records, ema, step, ema_base);
             let n = g.len();
             flex_from(g, &[n])
         };
@@ -496,15 +504,20 @@ impl NrcFusedOps for Flex {
         }
     }
 
-    fn catch_up_ema(
+    fn convert_ema(
         state: TrainState<Self>,
         layout: Arc<ModelLayout>,
-        ema: f32,
-        step: u32,
+        conversion: EmaConversion,
     ) -> TrainState<Self> {
-        with_flex_state(state, |s, last, _| {
+        with_flex_state(state, |s, _| {
             if let Some((hg, _)) = layout.encoding.grid() {
-                cpu::optim::catch_up(ema, step, hg.features(), s[0], last);
+                let (f, records) = (hg.features(), &mut *s[0]);
+                match conversion {
+                    EmaConversion::ToRaw { alpha, shift } => {
+                        cpu::optim::ema_raw_from_gap(alpha, shift, f, records)
+                    }
+                    EmaConversion::ToGap => cpu::optim::ema_gap_from_raw(f, records),
+                }
             }
         })
         .0

@@ -16,8 +16,8 @@
 //! ```
 //!
 //! `checksum` is FNV-1a (64-bit) over the little-endian 64-bit words of the eight tensors'
-//! bytes in the order above (a final partial word zero-padded). Every EMA entry is current at
-//! `step`. Files are written to a temporary name in the same directory and renamed.
+//! bytes in the order above (a final partial word zero-padded). The EMA tensors hold the raw
+//! EMA at `step`. Files are written to a temporary name in the same directory and renamed.
 
 use std::io::Write;
 use std::path::Path;

@@ -1,7 +1,7 @@
 //! The training state as device tensors, and its host (plain `Vec`) form for snapshots.
 
 use burn::backend::Dispatch;
-use burn::tensor::{DType, Device, Int, Tensor, TensorCreationOptions, TensorData};
+use burn::tensor::{Device, Tensor, TensorData};
 
 use crate::ops::TrainState;
 
@@ -22,8 +22,6 @@ pub struct TensorState {
     pub grid_v: Tensor<1>,
     /// Raw EMA of the table.
     pub grid_ema: Tensor<1>,
-    /// Step each table entry's EMA is current at (fused path).
-    pub grid_last: Tensor<1, Int>,
     /// Half-precision copy of the table's weights for the fused training forward (built by the
     /// first fused step that needs it; empty until then and on the other paths).
     pub grid_half: Tensor<1>,
@@ -37,7 +35,7 @@ pub struct TensorState {
     pub mlp_ema: Tensor<1>,
 }
 
-/// The training state on the host, EMA fully caught up to the step count.
+/// The training state on the host, with the raw EMA of every weight at the step count.
 #[derive(Clone, Debug, PartialEq)]
 pub struct HostState {
     /// Hash table weights `[entry][feature]`.
@@ -73,16 +71,10 @@ pub fn tensor_vec(t: Tensor<1>) -> Vec<f32> {
 }
 
 impl TensorState {
-    /// Uploads a host state; every table entry's EMA is current at `step`. `packed = Some(F)`
-    /// stores the table as records (the fused path).
-    pub fn from_host(
-        h: HostState,
-        entries: usize,
-        step: u32,
-        packed: Option<usize>,
-        device: &Device,
-    ) -> Self {
-        let last = crate::cpu::huge::huge_vec(entries, step as i32);
+    /// Uploads a host state. `packed = Some(F)` stores the table as records (the fused path),
+    /// the raw EMA in the records' last field (the fused step wants its EMA gap: see
+    /// [`crate::ops::EmaConversion`]).
+    pub fn from_host(h: HostState, packed: Option<usize>, device: &Device) -> Self {
         let (grid, grid_m, grid_v, grid_ema) = match packed {
             Some(f) => (
                 crate::cpu::optim::pack_records(f, &h.grid, &h.grid_m, &h.grid_v, &h.grid_ema),
@@ -98,10 +90,6 @@ impl TensorState {
             grid_m: vec_tensor(grid_m, device),
             grid_v: vec_tensor(grid_v, device),
             grid_ema: vec_tensor(grid_ema, device),
-            grid_last: Tensor::from_data(
-                TensorData::new(last, [entries]),
-                TensorCreationOptions::new(device.clone()).with_dtype(DType::I32),
-            ),
             grid_half: vec_tensor(Vec::new(), device),
             mlp: vec_tensor(h.mlp, device),
             mlp_m: vec_tensor(h.mlp_m, device),
@@ -110,7 +98,8 @@ impl TensorState {
         }
     }
 
-    /// Downloads the state (the caller has caught the EMA up).
+    /// Downloads the state (on the fused path, the caller has turned the EMA gap into the raw
+    /// EMA).
     pub fn to_host(&self) -> HostState {
         let (grid, grid_m, grid_v, grid_ema) = match self.packed {
             Some(f) => {
@@ -144,7 +133,6 @@ impl TensorState {
             grid_m: self.grid_m.into_dispatch(),
             grid_v: self.grid_v.into_dispatch(),
             grid_ema: self.grid_ema.into_dispatch(),
-            grid_last: self.grid_last.into_dispatch(),
             grid_half: self.grid_half.into_dispatch(),
             mlp: self.mlp.into_dispatch(),
             mlp_m: self.mlp_m.into_dispatch(),
@@ -161,7 +149,6 @@ impl TensorState {
             grid_m: Tensor::from_dispatch(s.grid_m),
             grid_v: Tensor::from_dispatch(s.grid_v),
             grid_ema: Tensor::from_dispatch(s.grid_ema),
-            grid_last: Tensor::from_dispatch(s.grid_last),
             grid_half: Tensor::from_dispatch(s.grid_half),
             mlp: Tensor::from_dispatch(s.mlp),
             mlp_m: Tensor::from_dispatch(s.mlp_m),

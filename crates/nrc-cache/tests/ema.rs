@@ -4,8 +4,8 @@
 use burn::tensor::f16;
 use nrc_cache::config::{AdamParams, NestedEncoding};
 use nrc_cache::cpu::optim::{
-    StepConstants, catch_up, decay_pow, dense_step, materialize_dense, materialize_grid,
-    pack_records, sparse_step, unpack_records,
+    StepConstants, decay_pow, dense_step, ema_gap_from_raw, ema_raw_from_gap, materialize_dense,
+    materialize_grid, pack_records, rebase_ema_gap, sparse_step, unpack_records,
 };
 use nrc_cache::state::tensor_vec;
 use nrc_cache::{
@@ -49,14 +49,21 @@ fn lazy_sparse_and_dense_ema_match_the_closed_form_on_a_toy_sequence() {
         .map(|_| r.random_range(-1.0..1.0))
         .collect();
     let zeros = vec![0f32; w0.len()];
+    // The raw EMA starts at zero; the records hold it as a gap to the weights, based at step 0.
     let mut records = pack_records(f, &w0, &zeros, &zeros, &zeros);
+    ema_gap_from_raw(f, &mut records);
+    let mut base = 0;
     let mut grad = zeros.clone();
-    let mut last = vec![0u32; entries];
     let mut dw = w0.clone();
     let (mut dm, mut dv, mut de) = (zeros.clone(), zeros.clone(), zeros.clone());
     let (mut history, mut dense_history) = (Vec::new(), Vec::new());
     for step in 1..=25u32 {
-        let c = StepConstants::new(adam(), Some(alpha), step);
+        // Rebase every seventh step (the cache does it every `ema_rebase_interval` steps).
+        if step % 7 == 0 {
+            rebase_ema_gap(alpha, step - 1 - base, f, &mut records);
+            base = step - 1;
+        }
+        let c = StepConstants::new(adam(), Some(alpha), step, base);
         // Sparse: each entry is referenced with probability 1/3; some entries never.
         let mut touched = vec![0u64; entries.div_ceil(64)];
         for en in 0..entries {
@@ -67,15 +74,7 @@ fn lazy_sparse_and_dense_ema_match_the_closed_form_on_a_toy_sequence() {
                 }
             }
         }
-        sparse_step(
-            &c,
-            f,
-            &mut touched,
-            &mut records,
-            &mut grad,
-            &mut last,
-            None,
-        );
+        sparse_step(&c, f, &mut touched, &mut records, &mut grad, None);
         assert!(
             grad.iter().all(|g| *g == 0.0),
             "the step consumes the gradient"
@@ -88,7 +87,7 @@ fn lazy_sparse_and_dense_ema_match_the_closed_form_on_a_toy_sequence() {
 
         let expect = closed_form(f64::from(alpha), &history);
         let mut got = vec![0f32; w0.len()];
-        materialize_grid(Some(alpha), step, f, &records, &last, &mut got);
+        materialize_grid(Some(alpha), step, Some(base), f, &records, &mut got);
         for (j, (a, b)) in got.iter().zip(&expect).enumerate() {
             assert!(
                 (f64::from(*a) - b).abs() < 1e-5 * (1.0 + b.abs()),
@@ -110,14 +109,25 @@ fn lazy_sparse_and_dense_ema_match_the_closed_form_on_a_toy_sequence() {
     for en in (0..entries).step_by(7) {
         assert_eq!(w[en * f], w0[en * f]);
     }
-    // Catching every entry up changes nothing about the materialised average.
+    // A rebase, and a round trip through the raw EMA (what a snapshot stores), move the
+    // materialised average by rounding only.
     let mut before = vec![0f32; w.len()];
-    materialize_grid(Some(alpha), 25, f, &records, &last, &mut before);
-    catch_up(alpha, 25, f, &mut records, &mut last);
-    assert!(last.iter().all(|l| *l == 25));
-    let mut after = vec![0f32; w.len()];
-    materialize_grid(Some(alpha), 25, f, &records, &last, &mut after);
-    assert_eq!(before, after);
+    materialize_grid(Some(alpha), 25, Some(base), f, &records, &mut before);
+    let mut rebased = records.clone();
+    rebase_ema_gap(alpha, 25 - base, f, &mut rebased);
+    let mut round_trip = records.clone();
+    ema_raw_from_gap(alpha, 25 - base, f, &mut round_trip);
+    ema_gap_from_raw(f, &mut round_trip);
+    for (what, r) in [("rebased", &rebased), ("raw and back", &round_trip)] {
+        let mut after = vec![0f32; w.len()];
+        materialize_grid(Some(alpha), 25, Some(25), f, r, &mut after);
+        for (j, (a, b)) in after.iter().zip(&before).enumerate() {
+            assert!(
+                (a - b).abs() <= 4.0 * f32::EPSILON * b.abs().max(1.0),
+                "{what} {j}: {a} vs {b}"
+            );
+        }
+    }
 }
 
 fn batch(n: usize, seed: u64) -> TrainingBatch {
@@ -144,53 +154,66 @@ fn batch(n: usize, seed: u64) -> TrainingBatch {
 }
 
 /// The cache's inference weights are the closed-form average of its weight history, on the
-/// fused path (lazy table EMA) and on the tensor path (dense EMA).
+/// fused path (the table's EMA as a gap, see `nrc_cache::cpu::optim`) and on the tensor path
+/// (dense EMA): with decay 0.8 over 12 steps, and with decay 0.5 over 100 steps, where the fused
+/// path rebases the gap every 40 steps; also after a snapshot-style round trip of the state
+/// halfway (the raw EMA and back).
 #[test]
 fn cache_inference_weights_are_the_closed_form_average() {
-    let mut config = CacheConfig::hash_grid_preset();
-    if let Some(NestedEncoding::HashGrid {
-        log2_hashmap_size,
-        inference_precision,
-        ..
-    }) = config.encoding.nested.first_mut()
-    {
-        *log2_hashmap_size = 12;
-        // The average itself, not its half-precision rounding (tested on its own below).
-        *inference_precision = nrc_cache::encoding::hash_grid::TablePrecision::F32;
-    }
-    if let nrc_cache::config::OptimizerConfig::EMA { decay, .. } = &mut config.optimizer {
-        *decay = 0.8;
-    }
-    for path in [ComputePath::Fused, ComputePath::Unfused] {
-        let mut cache =
-            RadianceCache::with_path(config.clone(), SceneBox::default(), CacheDevice::Cpu, path)
-                .unwrap();
-        let (mut grid_hist, mut mlp_hist) = (Vec::new(), Vec::new());
-        for step in 0..12 {
-            // Small batches leave most fine-level entries unreferenced in most steps.
-            cache.train(&batch(16, step), 1).unwrap();
-            let (g, m) = cache.weights();
-            grid_hist.push(g);
-            mlp_hist.push(m);
+    for (alpha, steps) in [(0.8f32, 12u64), (0.5, 100)] {
+        let mut config = CacheConfig::hash_grid_preset();
+        if let Some(NestedEncoding::HashGrid {
+            log2_hashmap_size,
+            inference_precision,
+            ..
+        }) = config.encoding.nested.first_mut()
+        {
+            *log2_hashmap_size = 12;
+            // The average itself, not its half-precision rounding (tested on its own below).
+            *inference_precision = nrc_cache::encoding::hash_grid::TablePrecision::F32;
         }
-        let (g, m) = cache.inference_weights();
-        for (got, hist, what) in [
-            (tensor_vec(g), &grid_hist, "table"),
-            (tensor_vec(m), &mlp_hist, "mlp"),
-        ] {
-            let expect = closed_form(0.8, hist);
-            for (j, (a, b)) in got.iter().zip(&expect).enumerate() {
-                assert!(
-                    (f64::from(*a) - b).abs() < 1e-5 * (1.0 + b.abs()),
-                    "{path} {what} {j}: {a} vs {b}"
-                );
+        if let nrc_cache::config::OptimizerConfig::EMA { decay, .. } = &mut config.optimizer {
+            *decay = alpha;
+        }
+        assert_eq!(nrc_cache::cpu::optim::ema_rebase_interval(0.5), 40);
+        for path in [ComputePath::Fused, ComputePath::Unfused] {
+            let mut cache = RadianceCache::with_path(
+                config.clone(),
+                SceneBox::default(),
+                CacheDevice::Cpu,
+                path,
+            )
+            .unwrap();
+            let (mut grid_hist, mut mlp_hist) = (Vec::new(), Vec::new());
+            for step in 0..steps {
+                // Small batches leave most fine-level entries unreferenced in most steps.
+                cache.train(&batch(16, step), 1).unwrap();
+                let (g, m) = cache.weights();
+                grid_hist.push(g);
+                mlp_hist.push(m);
+                if step == steps / 2 {
+                    let _ = cache.host_state();
+                }
+            }
+            let (g, m) = cache.inference_weights();
+            for (got, hist, what) in [
+                (tensor_vec(g), &grid_hist, "table"),
+                (tensor_vec(m), &mlp_hist, "mlp"),
+            ] {
+                let expect = closed_form(f64::from(alpha), hist);
+                for (j, (a, b)) in got.iter().zip(&expect).enumerate() {
+                    assert!(
+                        (f64::from(*a) - b).abs() < 1e-5 * (1.0 + b.abs()),
+                        "decay {alpha}, {path} {what} {j}: {a} vs {b}"
+                    );
+                }
             }
         }
     }
 }
 
 /// The AVX2 sparse update (four entries of two features at once) gives the same bits as the
-/// portable loop: weights, moments, EMA, zeroed gradients, EMA step table, cleared bitmap and
+/// portable loop: weights, moments, EMA gaps, zeroed gradients, cleared bitmap and
 /// the half-precision copy of the weights (each updated entry's weights rounded as
 /// `half_weights` rounds them, clamped to ±65504; the other entries' halves untouched), with
 /// non-finite gradients, an L2 term and weights beyond the half range in the mix, with and
@@ -213,7 +236,7 @@ fn avx2_sparse_step_matches_the_portable_loop() {
     };
     for ema in [Some(0.99f32), None] {
         let step = 57;
-        let c = StepConstants::new(adam, ema, step);
+        let c = StepConstants::new(adam, ema, step, step - 40);
         let records: Vec<f32> = (0..entries * RECORD * f)
             .map(|i| match i % 8 {
                 4 | 5 => rng.random_range(0.0..2.0),                 // v ≥ 0
@@ -233,7 +256,6 @@ fn avx2_sparse_step_matches_the_portable_loop() {
                 _ => rng.random_range(-5.0..5.0),
             })
             .collect();
-        let last: Vec<u32> = (0..entries).map(|_| rng.random_range(0..step)).collect();
         let mut touched = vec![0u64; entries.div_ceil(64)];
         for e in 0..entries {
             if rng.random::<f32>() < 0.3 {
@@ -241,31 +263,26 @@ fn avx2_sparse_step_matches_the_portable_loop() {
             }
         }
         let run = |avx: bool, with_half: bool| {
-            let (mut r, mut g, mut l, mut t, mut h) = (
-                records.clone(),
-                grad.clone(),
-                last.clone(),
-                touched.clone(),
-                half.clone(),
-            );
+            let (mut r, mut g, mut t, mut h) =
+                (records.clone(), grad.clone(), touched.clone(), half.clone());
             let hs = with_half.then_some(&mut h[..]);
             if avx {
-                sparse_step(&c, f, &mut t, &mut r, &mut g, &mut l, hs);
+                sparse_step(&c, f, &mut t, &mut r, &mut g, hs);
             } else {
-                sparse_step_portable::<2>(&c, &mut t, &mut r, &mut g, &mut l, hs);
+                sparse_step_portable::<2>(&c, &mut t, &mut r, &mut g, hs);
             }
-            (r, g, l, t, h)
+            (r, g, t, h)
         };
         let (a, b) = (run(true, true), run(false, true));
         let without = run(true, false);
         assert_eq!(without.0, a.0, "the half copy changes the update");
-        assert_eq!(without.4, half, "no half copy given, none written");
+        assert_eq!(without.3, half, "no half copy given, none written");
         let rounded = half_weights(f, &a.0);
         for e in 0..entries {
             let hit = touched[e / 64] >> (e % 64) & 1 == 1;
             let want = if hit { &rounded } else { &half };
             let span = e * f..(e + 1) * f;
-            let got = a.4[span.clone()].iter().zip(&b.4[span.clone()]);
+            let got = a.3[span.clone()].iter().zip(&b.3[span.clone()]);
             for ((x, portable), w) in got.zip(&want[span]) {
                 assert_eq!(
                     x.to_bits(),
@@ -290,28 +307,15 @@ fn avx2_sparse_step_matches_the_portable_loop() {
             );
         }
         assert_eq!(bits(&a.1), bits(&b.1), "gradients");
-        assert_eq!(a.2, b.2, "EMA step table");
-        assert_eq!(a.3, b.3, "bitmap");
-        assert!(a.3.iter().all(|w| *w == 0));
+        assert_eq!(a.2, b.2, "bitmap");
+        assert!(a.2.iter().all(|w| *w == 0));
     }
 }
 
-/// The step each of `entries` table entries' EMA is current at, for a table at `step`: blocks
-/// of eight inside the power table (under 1024 steps stale), beyond it, and never touched.
-fn stale_steps(r: &mut Pcg64Mcg, entries: usize, step: u32) -> Vec<u32> {
-    (0..entries)
-        .map(|e| match (e / 8 % 4, e % 8) {
-            (0, _) => step - r.random_range(1024..4000),
-            (1, 3) => 0,
-            _ => step - r.random_range(0..1024),
-        })
-        .collect()
-}
-
 /// The materialised average of a two-feature table (four entries per AVX2 register where the
-/// CPU has it) gives the same bits as the formula entry by entry, with catch-ups inside and
-/// beyond the power table (over 1024 steps stale, and never touched) and a length that is not
-/// a multiple of four.
+/// CPU has it) gives the same bits as the formula `(w + α^(t−b)·q) / (1 − α^t)` entry by entry,
+/// with the gap's base at the step itself, one step back and a rebase interval back, and as
+/// `e / (1 − α^t)` from the raw EMA; with a length that is not a multiple of four.
 #[test]
 fn materialised_grid_matches_the_formula_bit_for_bit() {
     let mut r = Pcg64Mcg::seed_from_u64(21);
@@ -321,21 +325,23 @@ fn materialised_grid_matches_the_formula_bit_for_bit() {
             .map(|_| r.random_range(-2.0..2.0))
             .collect()
     };
-    let (w, m, v, ema) = (value(&mut r), value(&mut r), value(&mut r), value(&mut r));
-    let records = pack_records(f, &w, &m, &v, &ema);
-    let last = stale_steps(&mut r, entries, step);
-    let mut got = vec![0f32; entries * f];
-    materialize_grid(Some(alpha), step, f, &records, &last, &mut got);
-    let inv = 1.0 / (1.0 - decay_pow(alpha, step));
-    for e in 0..entries {
-        let ak = decay_pow(alpha, step - last[e]);
-        for j in 0..f {
-            let want = (ak * ema[e * f + j] + (1.0 - ak) * w[e * f + j]) * inv;
-            let g = got[e * f + j];
+    let (w, m, v, q) = (value(&mut r), value(&mut r), value(&mut r), value(&mut r));
+    let records = pack_records(f, &w, &m, &v, &q);
+    let interval = nrc_cache::cpu::optim::ema_rebase_interval(alpha);
+    for base in [Some(step), Some(step - 1), Some(step - interval), None] {
+        let mut got = vec![0f32; entries * f];
+        materialize_grid(Some(alpha), step, base, f, &records, &mut got);
+        let inv = 1.0 / (1.0 - decay_pow(alpha, step));
+        for (i, g) in got.iter().enumerate() {
+            // Without a base, the records hold the raw EMA.
+            let want = match base {
+                Some(b) => (w[i] + decay_pow(alpha, step - b) * q[i]) * inv,
+                None => q[i] * inv,
+            };
             assert_eq!(
                 g.to_bits(),
                 want.to_bits(),
-                "entry {e} feature {j}: {g} vs {want}"
+                "base {base:?}, value {i}: {g} vs {want}"
             );
         }
     }
@@ -344,7 +350,7 @@ fn materialised_grid_matches_the_formula_bit_for_bit() {
 /// The half-precision inference table (AVX2/F16C where the CPU has it, eight values per
 /// conversion) holds each f32 value of the materialised table rounded to the nearest half,
 /// bit for bit: values from 1e-9 (below the smallest half subnormal) to 1e6 (beyond the largest
-/// half, clamped to ±65504, never infinite), catch-ups inside and beyond the power table, a
+/// half, clamped to ±65504, never infinite), an EMA gap based 2000 steps back, a
 /// length that is not a multiple of four; with and without the EMA.
 #[test]
 fn half_table_is_the_f32_table_rounded_to_nearest() {
@@ -360,14 +366,14 @@ fn half_table_is_the_f32_table_rounded_to_nearest() {
             })
             .collect()
     };
-    let (w, m, v, ema) = (value(&mut r), value(&mut r), value(&mut r), value(&mut r));
-    let records = pack_records(f, &w, &m, &v, &ema);
-    let last = stale_steps(&mut r, entries, step);
+    let (w, m, v, q) = (value(&mut r), value(&mut r), value(&mut r), value(&mut r));
+    let records = pack_records(f, &w, &m, &v, &q);
+    let base = step - 2000;
     for alpha in [Some(0.99f32), None] {
         let mut full = vec![0f32; entries * f];
-        materialize_grid(alpha, step, f, &records, &last, &mut full);
+        materialize_grid(alpha, step, Some(base), f, &records, &mut full);
         let mut halves = vec![std::mem::MaybeUninit::<f16>::uninit(); entries * f];
-        materialize_grid_into(alpha, step, f, &records, &last, &mut halves);
+        materialize_grid_into(alpha, step, Some(base), f, &records, &mut halves);
         let (mut clamped, mut subnormal) = (0, 0);
         for (i, (h, x)) in halves.iter().zip(&full).enumerate() {
             // SAFETY: `materialize_grid_into` writes every element.

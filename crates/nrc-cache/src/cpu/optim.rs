@@ -1,16 +1,23 @@
 //! Adam and the weight EMA on the CPU: dense for the MLP, sparse (lazy) for the hash table.
 //!
-//! The table's state is stored per entry as one record `[w (F) | m (F) | v (F) | ema (F)]`
+//! The table's state is stored per entry as one record `[w (F) | m (F) | v (F) | q (F)]`
 //! ([`RECORD`] · F floats), so an update touches one or two cache lines instead of four: the
 //! sparse step is bound by memory traffic.
 //!
 //! **Sparse semantics for the hash table** (PyTorch `SparseAdam`): an entry not referenced by
 //! any sample of a step keeps its weights and Adam moments unchanged that step; referenced
-//! entries get the standard Adam update with the global step's bias correction. Because an
-//! unreferenced entry's weight is constant, its EMA can be brought up to date *exactly* later:
-//! after `k` steps at constant weight `w`, `e ← α^k·e + (1 − α^k)·w`. Each entry records the step
-//! its EMA is current at; the catch-up happens when the entry is next updated, and for all
-//! entries when inference weights are materialised or a snapshot is written.
+//! entries get the standard Adam update with the global step's bias correction.
+//!
+//! **The table's EMA as a scaled gap.** The raw EMA `e` of every entry moves every step, also
+//! where the weight does not: `e ← α·e + (1 − α)·w`. While `w` is constant the gap `e − w`
+//! shrinks by `α` per step, so the record stores it scaled to a base step `b` shared by the
+//! whole table: `q = (e_t − w_t)·α^−(t−b)`, which is constant while the entry is not
+//! referenced. At any step `t`, `e_t = w_t + α^(t−b)·q`. A referenced entry's update from
+//! `w_old` to `w_new` at step `t` adds `α^(1−(t−b))·(w_old − w_new)` to `q` (from
+//! `e_t = α·e_(t−1) + (1 − α)·w_new`). No per-entry step count is stored or read (it cost a
+//! fifth of the sparse step's memory traffic), and the update needs one multiply-add. The scale
+//! `α^−(t−b)` grows with `t`; every [`ema_rebase_interval`] steps the whole table is rebased
+//! (`q ← α^(t−b)·q`, `b ← t`) so it stays below 2^40.
 
 use burn::tensor::f16;
 
@@ -33,13 +40,18 @@ pub struct StepConstants {
     step_size: f32,
     /// `1 / (1 − β2^t)`.
     inv_bc2: f32,
-    /// `α^k` of the EMA catch-ups, built once per step rather than per sparse update.
-    decay: DecayTable,
+    /// `α^(1 − (step − base))`: the factor of a weight change in the table's EMA gap.
+    gap_growth: f32,
 }
 
 impl StepConstants {
-    /// Constants of step `step` (≥ 1).
-    pub fn new(adam: AdamParams, ema: Option<f32>, step: u32) -> Self {
+    /// Constants of step `step` (≥ 1), the table's EMA gap scaled to step `ema_base` (< `step`;
+    /// see the module documentation).
+    pub fn new(adam: AdamParams, ema: Option<f32>, step: u32, ema_base: u32) -> Self {
+        assert!(
+            ema_base < step,
+            "EMA base {ema_base} not before step {step}"
+        );
         let t = step.min(i32::MAX as u32) as i32;
         let (bc1, bc2) = (1.0 - adam.beta1.powi(t), 1.0 - adam.beta2.powi(t));
         Self {
@@ -50,7 +62,7 @@ impl StepConstants {
             bc2,
             step_size: adam.learning_rate / bc1,
             inv_bc2: 1.0 / bc2,
-            decay: DecayTable::new(ema.unwrap_or(0.0)),
+            gap_growth: 1.0 / decay_pow(ema.unwrap_or(0.0), step - 1 - ema_base),
         }
     }
 
@@ -74,39 +86,21 @@ impl StepConstants {
     }
 }
 
-/// `α^k` for an EMA catch-up over `k` steps.
+/// `α^k` (the decay of an EMA over `k` steps).
 #[inline(always)]
 pub fn decay_pow(alpha: f32, k: u32) -> f32 {
     alpha.powi(k.min(i32::MAX as u32) as i32)
 }
 
-/// Table of `α^k` for small `k` (catch-ups are mostly a few steps; `powi` per entry costs
-/// ~20% of the sparse update).
-#[derive(Clone, Debug)]
-pub struct DecayTable {
-    alpha: f32,
-    powers: Vec<f32>,
-}
-
-impl DecayTable {
-    const LEN: usize = 1024;
-
-    /// Powers of `alpha`, computed as [`decay_pow`] does so results are identical.
-    pub fn new(alpha: f32) -> Self {
-        Self {
-            alpha,
-            powers: (0..Self::LEN as u32).map(|k| decay_pow(alpha, k)).collect(),
-        }
+/// Steps between rebases of the table's EMA gap for decay `alpha`: the gap's scale
+/// `α^−(t−b)` stays at most 2^40 (so `α^(t−b)` does not underflow either). One step for
+/// `alpha = 0` (whose EMA is the weight itself).
+pub fn ema_rebase_interval(alpha: f32) -> u32 {
+    let per_step = -f64::from(alpha).ln();
+    if per_step.is_nan() || per_step <= 0.0 {
+        return u32::MAX; // α ≥ 1: the scale never grows (the configuration rejects such α)
     }
-
-    /// `α^k`.
-    #[inline(always)]
-    pub fn get(&self, k: u32) -> f32 {
-        match self.powers.get(k as usize) {
-            Some(p) => *p,
-            None => decay_pow(self.alpha, k),
-        }
-    }
+    ((40.0 * std::f64::consts::LN_2 / per_step).floor() as u32).max(1)
 }
 
 /// Dense Adam + EMA over a parameter group (the MLP), consuming `grad`.
@@ -174,27 +168,26 @@ pub fn half_weights(f: usize, records: &[f32]) -> Vec<f16> {
     out
 }
 
-/// Sparse Adam + lazy EMA over one hash-grid level: for every entry whose bit is set in
-/// `touched`, updates its record (`f` features) from `grad` (which is zeroed), catches its EMA
-/// up and records the step in `last`; with `half`, also stores the new weights there rounded
-/// to half precision (as [`half_weights`]). The bitmap is cleared.
+/// Sparse Adam + EMA over part of a hash-grid level (`grad.len() / f` entries): for every
+/// entry whose bit is set in `touched`, updates its record (`f` features) from `grad` (which is
+/// zeroed), including its EMA gap; with `half`, also stores the new weights there rounded to
+/// half precision (as [`half_weights`]). The bitmap is cleared.
 pub fn sparse_step(
     c: &StepConstants,
     f: usize,
     touched: &mut [u64],
     records: &mut [f32],
     grad: &mut [f32],
-    last: &mut [u32],
     half: Option<&mut [f16]>,
 ) {
     if let Some(h) = &half {
-        assert_eq!(h.len(), last.len() * f, "one half per entry and feature");
+        assert_eq!(h.len(), grad.len(), "one half per gradient value");
     }
     match f {
-        1 => sparse_step_f::<1>(c, touched, records, grad, last, half),
-        2 => sparse_step_f::<2>(c, touched, records, grad, last, half),
-        4 => sparse_step_f::<4>(c, touched, records, grad, last, half),
-        8 => sparse_step_f::<8>(c, touched, records, grad, last, half),
+        1 => sparse_step_f::<1>(c, touched, records, grad, half),
+        2 => sparse_step_f::<2>(c, touched, records, grad, half),
+        4 => sparse_step_f::<4>(c, touched, records, grad, half),
+        8 => sparse_step_f::<8>(c, touched, records, grad, half),
         _ => panic!("unsupported features per level {f}"),
     }
 }
@@ -207,21 +200,20 @@ fn sparse_step_f<const F: usize>(
     touched: &mut [u64],
     records: &mut [f32],
     grad: &mut [f32],
-    last: &mut [u32],
     half: Option<&mut [f16]>,
 ) {
-    let entries = last.len();
-    assert!(records.len() >= entries * RECORD * F && grad.len() >= entries * F);
+    let entries = grad.len() / F;
+    assert!(records.len() >= entries * RECORD * F);
     assert!(touched.len() * 64 <= entries.next_multiple_of(64));
     #[cfg(target_arch = "x86_64")]
     if F == 2 && super::gemm::has_avx2_fma() && super::grid::has_f16c() {
         // SAFETY: AVX2, FMA and F16C were detected; every touched entry is below `entries`
         // (the bitmap's bits beyond the last entry are never set by the scatter, and the
         // indices are checked again inside), and the slices' lengths were checked above.
-        unsafe { sparse_step_f2_avx2(c, touched, records, grad, last, half) };
+        unsafe { sparse_step_f2_avx2(c, touched, records, grad, half) };
         return;
     }
-    sparse_step_portable::<F>(c, touched, records, grad, last, half);
+    sparse_step_portable::<F>(c, touched, records, grad, half);
 }
 
 /// The portable loop of [`sparse_step`] for `F` features (public for the test that compares it
@@ -231,11 +223,10 @@ pub fn sparse_step_portable<const F: usize>(
     touched: &mut [u64],
     records: &mut [f32],
     grad: &mut [f32],
-    last: &mut [u32],
     mut half: Option<&mut [f16]>,
 ) {
     drain_bits(touched, |e| {
-        update_entry::<F>(c, &c.decay, e, records, grad, last, half.as_deref_mut())
+        update_entry::<F>(c, e, records, grad, half.as_deref_mut())
     });
 }
 
@@ -251,21 +242,15 @@ fn drain_bits(bits: &mut [u64], mut f: impl FnMut(usize)) {
     }
 }
 
-/// Adam and the EMA catch-up of one table entry (and its half-precision weights).
+/// Adam and the EMA gap of one table entry (and its half-precision weights).
 #[inline(always)]
 fn update_entry<const F: usize>(
     c: &StepConstants,
-    table: &DecayTable,
     e: usize,
     records: &mut [f32],
     grad: &mut [f32],
-    last: &mut [u32],
     half: Option<&mut [f16]>,
 ) {
-    let k = c.step - last[e];
-    last[e] = c.step;
-    // e_t = α^k e_s + (α − α^k) w_old + (1 − α) w_new  (w_old held for k − 1 steps).
-    let ak = table.get(k);
     let r = &mut records[e * RECORD * F..(e + 1) * RECORD * F];
     let g = &mut grad[e * F..(e + 1) * F];
     for j in 0..F {
@@ -276,8 +261,8 @@ fn update_entry<const F: usize>(
         r[F + j] = m;
         r[2 * F + j] = v;
         g[j] = 0.0;
-        if let Some(alpha) = c.ema {
-            r[3 * F + j] = ak * r[3 * F + j] + (alpha - ak) * w_old + (1.0 - alpha) * w;
+        if c.ema.is_some() {
+            r[3 * F + j] += c.gap_growth * (w_old - w);
         }
     }
     if let Some(h) = half {
@@ -288,15 +273,15 @@ fn update_entry<const F: usize>(
 }
 
 /// [`sparse_step_portable`] for two features, four touched entries at a time: their records
-/// `[w0 w1 | m0 m1 | v0 v1 | e0 e1]` are transposed (as 64-bit pairs) into one register each of
-/// weights, moments and EMA, so one square root and one division serve eight values. Each
+/// `[w0 w1 | m0 m1 | v0 v1 | q0 q1]` are transposed (as 64-bit pairs) into one register each of
+/// weights, moments and EMA gaps, so one square root and one division serve eight values. Each
 /// value goes through the same IEEE operations in the same order as [`StepConstants::adam`]
 /// (no fused multiply-adds), so the results are bit-identical. A remainder of fewer than four
 /// entries takes the scalar update.
 ///
 /// # Safety
-/// The CPU has AVX2 and F16C; `records` holds `8·last.len()` floats and `grad` `2·last.len()`
-/// (and `half`, if any, `2·last.len()` halves).
+/// The CPU has AVX2 and F16C; `records` holds four floats per value of `grad` (and `half`, if
+/// any, one half).
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma,f16c")]
 unsafe fn sparse_step_f2_avx2(
@@ -304,13 +289,10 @@ unsafe fn sparse_step_f2_avx2(
     touched: &mut [u64],
     records: &mut [f32],
     grad: &mut [f32],
-    last: &mut [u32],
     mut half: Option<&mut [f16]>,
 ) {
     use std::arch::x86_64::*;
-    let table = &c.decay;
     let a = &c.adam;
-    let alpha = c.ema.unwrap_or(0.0);
     let set = _mm256_set1_ps;
     let (l2, b1, nb1, b2, nb2) = (
         set(a.l2_reg),
@@ -320,22 +302,19 @@ unsafe fn sparse_step_f2_avx2(
         set(1.0 - a.beta2),
     );
     let (step_size, inv_bc2, eps) = (set(c.step_size), set(c.inv_bc2), set(a.epsilon));
-    let (alpha_v, one_minus_alpha) = (set(alpha), set(1.0 - alpha));
+    let gap_growth = set(c.gap_growth);
     let zero = _mm256_setzero_ps();
     let (half_lowest, half_highest) = (set(-HALF_MAX), set(HALF_MAX));
     let rec = records.as_mut_ptr();
-    let update4 = |es: [usize; 4], last: &mut [u32], grad: &mut [f32], half: Option<&mut [f16]>| {
-        let mut ak = [0f32; 4];
+    let update4 = |es: [usize; 4], grad: &mut [f32], half: Option<&mut [f16]>| {
         let mut g = [0f64; 4];
         for (q, &e) in es.iter().enumerate() {
-            ak[q] = table.get(c.step - last[e]);
-            last[e] = c.step;
             let gp = &mut grad[2 * e..2 * e + 2];
             g[q] = f64::from_bits(u64::from(gp[0].to_bits()) | (u64::from(gp[1].to_bits()) << 32));
             gp.fill(0.0);
         }
-        // SAFETY (whole block): `e < last.len()` was checked by the indexing above, so each
-        // record `rec[8e..8e + 8]` is inside `records`.
+        // SAFETY (whole block): `2e + 2 ≤ grad.len()` was checked by the indexing above, so
+        // each record `rec[8e..8e + 8]` is inside `records`.
         unsafe {
             let load = |e: usize| _mm256_loadu_pd(rec.add(8 * e).cast::<f64>().cast_const());
             let (ra, rb, rc, rd) = (load(es[0]), load(es[1]), load(es[2]), load(es[3]));
@@ -348,7 +327,6 @@ unsafe fn sparse_step_f2_avx2(
             let m = _mm256_castpd_ps(_mm256_permute2f128_pd::<0x20>(t1, t3));
             let e = _mm256_castpd_ps(_mm256_permute2f128_pd::<0x31>(t1, t3));
             let g = _mm256_castpd_ps(_mm256_loadu_pd(g.as_ptr()));
-            let ak = _mm256_set_ps(ak[3], ak[3], ak[2], ak[2], ak[1], ak[1], ak[0], ak[0]);
             // Adam, as `StepConstants::adam`.
             let finite = |x: __m256| _mm256_cmp_ps::<_CMP_EQ_OQ>(_mm256_sub_ps(x, x), zero);
             let l2w = _mm256_mul_ps(l2, w);
@@ -375,13 +353,7 @@ unsafe fn sparse_step_f2_avx2(
                 h[es[3]] = _mm_extract_epi32::<3>(pairs) as u32;
             }
             let e = if c.ema.is_some() {
-                _mm256_add_ps(
-                    _mm256_add_ps(
-                        _mm256_mul_ps(ak, e),
-                        _mm256_mul_ps(_mm256_sub_ps(alpha_v, ak), w),
-                    ),
-                    _mm256_mul_ps(one_minus_alpha, w_new),
-                )
+                _mm256_add_ps(e, _mm256_mul_ps(gap_growth, _mm256_sub_ps(w, w_new)))
             } else {
                 e
             };
@@ -420,21 +392,12 @@ unsafe fn sparse_step_f2_avx2(
             let g = &order[4 * q..4 * q + 4];
             update4(
                 [g[0], g[1], g[2], g[3]].map(|e| e as usize),
-                last,
                 grad,
                 half.as_deref_mut(),
             );
         }
         for &e in &order[4 * groups..] {
-            update_entry::<2>(
-                c,
-                table,
-                e as usize,
-                records,
-                grad,
-                last,
-                half.as_deref_mut(),
-            );
+            update_entry::<2>(c, e as usize, records, grad, half.as_deref_mut());
         }
     });
 }
@@ -445,31 +408,50 @@ thread_local! {
     static ORDER: std::cell::RefCell<Vec<u32>> = const { std::cell::RefCell::new(Vec::new()) };
 }
 
-/// Brings every entry's EMA of one level up to `step` (`e ← α^k e + (1 − α^k) w`).
-pub fn catch_up(alpha: f32, step: u32, f: usize, records: &mut [f32], last: &mut [u32]) {
-    let table = DecayTable::new(alpha);
-    for (e, l) in last.iter_mut().enumerate() {
-        let k = step - *l;
-        if k == 0 {
-            continue;
+/// Applies `f` to every entry's `(w, q)` pairs of the records (`features` per entry), in
+/// parallel.
+fn for_each_gap(features: usize, records: &mut [f32], f: impl Fn(f32, &mut f32) + Sync) {
+    use rayon::prelude::*;
+    const CHUNK: usize = 1 << 14;
+    let rec = RECORD * features;
+    records.par_chunks_mut(CHUNK * rec).for_each(|chunk| {
+        for r in chunk.chunks_exact_mut(rec) {
+            let (w, rest) = r.split_at_mut(features);
+            for (w, q) in w.iter().zip(&mut rest[2 * features..]) {
+                f(*w, q);
+            }
         }
-        *l = step;
-        let ak = table.get(k);
-        let r = &mut records[e * RECORD * f..(e + 1) * RECORD * f];
-        for j in 0..f {
-            r[3 * f + j] = ak * r[3 * f + j] + (1.0 - ak) * r[j];
-        }
-    }
+    });
 }
 
-/// Bias-corrected EMA weights of one level at `step` without modifying the state:
-/// `(α^k e + (1 − α^k) w) / (1 − α^t)`, or the weights themselves at step 0 or without EMA.
+/// Turns the records' raw EMA into the EMA gap at base step "now" (`q = e − w`).
+pub fn ema_gap_from_raw(features: usize, records: &mut [f32]) {
+    for_each_gap(features, records, |w, q| *q -= w);
+}
+
+/// Turns the records' EMA gap into the raw EMA `shift` steps after its base
+/// (`e = w + α^shift·q`).
+pub fn ema_raw_from_gap(alpha: f32, shift: u32, features: usize, records: &mut [f32]) {
+    let a = decay_pow(alpha, shift);
+    for_each_gap(features, records, |w, q| *q = w + a * *q);
+}
+
+/// Moves the base of the records' EMA gap `shift` steps on (`q ← α^shift·q`).
+pub fn rebase_ema_gap(alpha: f32, shift: u32, features: usize, records: &mut [f32]) {
+    let a = decay_pow(alpha, shift);
+    for_each_gap(features, records, |_, q| *q *= a);
+}
+
+/// Bias-corrected EMA weights of a table at `step` without modifying the state (records of `f`
+/// features): `(w + α^(step−base)·q) / (1 − α^step)` with the EMA gap `q` at base `base`, or
+/// `e / (1 − α^step)` with `base = None` (the records hold the raw EMA `e` at `step`); the
+/// weights themselves at step 0 or without EMA.
 pub fn materialize_grid(
     alpha: Option<f32>,
     step: u32,
+    base: Option<u32>,
     f: usize,
     records: &[f32],
-    last: &[u32],
     out: &mut [f32],
 ) {
     // SAFETY: `MaybeUninit<f32>` has the layout of `f32`, and `materialize_grid_into` only
@@ -480,7 +462,7 @@ pub fn materialize_grid(
             out.len(),
         )
     };
-    materialize_grid_into(alpha, step, f, records, last, out);
+    materialize_grid_into(alpha, step, base, f, records, out);
 }
 
 /// A value type of the materialised inference table: `f32`, or `f16` (see
@@ -512,24 +494,20 @@ impl TableValue for f16 {
 const HALF_MAX: f32 = 65504.0;
 
 /// [`materialize_grid`] into memory not yet initialised, as `T`: writes every element of `out`
-/// (`last.len() · f` of them), so a fresh buffer needs no zero fill (whose page faults, on one
-/// thread, cost more than the pass itself on a 2^19 table).
+/// (`f` per record), so a fresh buffer needs no zero fill (whose page faults, on one thread,
+/// cost more than the pass itself on a 2^19 table).
 pub fn materialize_grid_into<T: TableValue>(
     alpha: Option<f32>,
     step: u32,
+    base: Option<u32>,
     f: usize,
     records: &[f32],
-    last: &[u32],
     out: &mut [std::mem::MaybeUninit<T>],
 ) {
     assert_eq!(
-        out.len(),
-        last.len() * f,
-        "one output per entry and feature"
-    );
-    assert!(
-        records.len() >= last.len() * RECORD * f,
-        "records too short"
+        out.len() * RECORD,
+        records.len(),
+        "one output per record feature"
     );
     let Some(alpha) = alpha.filter(|_| step > 0) else {
         for (o, r) in out
@@ -543,91 +521,69 @@ pub fn materialize_grid_into<T: TableValue>(
         return;
     };
     let inv = 1.0 / (1.0 - decay_pow(alpha, step));
-    let table = DecayTable::new(alpha);
+    // `None`: the raw EMA, `e · inv`.
+    let a = base.map(|b| {
+        assert!(b <= step, "EMA base {b} after step {step}");
+        decay_pow(alpha, step - b)
+    });
     let mut done = 0;
     #[cfg(target_arch = "x86_64")]
     if f == 2 && super::gemm::has_avx2_fma() && super::grid::has_f16c() {
-        // SAFETY: AVX2, FMA and F16C were detected; the lengths of `records`, `last` and `out`
-        // were checked above.
-        done = unsafe { materialize_pairs_avx2(&table, step, inv, records, last, out) };
+        // SAFETY: AVX2, FMA and F16C were detected; the lengths of `records` and `out` were
+        // checked above.
+        done = unsafe { materialize_pairs_avx2(a, inv, records, out) };
     }
-    for e in done..last.len() {
-        materialize_entry(&table, step, inv, f, e, records, last, out);
-    }
-}
-
-/// Entry `e` of [`materialize_grid_into`]: `(α^k e + (1 − α^k) w) · inv` per feature.
-#[inline(always)]
-#[allow(clippy::too_many_arguments)]
-fn materialize_entry<T: TableValue>(
-    table: &DecayTable,
-    step: u32,
-    inv: f32,
-    f: usize,
-    e: usize,
-    records: &[f32],
-    last: &[u32],
-    out: &mut [std::mem::MaybeUninit<T>],
-) {
-    let ak = table.get(step - last[e]);
-    let r = &records[e * RECORD * f..(e + 1) * RECORD * f];
-    for j in 0..f {
-        out[e * f + j].write(T::from_f32((ak * r[3 * f + j] + (1.0 - ak) * r[j]) * inv));
+    for (o, r) in out[done * f..]
+        .chunks_exact_mut(f)
+        .zip(records[done * RECORD * f..].chunks_exact(RECORD * f))
+    {
+        for j in 0..f {
+            let e = match a {
+                Some(a) => r[j] + a * r[3 * f + j],
+                None => r[3 * f + j],
+            };
+            o[j].write(T::from_f32(e * inv));
+        }
     }
 }
 
 /// The AVX2 form of [`materialize_grid_into`]'s loop for two features, four entries per
 /// register and the same operations in the same order (the same bits; halves are clamped and
-/// rounded to nearest even, as [`TableValue::from_f32`]); a block of four with a catch-up
-/// `step − last` beyond the power table takes the scalar form. Returns how many leading
-/// entries it wrote (all but the last `len % 4`, which the caller's loop finishes).
+/// rounded to nearest even, as [`TableValue::from_f32`]). Returns how many leading entries it
+/// wrote (all but the last `len % 4`, which the caller's loop finishes).
 ///
 /// # Safety
-/// The CPU has AVX2, FMA and F16C; `records` holds `RECORD · 2` floats per entry of `last`, and
-/// `out` two per entry.
+/// The CPU has AVX2, FMA and F16C; `records` holds `RECORD · 2` floats per entry, and `out` two
+/// per entry.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma,f16c")]
 unsafe fn materialize_pairs_avx2<T: TableValue>(
-    table: &DecayTable,
-    step: u32,
+    a: Option<f32>,
     inv: f32,
     records: &[f32],
-    last: &[u32],
     out: &mut [std::mem::MaybeUninit<T>],
 ) -> usize {
     use std::arch::x86_64::*;
     const REC: usize = RECORD * 2;
-    let steps = _mm_set1_epi32(step as i32);
-    let limit = _mm_set1_epi32(DecayTable::LEN as i32 - 1);
-    let inv_scalar = inv;
-    let (one, inv) = (_mm256_set1_ps(1.0), _mm256_set1_ps(inv));
+    let entries = out.len() / 2;
+    let (raw, a, inv) = (
+        a.is_none(),
+        _mm256_set1_ps(a.unwrap_or(0.0)),
+        _mm256_set1_ps(inv),
+    );
     let (lowest, highest) = (_mm256_set1_ps(-HALF_MAX), _mm256_set1_ps(HALF_MAX));
-    let pairs = _mm256_setr_epi32(0, 0, 1, 1, 2, 2, 3, 3);
     let mut e = 0;
-    // SAFETY (whole loop): entries e..e + 4 exist in `last`, `records` and `out`.
+    // SAFETY (whole loop): entries e..e + 4 exist in `records` and `out`.
     unsafe {
-        while e + 4 <= last.len() {
-            let k = _mm_sub_epi32(steps, _mm_loadu_si128(last.as_ptr().add(e).cast()));
-            // Unsigned k ≤ LEN − 1 in every lane, else this block takes the scalar form.
-            if _mm_movemask_epi8(_mm_cmpeq_epi32(_mm_min_epu32(k, limit), k)) != 0xFFFF {
-                for i in e..e + 4 {
-                    materialize_entry(table, step, inv_scalar, 2, i, records, last, out);
-                }
-                e += 4;
-                continue;
-            }
-            let ak = _mm256_permutevar8x32_ps(
-                _mm256_castps128_ps256(_mm_i32gather_ps::<4>(table.powers.as_ptr(), k)),
-                pairs,
-            );
-            // Record = [w0 w1 m0 m1 | v0 v1 e0 e1]: the weights are the low 64 bits of the
-            // first half, the EMA the high 64 bits of the second.
+        while e + 4 <= entries {
+            // Record = [w0 w1 m0 m1 | v0 v1 q0 q1]: the weights are the low 64 bits of the
+            // first half, the EMA gap the high 64 bits of the second.
             let r = |i: usize| records.as_ptr().add((e + i) * REC);
             let (w01, w23) = (
                 _mm_unpacklo_pd(_mm_loadu_pd(r(0).cast()), _mm_loadu_pd(r(1).cast())),
                 _mm_unpacklo_pd(_mm_loadu_pd(r(2).cast()), _mm_loadu_pd(r(3).cast())),
             );
-            let (e01, e23) = (
+            let (q01, q23) = (
                 _mm_unpackhi_pd(
                     _mm_loadu_pd(r(0).add(4).cast()),
                     _mm_loadu_pd(r(1).add(4).cast()),
@@ -638,14 +594,13 @@ unsafe fn materialize_pairs_avx2<T: TableValue>(
                 ),
             );
             let w = _mm256_castpd_ps(_mm256_set_m128d(w23, w01));
-            let ema = _mm256_castpd_ps(_mm256_set_m128d(e23, e01));
-            let v = _mm256_mul_ps(
-                _mm256_add_ps(
-                    _mm256_mul_ps(ak, ema),
-                    _mm256_mul_ps(_mm256_sub_ps(one, ak), w),
-                ),
-                inv,
-            );
+            let q = _mm256_castpd_ps(_mm256_set_m128d(q23, q01));
+            let ema = if raw {
+                q
+            } else {
+                _mm256_add_ps(w, _mm256_mul_ps(a, q))
+            };
+            let v = _mm256_mul_ps(ema, inv);
             let dst = out.as_mut_ptr().add(e * 2);
             if T::HALF {
                 let v = _mm256_min_ps(_mm256_max_ps(v, lowest), highest);

@@ -48,14 +48,12 @@ pub struct GroupState<'a> {
     pub ema: &'a mut [f32],
 }
 
-/// Hash-table state: the per-entry records (see [`super::optim::RECORD`]), the step each
-/// entry's EMA is current at, and optionally the weights in half precision.
+/// Hash-table state: the per-entry records (see [`super::optim`]) and optionally the weights
+/// in half precision.
 #[derive(Debug)]
 pub struct GridState<'a> {
-    /// Records `[w | m | v | ema]` per entry.
+    /// Records `[w | m | v | q]` per entry (`q`: the EMA gap, see [`super::optim`]).
     pub records: &'a mut [f32],
-    /// Step each entry's EMA is current at.
-    pub last: &'a mut [u32],
     /// The weights rounded to half precision (`F` per entry, equal to
     /// [`super::optim::half_weights`] of the records): when present, the forward pass reads
     /// them instead of the records, and the update keeps them equal.
@@ -212,13 +210,8 @@ pub fn train_step(
     let t_grid = Instant::now();
     if let (Some(g), Some((hg, _))) = (grid, grid_part) {
         let f = hg.features();
-        let GridState {
-            records,
-            last,
-            half,
-        } = g;
+        let GridState { records, half } = g;
         let rs = split_levels(hg, f * RECORD, records);
-        let ls = split_levels(hg, 1, last);
         let hs: Vec<Option<&mut [f16]>> = match half {
             Some(h) => split_levels(hg, f, h).into_iter().map(Some).collect(),
             None => (0..hg.levels.len()).map(|_| None).collect(),
@@ -245,7 +238,7 @@ pub fn train_step(
         }
         let xyz = [&xyz[..padded], &xyz[padded..2 * padded], &xyz[2 * padded..]];
         let by_level = &by_level;
-        let level_step = |l: usize, rec: &mut [f32], la: &mut [u32], mut hl: Option<&mut [f16]>| {
+        let level_step = |l: usize, rec: &mut [f32], mut hl: Option<&mut [f16]>| {
             SCRATCH.with_borrow_mut(|scratch| {
                 let t_scatter = Instant::now();
                 let mut adam_nanos = 0;
@@ -256,7 +249,7 @@ pub fn train_step(
                     let half = hl
                         .as_deref_mut()
                         .map(|h| &mut h[first * f..(first + len) * f]);
-                    sparse_step(c, f, touched, rec, gr, &mut la[first..first + len], half);
+                    sparse_step(c, f, touched, rec, gr, half);
                     adam_nanos += t_adam.elapsed().as_nanos() as u64;
                 };
                 let dout = &by_level[l * n * f..(l + 1) * n * f];
@@ -274,12 +267,12 @@ pub fn train_step(
         };
         // Largest levels first (longest-processing-time order): the tasks left when a thread
         // runs out of work are the small coarse levels, so the threads finish together.
-        let mut tasks: Vec<_> = rs.into_iter().zip(ls).zip(hs).enumerate().collect();
+        let mut tasks: Vec<_> = rs.into_iter().zip(hs).enumerate().collect();
         tasks.sort_by_key(|(l, _)| std::cmp::Reverse(hg.levels[*l].entries));
         let level_step = &level_step;
         rayon::scope_fifo(|s| {
-            for (l, ((rec, la), hl)) in tasks {
-                s.spawn_fifo(move |_| level_step(l, rec, la, hl));
+            for (l, (rec, hl)) in tasks {
+                s.spawn_fifo(move |_| level_step(l, rec, hl));
             }
         });
     }
