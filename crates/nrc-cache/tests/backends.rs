@@ -476,7 +476,8 @@ fn hard_positions(rng: &mut Pcg64Mcg, m: usize) -> Vec<f32> {
 /// The batch gradient scatter (per level, software-pipelined) gives the same bits as
 /// scattering one sample at a time with the scalar reference, including
 /// positions on the faces of the cube, outside it and NaN, and a batch that is not a multiple
-/// of eight.
+/// of eight; also with every sample at one point, which overflows the first try's bins on the
+/// hashed levels (redone with counted bins).
 #[test]
 fn batch_hash_grid_scatter_matches_the_per_sample_reference() {
     use nrc_cache::cpu::grid::backward_table;
@@ -489,30 +490,61 @@ fn batch_hash_grid_scatter_matches_the_per_sample_reference() {
         for v in pos[300..600].iter_mut() {
             *v = 0.5 + 0.01 * *v;
         }
-        let d = grid.output_dims();
-        let dout: Vec<f32> = (0..m * d).map(|_| rng.random_range(-1.0..1.0)).collect();
-        let mut batch = vec![0f32; grid.total_entries * 2];
-        backward_table(&grid, &pos, &dout, &mut batch);
-        let mut reference = vec![0f32; grid.total_entries * 2];
-        for i in 0..m {
-            grid.backward_params_one(
-                [pos[3 * i], pos[3 * i + 1], pos[3 * i + 2]],
-                &dout[i * d..(i + 1) * d],
-                &mut reference,
+        let one_point: Vec<f32> = (0..m).flat_map(|_| [0.3, 0.6, 0.7]).collect();
+        let levels = grid.levels.len();
+        let dense_multi_bin = grid
+            .levels
+            .iter()
+            .filter(|l| l.dense && l.entries as usize > nrc_cache::cpu::grid::BIN_ENTRIES)
+            .count();
+        for (what, pos) in [("spread", pos), ("one point", one_point)] {
+            let d = grid.output_dims();
+            let dout: Vec<f32> = (0..m * d).map(|_| rng.random_range(-1.0..1.0)).collect();
+            let mut batch = vec![0f32; grid.total_entries * 2];
+            backward_table(&grid, &pos, &dout, &mut batch);
+            let mut reference = vec![0f32; grid.total_entries * 2];
+            for i in 0..m {
+                grid.backward_params_one(
+                    [pos[3 * i], pos[3 * i + 1], pos[3 * i + 2]],
+                    &dout[i * d..(i + 1) * d],
+                    &mut reference,
+                );
+            }
+            assert!(batch.iter().filter(|v| **v != 0.0).count() > 100);
+            let (binned, counted) = binned_gradient(&grid, &pos, &dout);
+            // Dense levels of several bins always count; so do hashed levels where the cluster
+            // overflows a bin (the coarser ones), and at one point every hashed level of several
+            // bins; at log2T 12 every level is one bin.
+            let multi_bin = grid
+                .levels
+                .iter()
+                .filter(|l| l.entries as usize > nrc_cache::cpu::grid::BIN_ENTRIES)
+                .count();
+            let expected = match what {
+                "spread" => dense_multi_bin..multi_bin,
+                _ => multi_bin..multi_bin + 1,
+            };
+            assert!(
+                expected.contains(&counted) || (multi_bin == 0 && counted == 0),
+                "log2T {log2t}, {what}: {counted} of {levels} levels counted, not {expected:?}"
             );
+            for (i, ((x, y), z)) in batch.iter().zip(&reference).zip(&binned).enumerate() {
+                assert_eq!(
+                    x.to_bits(),
+                    y.to_bits(),
+                    "log2T {log2t}, {what}, value {i}: {x} vs {y}"
+                );
+                assert_eq!(
+                    z.to_bits(),
+                    y.to_bits(),
+                    "log2T {log2t}, {what}, binned value {i}: {z} vs {y}"
+                );
+            }
         }
-        assert!(batch.iter().filter(|v| **v != 0.0).count() > 1000);
-        let binned = binned_gradient(&grid, &pos, &dout);
-        for (i, ((x, y), z)) in batch.iter().zip(&reference).zip(&binned).enumerate() {
-            assert_eq!(
-                x.to_bits(),
-                y.to_bits(),
-                "log2T {log2t}, value {i}: {x} vs {y}"
-            );
-            assert_eq!(
-                z.to_bits(),
-                y.to_bits(),
-                "log2T {log2t}, binned value {i}: {z} vs {y}"
+        if log2t == 19 {
+            assert!(
+                dense_multi_bin > 0,
+                "the preset has dense levels of several bins"
             );
         }
     }
@@ -521,12 +553,13 @@ fn batch_hash_grid_scatter_matches_the_per_sample_reference() {
 /// The table gradient as the training step forms it: level by level with
 /// [`nrc_cache::cpu::grid::scatter_binned`], each bin copied out and cleared as the sparse
 /// update does; checks that every entry with a nonzero gradient is marked referenced (a
-/// referenced entry's sum may be zero: corners with weight zero on the cube's faces).
+/// referenced entry's sum may be zero: corners with weight zero on the cube's faces). Also
+/// returns how many levels were redone with counted bins.
 fn binned_gradient(
     grid: &nrc_cache::encoding::hash_grid::HashGrid,
     pos: &[f32],
     dout: &[f32],
-) -> Vec<f32> {
+) -> (Vec<f32>, usize) {
     use nrc_cache::cpu::grid::{BinScratch, scatter_binned};
     let m = pos.len() / 3;
     let d = grid.output_dims();
@@ -563,7 +596,7 @@ fn binned_gradient(
             },
         );
     }
-    out
+    (out, scratch.counted_levels())
 }
 
 /// The per-sample encodings of a whole tile (one-blob a column at a time) give the same bits as

@@ -564,14 +564,26 @@ pub struct BinScratch {
     grad: Vec<f32>,
     /// One bin's referenced entries, clear between bins.
     touched: Vec<u64>,
+    /// Levels that took counted bins (dense levels of several bins, and hashed levels where a
+    /// bin of the first try overflowed).
+    counted_levels: usize,
+}
+
+impl BinScratch {
+    /// How many levels [`scatter_binned`] took counted bins for (dense levels of several bins,
+    /// and hashed levels where a bin of the first try overflowed).
+    pub fn counted_levels(&self) -> usize {
+        self.counted_levels
+    }
 }
 
 /// Level `l`'s table gradient of a batch, bin by bin: the same sums as [`scatter_level`]
 /// (each entry's contributions added in sample and corner order, so the same bits), without
-/// read-modify-writes into a gradient table the size of the level. The samples' corners are
-/// computed twice: once to count each bin's contributions, once to write the weighted
-/// gradients straight into their bin's place; then each bin's contributions are summed into a
-/// bin-sized buffer that stays in L2.
+/// read-modify-writes into a gradient table the size of the level. The weighted gradients are
+/// written straight into their bin's place (on hashed levels into bins of twice the even
+/// share, in one pass; on dense levels, or where such a bin overflows, into bins sized by a
+/// counting pass first); then each bin's contributions are summed into a bin-sized buffer that
+/// stays in L2.
 ///
 /// `xyz` holds the positions one axis per slice, padded with zeros to whole groups of eight;
 /// `dout` holds the level's `F` output gradients per sample. `per_bin(first, grad, touched)`
@@ -600,64 +612,75 @@ pub fn scatter_binned<const F: usize>(
     let bins = entries.div_ceil(BIN_ENTRIES);
     let avx2 = super::gemm::has_avx2_fma();
     let s = scratch;
-    s.starts.clear();
-    s.starts.resize(bins + 1, 0);
-    let mut corners = ([[0u32; LANES]; 8], [[0f32; LANES]; 8]);
-    for g in 0..groups {
-        group_corners(&fast, xyz, g * LANES, avx2, &mut corners);
-        let idx = &corners.0;
-        for j in 0..LANES.min(n - g * LANES) {
-            for corner in idx {
-                s.starts[(corner[j] - offset) as usize / BIN_ENTRIES + 1] += 1;
-            }
-        }
-    }
-    for b in 0..bins {
-        s.starts[b + 1] += s.starts[b];
-    }
+    let total = 8 * n;
     let words = std::mem::size_of::<Contribution<F>>() / 4;
-    s.sorted.resize(n * 8 * words, 0);
-    // SAFETY: `Contribution<F>` is plain data of `u32`/`f32` words (any bit pattern is
-    // valid, alignment 4), and `sorted` holds `8n` of them.
-    let sorted = unsafe {
-        std::slice::from_raw_parts_mut(s.sorted.as_mut_ptr().cast::<Contribution<F>>(), n * 8)
+    // First try on hashed levels: every bin gets room for twice its even share of the
+    // contributions (the spatial hash fills the bins evenly: 2048 ± 45 each at 2^14 samples),
+    // written in one pass. Dense levels (whose bins are slabs of space, filled as unevenly as
+    // the samples lie), and hashed levels where a bin overflows (a few distinct cells), take
+    // counted bins: corners computed once to count each bin's contributions, then again to
+    // write them.
+    let room = if bins == 1 {
+        total
+    } else {
+        (2 * total.div_ceil(bins) + 64).min(total)
     };
+    s.starts.clear();
+    s.starts.extend((0..=bins).map(|b| b * room));
+    s.sorted.resize(bins * room * words, 0);
     let mut next = s.starts[..bins].to_vec();
-    for g in 0..groups {
-        group_corners(&fast, xyz, g * LANES, avx2, &mut corners);
-        let (idx, w) = &corners;
-        for j in 0..LANES.min(n - g * LANES) {
-            let i = g * LANES + j;
-            let d: [f32; F] = dout[i * F..(i + 1) * F].try_into().expect("F values");
-            for k in 0..8 {
-                let entry = idx[k][j] - offset;
-                let p = &mut next[entry as usize / BIN_ENTRIES];
-                // The bin's write position 16 contributions (three lines) on: with 64 bins
-                // written at once the hardware does not fetch ahead of every stream, and the
-                // stores waited on their lines (scatter 15–30 % faster, BENCHMARKS.md).
-                prefetch(sorted.as_ptr().wrapping_add(*p + 16));
-                sorted[*p] = Contribution {
-                    entry,
-                    grad: d.map(|dq| w[k][j] * dq),
-                };
-                *p += 1;
+    let level_input = LevelInput::<F> {
+        fast: &fast,
+        offset,
+        xyz,
+        dout,
+        avx2,
+    };
+    let roomy =
+        (bins == 1 || !level.dense) && level_input.write(true, &s.starts, &mut s.sorted, &mut next);
+    if !roomy {
+        s.counted_levels += 1;
+        s.starts.fill(0);
+        let mut corners = ([[0u32; LANES]; 8], [[0f32; LANES]; 8]);
+        for g in 0..groups {
+            group_corners(&fast, xyz, g * LANES, avx2, &mut corners);
+            let idx = &corners.0;
+            for j in 0..LANES.min(n - g * LANES) {
+                for corner in idx {
+                    s.starts[(corner[j] - offset) as usize / BIN_ENTRIES + 1] += 1;
+                }
             }
         }
+        for b in 0..bins {
+            s.starts[b + 1] += s.starts[b];
+        }
+        s.sorted.resize(total * words, 0);
+        next.copy_from_slice(&s.starts[..bins]);
+        let counted = level_input.write(false, &s.starts, &mut s.sorted, &mut next);
+        debug_assert!(counted, "counted bins cannot overflow");
     }
+    let sorted = contributions_mut::<F>(&mut s.sorted);
     s.grad.resize(BIN_ENTRIES * F, 0.0);
     s.touched.resize(BIN_ENTRIES / 64, 0);
-    for b in 0..bins {
-        let (lo, hi) = (s.starts[b], s.starts[b + 1]);
+    for (b, (&lo, &hi)) in s.starts.iter().zip(&next).enumerate() {
+        // Bin b's contributions: from its start to where its writing stopped.
         if lo == hi {
             continue;
         }
         let first = b * BIN_ENTRIES;
+        let grad = &mut s.grad[..BIN_ENTRIES * F];
+        let touched = &mut s.touched[..BIN_ENTRIES / 64];
         for c in &sorted[lo..hi] {
             let e = c.entry as usize - first;
-            for (g, v) in s.grad[e * F..(e + 1) * F].iter_mut().zip(c.grad) {
-                *g += v;
+            assert!(e < BIN_ENTRIES, "contribution outside its bin");
+            // SAFETY: e < BIN_ENTRIES (checked above), and the slices hold BIN_ENTRIES · F and
+            // BIN_ENTRIES / 64 elements.
+            unsafe {
+                for (q, v) in c.grad.iter().enumerate() {
+                    *grad.get_unchecked_mut(e * F + q) += v;
+                }
+                *touched.get_unchecked_mut(e / 64) |= 1u64 << (e % 64);
             }
-            s.touched[e / 64] |= 1u64 << (e % 64);
         }
         let len = BIN_ENTRIES.min(entries - first);
         per_bin(
@@ -666,6 +689,66 @@ pub fn scatter_binned<const F: usize>(
             &mut s.touched[..len.div_ceil(64)],
         );
         debug_assert!(s.touched.iter().all(|&t| t == 0), "per_bin left bits set");
+    }
+}
+
+/// The contribution records held in a [`BinScratch`]'s words.
+fn contributions_mut<const F: usize>(words: &mut [u32]) -> &mut [Contribution<F>] {
+    let n = words.len() * 4 / std::mem::size_of::<Contribution<F>>();
+    // SAFETY: `Contribution<F>` is plain data of `u32`/`f32` words (any bit pattern is valid,
+    // alignment 4), and `words` holds `n` of them.
+    unsafe { std::slice::from_raw_parts_mut(words.as_mut_ptr().cast::<Contribution<F>>(), n) }
+}
+
+/// One level's input to the write pass of [`scatter_binned`].
+struct LevelInput<'a, const F: usize> {
+    fast: &'a FastLevel,
+    offset: u32,
+    xyz: [&'a [f32]; 3],
+    dout: &'a [f32],
+    avx2: bool,
+}
+
+impl<const F: usize> LevelInput<'_, F> {
+    /// The write pass: each sample's eight weighted gradients go to their bin's next place
+    /// (`next[bin]`, advanced) in `words` (contribution records), in sample and corner order.
+    /// Bin `b` ends at `starts[b + 1]`; with `check`, the pass stops and returns false when a
+    /// bin is full; without it, the caller has sized the bins by counting.
+    fn write(&self, check: bool, starts: &[usize], words: &mut [u32], next: &mut [usize]) -> bool {
+        let (n, ends) = (self.dout.len() / F, &starts[1..]);
+        let sorted = contributions_mut::<F>(words);
+        assert!(ends.len() >= next.len() && ends.iter().all(|&e| e <= sorted.len()));
+        let mut corners = ([[0u32; LANES]; 8], [[0f32; LANES]; 8]);
+        for g in 0..n.div_ceil(LANES) {
+            group_corners(self.fast, self.xyz, g * LANES, self.avx2, &mut corners);
+            let (idx, w) = &corners;
+            for j in 0..LANES.min(n - g * LANES) {
+                let i = g * LANES + j;
+                let d: [f32; F] = self.dout[i * F..(i + 1) * F].try_into().expect("F values");
+                for k in 0..8 {
+                    let entry = idx[k][j] - self.offset;
+                    let bin = entry as usize / BIN_ENTRIES;
+                    let p = next[bin];
+                    if check && p == ends[bin] {
+                        return false;
+                    }
+                    assert!(p < ends[bin], "bin {bin} overflows its counted size");
+                    // The bin's write position 16 contributions (three lines) on: with 64 bins
+                    // written at once the hardware does not fetch ahead of every stream, and the
+                    // stores waited on their lines (scatter 15–30 % faster, BENCHMARKS.md).
+                    prefetch(sorted.as_ptr().wrapping_add(p + 16));
+                    // SAFETY: p < ends[bin] ≤ sorted.len() (checked above).
+                    unsafe {
+                        *sorted.get_unchecked_mut(p) = Contribution {
+                            entry,
+                            grad: d.map(|dq| w[k][j] * dq),
+                        };
+                    }
+                    next[bin] = p + 1;
+                }
+            }
+        }
+        true
     }
 }
 
