@@ -62,7 +62,7 @@ impl StepConstants {
             bc2,
             step_size: adam.learning_rate / bc1,
             inv_bc2: 1.0 / bc2,
-            gap_growth: 1.0 / decay_pow(ema.unwrap_or(0.0), step - 1 - ema_base),
+            gap_growth: ema.map_or(1.0, |alpha| 1.0 / decay_pow(alpha, step - 1 - ema_base)),
         }
     }
 
