@@ -309,9 +309,10 @@ pub fn run(options: &BenchOptions) -> Vec<BenchFigure> {
     };
     let mut figures = Vec::new();
     println!(
-        "nrc-cache benchmark (threads: {}, AVX2+FMA kernels: {})",
+        "nrc-cache benchmark (threads: {}, AVX2+FMA kernels: {}, MLP kernel: {:?})",
         rayon::current_num_threads(),
-        crate::cpu::gemm::has_avx2_fma()
+        crate::cpu::gemm::has_avx2_fma(),
+        crate::cpu::gemm::Kernel::best()
     );
     let (copy, random) = memory_limits();
     println!(

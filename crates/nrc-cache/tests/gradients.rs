@@ -7,7 +7,7 @@ use burn::tensor::{Device, Tensor, TensorData};
 use nrc_cache::CacheConfig;
 use nrc_cache::batch::{TRAIN_ROW, pack_training};
 use nrc_cache::config::{CompositeConfig, NestedEncoding, OutputActivation};
-use nrc_cache::cpu::gemm::{Rows, Store, Strided, gemm, gemm_portable};
+use nrc_cache::cpu::gemm::{Rows, Store, Strided, gemm_portable};
 use nrc_cache::cpu::mlp::{
     MlpGrad, OUT_PAD, PreparedMlp, TileScratch, backward_tile, forward_tile,
 };
@@ -343,70 +343,109 @@ fn fused_mlp_tile_matches_f64_reference_and_finite_differences() {
     }
 }
 
-#[test]
-fn avx2_gemm_matches_portable_loops() {
-    let mut r = rng(4);
-    for &(m, n, k) in &[
-        (1, 8, 1),
-        (6, 16, 64),
-        (7, 24, 5),
-        (37, 64, 64),
-        (64, 8, 128),
-        (13, 64, 3),
-    ] {
+/// Per case: a label, C before, and C after each kernel.
+type GemmResults = Vec<(String, Vec<f32>, Vec<Vec<f32>>)>;
+
+/// For random products of each shape, every store mode and A plain and transposed: a label, C
+/// before, and C after each of `kernels` (`None`: the portable loops).
+fn gemm_results(
+    seed: u64,
+    shapes: &[(usize, usize, usize)],
+    kernels: &[Option<nrc_cache::cpu::gemm::Kernel>],
+) -> GemmResults {
+    let mut r = rng(seed);
+    let mut out = Vec::new();
+    for &(m, n, k) in shapes {
         let a: Vec<f32> = (0..m * k + 7).map(|_| r.random_range(-1.0..1.0)).collect();
         let b: Vec<f32> = (0..k * n).map(|_| r.random_range(-1.0..1.0)).collect();
         for store in [Store::Overwrite, Store::Relu, Store::Accumulate] {
             for transposed in [false, true] {
                 let (rs, cs) = if transposed { (1, m) } else { (k, 1) };
                 let c0: Vec<f32> = (0..m * n).map(|_| r.random_range(-1.0..1.0)).collect();
-                let mut c1 = c0.clone();
-                let mut c2 = c0.clone();
-                gemm(
-                    m,
-                    n,
-                    k,
-                    Strided {
-                        data: &a,
-                        row_stride: rs,
-                        col_stride: cs,
-                    },
-                    Rows {
-                        data: &b,
-                        stride: n,
-                    },
-                    Rows {
-                        data: &mut c1,
-                        stride: n,
-                    },
-                    store,
-                );
-                gemm_portable(
-                    m,
-                    n,
-                    k,
-                    Strided {
-                        data: &a,
-                        row_stride: rs,
-                        col_stride: cs,
-                    },
-                    Rows {
-                        data: &b,
-                        stride: n,
-                    },
-                    Rows {
-                        data: &mut c2,
-                        stride: n,
-                    },
-                    store,
-                );
-                for (x, y) in c1.iter().zip(&c2) {
-                    assert!(
-                        (x - y).abs() < 1e-4 * (1.0 + y.abs()),
-                        "{m}×{n}×{k} {store:?}: {x} vs {y}"
-                    );
-                }
+                let results = kernels
+                    .iter()
+                    .map(|kernel| {
+                        let mut c = c0.clone();
+                        let a = Strided {
+                            data: &a,
+                            row_stride: rs,
+                            col_stride: cs,
+                        };
+                        let b = Rows {
+                            data: &b[..],
+                            stride: n,
+                        };
+                        let out = Rows {
+                            data: &mut c[..],
+                            stride: n,
+                        };
+                        match kernel {
+                            Some(kernel) => {
+                                nrc_cache::cpu::gemm::gemm_with(*kernel, m, n, k, a, b, out, store)
+                            }
+                            None => gemm_portable(m, n, k, a, b, out, store),
+                        }
+                        c
+                    })
+                    .collect();
+                let label = format!("{m}×{n}×{k} {store:?} transposed {transposed}");
+                out.push((label, c0, results));
             }
+        }
+    }
+    out
+}
+
+#[test]
+fn avx2_gemm_matches_portable_loops() {
+    use nrc_cache::cpu::gemm::Kernel;
+    let shapes = [
+        (1, 8, 1),
+        (6, 16, 64),
+        (7, 24, 5),
+        (37, 64, 64),
+        (64, 8, 128),
+        (13, 64, 3),
+    ];
+    for (label, _, c) in gemm_results(4, &shapes, &[Some(Kernel::best()), None]) {
+        for (x, y) in c[0].iter().zip(&c[1]) {
+            assert!(
+                (x - y).abs() < 1e-4 * (1.0 + y.abs()),
+                "{label}: {x} vs {y}"
+            );
+        }
+    }
+}
+
+/// The AVX-512 kernel (12×32 blocks, the rest by the AVX2 kernel) gives the AVX2 kernel's bits:
+/// the same fused multiply-adds in the same order, for shapes with and without whole blocks,
+/// transposed A, every store mode.
+#[test]
+fn avx512_gemm_gives_the_avx2_bits() {
+    use nrc_cache::cpu::gemm::Kernel;
+    if Kernel::best() != Kernel::Avx512 {
+        println!(
+            "skipped: this CPU has no AVX-512F (best kernel {:?})",
+            Kernel::best()
+        );
+        return;
+    }
+    let shapes = [
+        (12, 32, 64),
+        (128, 64, 64),
+        (64, 64, 128),
+        (25, 40, 7),
+        (11, 64, 3),
+        (13, 8, 1),
+        (36, 96, 0),
+    ];
+    let kernels = [Some(Kernel::Avx512), Some(Kernel::Avx2)];
+    for (label, c0, c) in gemm_results(5, &shapes, &kernels) {
+        for (i, (p, q)) in c[0].iter().zip(&c[1]).enumerate() {
+            assert_eq!(p.to_bits(), q.to_bits(), "{label}, {i}: {p} vs {q}");
+        }
+        if !label.contains("×0 ") {
+            assert_ne!(c[0], c0, "{label}: nothing written");
         }
     }
 }
