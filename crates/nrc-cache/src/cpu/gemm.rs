@@ -168,9 +168,65 @@ pub fn gemm_portable(
     }
 }
 
+/// The raw operands of a register block: `k` steps of the inner dimension, A at `a` (row stride
+/// `ars`, column stride `acs`), B at `b` (row stride `ldb`), C at `c` (row stride `ldc`).
+#[cfg(target_arch = "x86_64")]
+#[derive(Clone, Copy)]
+struct Block {
+    k: usize,
+    a: *const f32,
+    ars: usize,
+    acs: usize,
+    b: *const f32,
+    ldb: usize,
+    c: *mut f32,
+    ldc: usize,
+    store: Store,
+}
+
+#[cfg(target_arch = "x86_64")]
+impl Block {
+    /// The whole product's operands (the caller checked their bounds).
+    fn new(
+        k: usize,
+        a: &Strided<'_>,
+        b: &Rows<&[f32]>,
+        c: &mut Rows<&mut [f32]>,
+        store: Store,
+    ) -> Self {
+        Self {
+            k,
+            a: a.data.as_ptr(),
+            ars: a.row_stride,
+            acs: a.col_stride,
+            b: b.data.as_ptr(),
+            ldb: b.stride,
+            c: c.data.as_mut_ptr(),
+            ldc: c.stride,
+            store,
+        }
+    }
+
+    /// The block starting at row `i` and column `j` of C.
+    ///
+    /// # Safety
+    /// Row `i` and column `j` lie inside the operands.
+    unsafe fn at(self, i: usize, j: usize) -> Self {
+        // SAFETY: inside the operands (the caller's promise).
+        unsafe {
+            Self {
+                a: self.a.add(i * self.ars),
+                b: self.b.add(j),
+                c: self.c.add(i * self.ldc + j),
+                ..self
+            }
+        }
+    }
+}
+
 #[cfg(target_arch = "x86_64")]
 mod avx2 {
-    use super::{Rows, Store, Strided};
+    use super::{Block, Rows, Store, Strided};
     use std::arch::x86_64::*;
 
     #[target_feature(enable = "avx2,fma")]
@@ -180,37 +236,24 @@ mod avx2 {
         k: usize,
         a: Strided<'_>,
         b: Rows<&[f32]>,
-        c: Rows<&mut [f32]>,
+        mut c: Rows<&mut [f32]>,
         store: Store,
     ) {
-        let (ap, bp, cp) = (a.data.as_ptr(), b.data.as_ptr(), c.data.as_mut_ptr());
-        let (ars, acs, ldb, ldc) = (a.row_stride, a.col_stride, b.stride, c.stride);
+        let whole = Block::new(k, &a, &b, &mut c, store);
         let mut i = 0;
-        // SAFETY (all blocks): rows i..i+MR < m and columns j..j+8·NV ≤ n, checked by the caller.
+        // SAFETY (all blocks): rows i..i+MR ≤ m and columns j..j+8·NV ≤ n, checked by the caller.
         unsafe {
             while i + 6 <= m {
-                row_block::<6>(
-                    n,
-                    k,
-                    ap.add(i * ars),
-                    ars,
-                    acs,
-                    bp,
-                    ldb,
-                    cp.add(i * ldc),
-                    ldc,
-                    store,
-                );
+                row_block::<6>(n, whole.at(i, 0));
                 i += 6;
             }
-            let rest = m - i;
-            let (ap, cp) = (ap.add(i * ars), cp.add(i * ldc));
-            match rest {
-                1 => row_block::<1>(n, k, ap, ars, acs, bp, ldb, cp, ldc, store),
-                2 => row_block::<2>(n, k, ap, ars, acs, bp, ldb, cp, ldc, store),
-                3 => row_block::<3>(n, k, ap, ars, acs, bp, ldb, cp, ldc, store),
-                4 => row_block::<4>(n, k, ap, ars, acs, bp, ldb, cp, ldc, store),
-                5 => row_block::<5>(n, k, ap, ars, acs, bp, ldb, cp, ldc, store),
+            let rest = whole.at(i, 0);
+            match m - i {
+                1 => row_block::<1>(n, rest),
+                2 => row_block::<2>(n, rest),
+                3 => row_block::<3>(n, rest),
+                4 => row_block::<4>(n, rest),
+                5 => row_block::<5>(n, rest),
                 _ => {}
             }
         }
@@ -218,27 +261,16 @@ mod avx2 {
 
     #[inline]
     #[target_feature(enable = "avx2,fma")]
-    unsafe fn row_block<const MR: usize>(
-        n: usize,
-        k: usize,
-        a: *const f32,
-        ars: usize,
-        acs: usize,
-        b: *const f32,
-        ldb: usize,
-        c: *mut f32,
-        ldc: usize,
-        store: Store,
-    ) {
+    unsafe fn row_block<const MR: usize>(n: usize, rows: Block) {
         let mut j = 0;
         // SAFETY: see `gemm`.
         unsafe {
             while j + 16 <= n {
-                micro::<MR, 2>(k, a, ars, acs, b.add(j), ldb, c.add(j), ldc, store);
+                micro::<MR, 2>(rows.at(0, j));
                 j += 16;
             }
             if j < n {
-                micro::<MR, 1>(k, a, ars, acs, b.add(j), ldb, c.add(j), ldc, store);
+                micro::<MR, 1>(rows.at(0, j));
             }
         }
     }
@@ -246,29 +278,19 @@ mod avx2 {
     /// An `MR × 8·NV` block of C accumulated in registers over the whole inner dimension.
     #[inline]
     #[target_feature(enable = "avx2,fma")]
-    unsafe fn micro<const MR: usize, const NV: usize>(
-        k: usize,
-        a: *const f32,
-        ars: usize,
-        acs: usize,
-        b: *const f32,
-        ldb: usize,
-        c: *mut f32,
-        ldc: usize,
-        store: Store,
-    ) {
+    unsafe fn micro<const MR: usize, const NV: usize>(o: Block) {
         // SAFETY: see `gemm`.
         unsafe {
             let mut acc = [[_mm256_setzero_ps(); NV]; MR];
-            for p in 0..k {
-                let brow = b.add(p * ldb);
+            for p in 0..o.k {
+                let brow = o.b.add(p * o.ldb);
                 let mut bv = [_mm256_setzero_ps(); NV];
                 for (v, bvv) in bv.iter_mut().enumerate() {
                     *bvv = _mm256_loadu_ps(brow.add(8 * v));
                 }
-                let acol = a.add(p * acs);
+                let acol = o.a.add(p * o.acs);
                 for (i, acc_i) in acc.iter_mut().enumerate() {
-                    let av = _mm256_broadcast_ss(&*acol.add(i * ars));
+                    let av = _mm256_broadcast_ss(&*acol.add(i * o.ars));
                     for v in 0..NV {
                         acc_i[v] = _mm256_fmadd_ps(av, bv[v], acc_i[v]);
                     }
@@ -276,10 +298,10 @@ mod avx2 {
             }
             let zero = _mm256_setzero_ps();
             for (i, acc_i) in acc.iter().enumerate() {
-                let crow = c.add(i * ldc);
+                let crow = o.c.add(i * o.ldc);
                 for (v, accv) in acc_i.iter().enumerate() {
                     let dst = crow.add(8 * v);
-                    let val = match store {
+                    let val = match o.store {
                         Store::Overwrite => *accv,
                         Store::Relu => _mm256_max_ps(*accv, zero),
                         Store::Accumulate => _mm256_add_ps(_mm256_loadu_ps(dst), *accv),
@@ -293,7 +315,7 @@ mod avx2 {
 
 #[cfg(target_arch = "x86_64")]
 mod avx512 {
-    use super::{Rows, Store, Strided};
+    use super::{Block, Rows, Store, Strided};
     use std::arch::x86_64::*;
 
     /// Rows in blocks of 12 and columns in blocks of 32 (24 accumulators in the 32 zmm
@@ -307,69 +329,44 @@ mod avx512 {
         k: usize,
         a: Strided<'_>,
         b: Rows<&[f32]>,
-        c: Rows<&mut [f32]>,
+        mut c: Rows<&mut [f32]>,
         store: Store,
     ) {
         const MR: usize = 12;
         let (m12, n32) = (m / MR * MR, n / 32 * 32);
-        let (ars, acs, ldb, ldc) = (a.row_stride, a.col_stride, b.stride, c.stride);
-        {
-            let (ap, bp, cp) = (a.data.as_ptr(), b.data.as_ptr(), c.data.as_mut_ptr());
-            // SAFETY: rows i..i+12 ≤ m and columns j..j+32 ≤ n, bounds checked by the caller.
-            unsafe {
-                for i in (0..m12).step_by(MR) {
-                    for j in (0..n32).step_by(32) {
-                        micro::<MR>(
-                            k,
-                            ap.add(i * ars),
-                            ars,
-                            acs,
-                            bp.add(j),
-                            ldb,
-                            cp.add(i * ldc + j),
-                            ldc,
-                            store,
-                        );
-                    }
+        let whole = Block::new(k, &a, &b, &mut c, store);
+        // SAFETY: rows i..i+12 ≤ m and columns j..j+32 ≤ n, bounds checked by the caller.
+        unsafe {
+            for i in (0..m12).step_by(MR) {
+                for j in (0..n32).step_by(32) {
+                    micro::<MR>(whole.at(i, j));
                 }
             }
         }
+        let (ars, ldb, ldc) = (a.row_stride, b.stride, c.stride);
         // SAFETY (both calls): sub-blocks of the checked operands; AVX2 and FMA are present.
         unsafe {
             if n32 < n && m12 > 0 {
-                super::avx2::gemm(
-                    m12,
-                    n - n32,
-                    k,
-                    a,
-                    Rows {
-                        data: &b.data[n32..],
-                        stride: ldb,
-                    },
-                    Rows {
-                        data: &mut c.data[n32..],
-                        stride: ldc,
-                    },
-                    store,
-                );
+                let b = Rows {
+                    data: &b.data[n32..],
+                    stride: ldb,
+                };
+                let c = Rows {
+                    data: &mut c.data[n32..],
+                    stride: ldc,
+                };
+                super::avx2::gemm(m12, n - n32, k, a, b, c, store);
             }
             if m12 < m {
-                super::avx2::gemm(
-                    m - m12,
-                    n,
-                    k,
-                    Strided {
-                        data: &a.data[m12 * ars..],
-                        row_stride: ars,
-                        col_stride: acs,
-                    },
-                    b,
-                    Rows {
-                        data: &mut c.data[m12 * ldc..],
-                        stride: ldc,
-                    },
-                    store,
-                );
+                let a = Strided {
+                    data: &a.data[m12 * ars..],
+                    ..a
+                };
+                let c = Rows {
+                    data: &mut c.data[m12 * ldc..],
+                    stride: ldc,
+                };
+                super::avx2::gemm(m - m12, n, k, a, b, c, store);
             }
         }
     }
@@ -377,37 +374,26 @@ mod avx512 {
     /// An `MR × 32` block of C accumulated in registers over the whole inner dimension.
     #[inline]
     #[target_feature(enable = "avx512f")]
-    #[allow(clippy::too_many_arguments)]
-    unsafe fn micro<const MR: usize>(
-        k: usize,
-        a: *const f32,
-        ars: usize,
-        acs: usize,
-        b: *const f32,
-        ldb: usize,
-        c: *mut f32,
-        ldc: usize,
-        store: Store,
-    ) {
+    unsafe fn micro<const MR: usize>(o: Block) {
         // SAFETY: see `gemm`.
         unsafe {
             let mut acc = [[_mm512_setzero_ps(); 2]; MR];
-            for p in 0..k {
-                let brow = b.add(p * ldb);
+            for p in 0..o.k {
+                let brow = o.b.add(p * o.ldb);
                 let (b0, b1) = (_mm512_loadu_ps(brow), _mm512_loadu_ps(brow.add(16)));
-                let acol = a.add(p * acs);
+                let acol = o.a.add(p * o.acs);
                 for (i, acc_i) in acc.iter_mut().enumerate() {
-                    let av = _mm512_set1_ps(*acol.add(i * ars));
+                    let av = _mm512_set1_ps(*acol.add(i * o.ars));
                     acc_i[0] = _mm512_fmadd_ps(av, b0, acc_i[0]);
                     acc_i[1] = _mm512_fmadd_ps(av, b1, acc_i[1]);
                 }
             }
             let zero = _mm512_setzero_ps();
             for (i, acc_i) in acc.iter().enumerate() {
-                let crow = c.add(i * ldc);
+                let crow = o.c.add(i * o.ldc);
                 for (v, accv) in acc_i.iter().enumerate() {
                     let dst = crow.add(16 * v);
-                    let val = match store {
+                    let val = match o.store {
                         Store::Overwrite => *accv,
                         Store::Relu => _mm512_max_ps(*accv, zero),
                         Store::Accumulate => _mm512_add_ps(_mm512_loadu_ps(dst), *accv),
