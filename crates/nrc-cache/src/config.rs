@@ -158,6 +158,31 @@ pub struct NetworkConfig {
     /// Must be 3 (RGB).
     #[serde(default = "three")]
     pub n_output_dims: u32,
+    /// Arithmetic of the hidden layers' products in the fused CPU path (`"f32"` when absent).
+    #[serde(default, skip_serializing_if = "MlpPrecision::is_f32")]
+    pub precision: MlpPrecision,
+}
+
+/// Arithmetic of the MLP's products in the fused CPU path (training and inference): `f32`, or
+/// `bf16`: operands rounded to bfloat16 with f32 sums, the weights rounded from f32 master
+/// weights each step (mixed precision, as tiny-cuda-nn's half-precision MLP), twice the
+/// multiply-adds per cycle on CPUs with AVX-512 BF16 (see [`crate::cpu::bf16`]). The output
+/// layer, the optimizer and the other paths (custom ops, wgpu) stay f32.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum MlpPrecision {
+    /// Single precision (the default).
+    #[default]
+    F32,
+    /// bfloat16 operands, f32 sums.
+    Bf16,
+}
+
+impl MlpPrecision {
+    /// Whether this is the default, f32.
+    pub fn is_f32(&self) -> bool {
+        *self == Self::F32
+    }
 }
 
 fn relu() -> String {

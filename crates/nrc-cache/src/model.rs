@@ -16,7 +16,7 @@
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64Mcg;
 
-use crate::config::{CacheConfig, OutputActivation};
+use crate::config::{CacheConfig, MlpPrecision, OutputActivation};
 use crate::encoding::InputEncoding;
 use crate::encoding::hash_grid::TablePrecision;
 
@@ -58,6 +58,8 @@ pub struct ModelLayout {
     pub layers: Vec<LayerShape>,
     /// Output mapping.
     pub output_activation: OutputActivation,
+    /// Arithmetic of the fused CPU path's hidden-layer products.
+    pub mlp_precision: MlpPrecision,
     /// Parameters of the hash table (they come first).
     pub grid_params: usize,
     /// Total parameters.
@@ -87,6 +89,7 @@ impl ModelLayout {
             encoding,
             layers,
             output_activation: config.network.output_activation,
+            mlp_precision: config.network.precision,
             grid_params,
             total_params: grid_params + offset,
         }

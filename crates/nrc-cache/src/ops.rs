@@ -28,6 +28,7 @@ use burn::backend::{
 use burn::tensor::{DType, Tensor, TensorData, f16};
 use rayon::prelude::*;
 
+use crate::config::MlpPrecision;
 use crate::cpu;
 use crate::cpu::mlp::{
     MlpGrad, OUT_PAD, PreparedMlp, TILE, TileScratch, backward_tile, forward_tile,
@@ -233,7 +234,7 @@ impl MlpOps for Flex {
         let k = layers[0].inputs;
         let x = flex_f32(&input);
         let n = x.len() / k;
-        let prepared = PreparedMlp::new(&layers, &flex_f32(&weights));
+        let prepared = PreparedMlp::new(&layers, &flex_f32(&weights), MlpPrecision::F32);
         let mut out = vec![0f32; n * 3];
         out.par_chunks_mut(TILE * 3)
             .zip(x.par_chunks(TILE * k))
@@ -263,7 +264,7 @@ impl MlpOps for Flex {
         let dy = flex_f32(&grad_out);
         let n = x.len() / k;
         let w = flex_f32(&weights);
-        let prepared = PreparedMlp::new(&layers, &w);
+        let prepared = PreparedMlp::new(&layers, &w, MlpPrecision::F32);
         let mut dx = vec![0f32; if needs.input { n * k } else { k }];
         let dx_chunk = if needs.input { TILE * k } else { k };
         let grad = x

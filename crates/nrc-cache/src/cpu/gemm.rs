@@ -7,11 +7,12 @@
 //! multiply-add) where AVX-512F is present too; other machines use the portable loops, which are
 //! also the reference of the tests.
 
-/// Operand `A` of [`gemm`]: element `(i, p)` is `data[i·row_stride + p·col_stride]`.
+/// Operand `A` of [`gemm`]: element `(i, p)` is `data[i·row_stride + p·col_stride]` (f32, or
+/// bfloat16 pairs for [`super::bf16::gemm_pairs`]).
 #[derive(Clone, Copy, Debug)]
-pub struct Strided<'a> {
+pub struct Strided<'a, T = f32> {
     /// Backing storage.
-    pub data: &'a [f32],
+    pub data: &'a [T],
     /// Distance between rows.
     pub row_stride: usize,
     /// Distance between columns.
@@ -99,8 +100,32 @@ pub fn gemm_with(
         "gemm: this machine has no {kernel:?} kernel"
     );
     assert!(n.is_multiple_of(8), "gemm: n = {n} must be a multiple of 8");
-    if m == 0 || n == 0 {
+    if !check_bounds(m, n, k, &a, &b, &c) {
         return;
+    }
+    match kernel {
+        // SAFETY (both): the machine has the kernel's features (checked above, detected at run
+        // time) and all accesses were bounds-checked above.
+        #[cfg(target_arch = "x86_64")]
+        Kernel::Avx512 => unsafe { avx512::gemm(m, n, k, a, b, c, store) },
+        #[cfg(target_arch = "x86_64")]
+        Kernel::Avx2 => unsafe { avx2::gemm(m, n, k, a, b, c, store) },
+        _ => gemm_portable(m, n, k, a, b, c, store),
+    }
+}
+
+/// Checks that the operands of `C[m×n] (op)= A[m×k] · B[k×n]` hold every element the product
+/// touches (panics otherwise); false when there is nothing to compute.
+pub(super) fn check_bounds<T>(
+    m: usize,
+    n: usize,
+    k: usize,
+    a: &Strided<'_, T>,
+    b: &Rows<&[T]>,
+    c: &Rows<&mut [f32]>,
+) -> bool {
+    if m == 0 || n == 0 {
+        return false;
     }
     if k > 0 {
         assert!(
@@ -116,15 +141,7 @@ pub fn gemm_with(
         (m - 1) * c.stride + n <= c.data.len(),
         "gemm: C out of bounds"
     );
-    match kernel {
-        // SAFETY (both): the machine has the kernel's features (checked above, detected at run
-        // time) and all accesses were bounds-checked above.
-        #[cfg(target_arch = "x86_64")]
-        Kernel::Avx512 => unsafe { avx512::gemm(m, n, k, a, b, c, store) },
-        #[cfg(target_arch = "x86_64")]
-        Kernel::Avx2 => unsafe { avx2::gemm(m, n, k, a, b, c, store) },
-        _ => gemm_portable(m, n, k, a, b, c, store),
-    }
+    true
 }
 
 /// Whether the AVX2 + FMA kernel is used on this machine.
@@ -169,28 +186,29 @@ pub fn gemm_portable(
 }
 
 /// The raw operands of a register block: `k` steps of the inner dimension, A at `a` (row stride
-/// `ars`, column stride `acs`), B at `b` (row stride `ldb`), C at `c` (row stride `ldc`).
+/// `ars`, column stride `acs`), B at `b` (row stride `ldb`), C at `c` (row stride `ldc`). The
+/// operands are f32, or bfloat16 pairs (`u32`) for [`super::bf16`].
 #[cfg(target_arch = "x86_64")]
 #[derive(Clone, Copy)]
-struct Block {
-    k: usize,
-    a: *const f32,
-    ars: usize,
-    acs: usize,
-    b: *const f32,
-    ldb: usize,
-    c: *mut f32,
-    ldc: usize,
-    store: Store,
+pub(super) struct Block<T = f32> {
+    pub(super) k: usize,
+    pub(super) a: *const T,
+    pub(super) ars: usize,
+    pub(super) acs: usize,
+    pub(super) b: *const T,
+    pub(super) ldb: usize,
+    pub(super) c: *mut f32,
+    pub(super) ldc: usize,
+    pub(super) store: Store,
 }
 
 #[cfg(target_arch = "x86_64")]
-impl Block {
+impl<T> Block<T> {
     /// The whole product's operands (the caller checked their bounds).
-    fn new(
+    pub(super) fn new(
         k: usize,
-        a: &Strided<'_>,
-        b: &Rows<&[f32]>,
+        a: &Strided<'_, T>,
+        b: &Rows<&[T]>,
         c: &mut Rows<&mut [f32]>,
         store: Store,
     ) -> Self {
@@ -211,7 +229,7 @@ impl Block {
     ///
     /// # Safety
     /// Row `i` and column `j` lie inside the operands.
-    unsafe fn at(self, i: usize, j: usize) -> Self {
+    pub(super) unsafe fn at(self, i: usize, j: usize) -> Self {
         // SAFETY: inside the operands (the caller's promise).
         unsafe {
             Self {
@@ -314,7 +332,7 @@ mod avx2 {
 }
 
 #[cfg(target_arch = "x86_64")]
-mod avx512 {
+pub(super) mod avx512 {
     use super::{Block, Rows, Store, Strided};
     use std::arch::x86_64::*;
 
@@ -388,7 +406,23 @@ mod avx512 {
                     acc_i[1] = _mm512_fmadd_ps(av, b1, acc_i[1]);
                 }
             }
-            let zero = _mm512_setzero_ps();
+            store_block(&acc, o);
+        }
+    }
+
+    /// Stores (or adds) an `MR × 16·NV` block of sums at `o`'s C, as `o.store` says.
+    ///
+    /// # Safety
+    /// The block lies inside C.
+    #[inline]
+    #[target_feature(enable = "avx512f")]
+    pub(in crate::cpu) unsafe fn store_block<T, const MR: usize, const NV: usize>(
+        acc: &[[__m512; NV]; MR],
+        o: Block<T>,
+    ) {
+        let zero = _mm512_setzero_ps();
+        // SAFETY: inside C (the caller's promise).
+        unsafe {
             for (i, acc_i) in acc.iter().enumerate() {
                 let crow = o.c.add(i * o.ldc);
                 for (v, accv) in acc_i.iter().enumerate() {

@@ -26,7 +26,7 @@ pub fn add_infer_phase(i: usize, since: Instant) {
 /// hash table `grid` and MLP weights `mlp` (the bias-corrected EMA weights for inference).
 pub fn infer(layout: &ModelLayout, grid: Table, mlp: &[f32], rows: &[f32], out: &mut [f32]) {
     let t_kernel = Instant::now();
-    let prepared = PreparedMlp::new(&layout.layers, mlp);
+    let prepared = PreparedMlp::new(&layout.layers, mlp, layout.mlp_precision);
     let network_out = network_outputs(layout, &prepared, grid, rows);
     out.par_chunks_mut(3)
         .zip(network_out.par_chunks(3))

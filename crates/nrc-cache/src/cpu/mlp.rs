@@ -2,7 +2,9 @@
 //! the core's L2 cache (a tile of 128 samples of a 3-hidden-layer network is ≈ 200 KiB with
 //! its weights), in the spirit of tiny-cuda-nn's fully fused MLP keeping a tile in shared memory.
 
+use super::bf16::{Pairs, gemm_pairs, pairs_along_columns, pairs_along_rows};
 use super::gemm::{Rows, Store, Strided, gemm};
+use crate::config::MlpPrecision;
 use crate::model::{LayerShape, OUTPUTS, WIDTH};
 
 /// Columns of the padded output layer (the kernels work on multiples of 8 columns).
@@ -12,7 +14,8 @@ pub const OUT_PAD: usize = 8;
 pub const TILE: usize = 128;
 
 /// The weights arranged for the kernels: forward matrices (the output layer padded to 8
-/// columns) and their transposes for the backward pass.
+/// columns) and their transposes for the backward pass; with bfloat16 products, the hidden
+/// layers' matrices also in bfloat16 pairs.
 #[derive(Clone, Debug)]
 pub struct PreparedMlp {
     /// Layer shapes (from the layout).
@@ -21,6 +24,9 @@ pub struct PreparedMlp {
     forward: Vec<Vec<f32>>,
     /// Transposed matrices `[out][in_pad]` (rows padded to a multiple of 8).
     transposed: Vec<Vec<f32>>,
+    /// With `"precision": "bf16"`, per hidden layer: the forward matrix in pairs along its
+    /// inputs `[in/2][64]` and the transposed one in pairs along its outputs `[32][in_pad]`.
+    pairs: Option<Vec<(Vec<u32>, Vec<u32>)>>,
 }
 
 /// Rounds up to a multiple of 8.
@@ -30,8 +36,9 @@ pub fn pad8(n: usize) -> usize {
 }
 
 impl PreparedMlp {
-    /// Arranges the MLP parameter group `params` (layout of [`LayerShape`]).
-    pub fn new(layers: &[LayerShape], params: &[f32]) -> Self {
+    /// Arranges the MLP parameter group `params` (layout of [`LayerShape`]) for products in
+    /// `precision` (bfloat16 needs an even number of inputs; otherwise f32 is used).
+    pub fn new(layers: &[LayerShape], params: &[f32], precision: MlpPrecision) -> Self {
         let last = layers.len() - 1;
         let mut forward = Vec::with_capacity(layers.len());
         let mut transposed = Vec::with_capacity(layers.len());
@@ -53,10 +60,24 @@ impl PreparedMlp {
             }
             transposed.push(t);
         }
+        let bf16 = precision == MlpPrecision::Bf16 && layers[0].inputs.is_multiple_of(2);
+        let pairs = bf16.then(|| {
+            (0..last)
+                .map(|l| {
+                    let (k, ip) = (layers[l].inputs, pad8(layers[l].inputs));
+                    let mut f = vec![0u32; k / 2 * WIDTH];
+                    pairs_along_rows(&forward[l], k, WIDTH, WIDTH, &mut f);
+                    let mut t = vec![0u32; WIDTH / 2 * ip];
+                    pairs_along_rows(&transposed[l], WIDTH, ip, ip, &mut t);
+                    (f, t)
+                })
+                .collect()
+        });
         Self {
             layers: layers.to_vec(),
             forward,
             transposed,
+            pairs,
         }
     }
 
@@ -83,6 +104,11 @@ pub struct TileScratch {
     /// Loss gradient with respect to `out` `[TILE][8]`.
     pub dout: Vec<f32>,
     dh: [Vec<f32>; 2],
+    /// bfloat16 pairs of a product's left operand (`[TILE][max(in, 64)/2]`, or
+    /// `[TILE/2][max(in, 64)]` paired along the rows).
+    pairs_a: Vec<u32>,
+    /// bfloat16 pairs of the backward gradient paired along the rows `[TILE/2][64]`.
+    pairs_b: Vec<u32>,
 }
 
 impl TileScratch {
@@ -94,6 +120,8 @@ impl TileScratch {
             out: vec![0.0; TILE * OUT_PAD],
             dout: vec![0.0; TILE * OUT_PAD],
             dh: [vec![0.0; TILE * WIDTH], vec![0.0; TILE * WIDTH]],
+            pairs_a: vec![0; TILE * pad8(inputs.max(WIDTH))],
+            pairs_b: vec![0; TILE * WIDTH],
         }
     }
 }
@@ -140,30 +168,52 @@ pub fn forward_tile(mlp: &PreparedMlp, m: usize, s: &mut TileScratch) {
     let hidden = mlp.hidden();
     for l in 0..hidden {
         let (prev, rest) = s.h.split_at_mut(l);
-        let (a, ars, k) = if l == 0 {
-            (&s.x[..], k_in, k_in)
+        let (a, k) = if l == 0 {
+            (&s.x[..], k_in)
         } else {
-            (&prev[l - 1][..], WIDTH, WIDTH)
+            (&prev[l - 1][..], WIDTH)
         };
-        gemm(
-            m,
-            WIDTH,
-            k,
-            Strided {
-                data: a,
-                row_stride: ars,
-                col_stride: 1,
-            },
-            Rows {
-                data: &mlp.forward[l],
-                stride: WIDTH,
-            },
-            Rows {
-                data: &mut rest[0][..],
-                stride: WIDTH,
-            },
-            Store::Relu,
-        );
+        let out = Rows {
+            data: &mut rest[0][..],
+            stride: WIDTH,
+        };
+        match &mlp.pairs {
+            Some(p) => {
+                pairs_along_columns(a, m, k, k, &mut s.pairs_a);
+                gemm_pairs(
+                    m,
+                    WIDTH,
+                    k / 2,
+                    Pairs {
+                        data: &s.pairs_a,
+                        row_stride: k / 2,
+                        col_stride: 1,
+                    },
+                    Rows {
+                        data: &p[l].0,
+                        stride: WIDTH,
+                    },
+                    out,
+                    Store::Relu,
+                );
+            }
+            None => gemm(
+                m,
+                WIDTH,
+                k,
+                Strided {
+                    data: a,
+                    row_stride: k,
+                    col_stride: 1,
+                },
+                Rows {
+                    data: &mlp.forward[l],
+                    stride: WIDTH,
+                },
+                out,
+                Store::Relu,
+            ),
+        }
     }
     gemm(
         m,
@@ -186,6 +236,95 @@ pub fn forward_tile(mlp: &PreparedMlp, m: usize, s: &mut TileScratch) {
     );
 }
 
+/// `grad += aᵀ · d` over a tile's `m` rows (`a`: `[m][k]`, `d`: `[m][64]`, `grad`: `[k][64]`):
+/// a hidden layer's weight gradient. `pa` and `pb` hold the bfloat16 pairs.
+#[allow(clippy::too_many_arguments)]
+fn weight_gradient(
+    mlp: &PreparedMlp,
+    m: usize,
+    a: &[f32],
+    k: usize,
+    d: &[f32],
+    grad: &mut [f32],
+    pa: &mut [u32],
+    pb: &mut [u32],
+) {
+    let grad = Rows {
+        data: grad,
+        stride: WIDTH,
+    };
+    if mlp.pairs.is_some() {
+        pairs_along_rows(a, m, k, k, pa);
+        pairs_along_rows(d, m, WIDTH, WIDTH, pb);
+        let a = Pairs {
+            data: pa,
+            row_stride: 1,
+            col_stride: k,
+        };
+        let d = Rows {
+            data: &pb[..],
+            stride: WIDTH,
+        };
+        gemm_pairs(k, WIDTH, m.div_ceil(2), a, d, grad, Store::Accumulate);
+    } else {
+        let a = Strided {
+            data: a,
+            row_stride: 1,
+            col_stride: k,
+        };
+        let d = Rows {
+            data: d,
+            stride: WIDTH,
+        };
+        gemm(k, WIDTH, m, a, d, grad, Store::Accumulate);
+    }
+}
+
+/// `out[m][n] = d · Mₗᵀ` restricted to columns `start..start + n` of `Mₗᵀ` (`d`: `[m][64]`): the
+/// gradient with respect to hidden layer `l`'s inputs. `pa` holds the bfloat16 pairs.
+fn input_gradient(
+    mlp: &PreparedMlp,
+    l: usize,
+    m: usize,
+    d: &[f32],
+    (start, n): (usize, usize),
+    out: &mut [f32],
+    pa: &mut [u32],
+) {
+    let ip = pad8(mlp.layers[l].inputs);
+    let out = Rows {
+        data: out,
+        stride: n,
+    };
+    match &mlp.pairs {
+        Some(p) if n.is_multiple_of(16) => {
+            pairs_along_columns(d, m, WIDTH, WIDTH, pa);
+            let d = Pairs {
+                data: pa,
+                row_stride: WIDTH / 2,
+                col_stride: 1,
+            };
+            let t = Rows {
+                data: &p[l].1[start..],
+                stride: ip,
+            };
+            gemm_pairs(m, n, WIDTH / 2, d, t, out, Store::Overwrite);
+        }
+        _ => {
+            let d = Strided {
+                data: d,
+                row_stride: WIDTH,
+                col_stride: 1,
+            };
+            let t = Rows {
+                data: &mlp.transposed[l][start..],
+                stride: ip,
+            };
+            gemm(m, n, WIDTH, d, t, out, Store::Overwrite);
+        }
+    }
+}
+
 /// Backward pass of a tile after [`forward_tile`], with `scratch.dout` holding ∂L/∂out (zero in
 /// the padding columns): accumulates the weight gradients into `grad` and, when `dx` is given
 /// as `(first column, columns, buffer [m][columns])`, writes ∂L/∂x for those input columns.
@@ -198,7 +337,7 @@ pub fn backward_tile(
 ) {
     let hidden = mlp.hidden();
     let k_in = mlp.inputs();
-    // Output layer: dM += h_lastᵀ · dout, dh = dout · Mᵀ ⊙ relu'.
+    // Output layer (f32): dM += h_lastᵀ · dout, dh = dout · Mᵀ ⊙ relu'.
     gemm(
         WIDTH,
         OUT_PAD,
@@ -240,93 +379,22 @@ pub fn backward_tile(
     );
     relu_mask(&mut dh_a[..m * WIDTH], &s.h[hidden - 1][..m * WIDTH]);
     let (mut cur, mut next) = (dh_a, dh_b);
+    let (pa, pb) = (&mut s.pairs_a[..], &mut s.pairs_b[..]);
     for l in (1..hidden).rev() {
-        gemm(
-            WIDTH,
-            WIDTH,
-            m,
-            Strided {
-                data: &s.h[l - 1],
-                row_stride: 1,
-                col_stride: WIDTH,
-            },
-            Rows {
-                data: &cur[..],
-                stride: WIDTH,
-            },
-            Rows {
-                data: &mut grad.layers[l][..],
-                stride: WIDTH,
-            },
-            Store::Accumulate,
-        );
-        gemm(
-            m,
-            WIDTH,
-            WIDTH,
-            Strided {
-                data: &cur[..],
-                row_stride: WIDTH,
-                col_stride: 1,
-            },
-            Rows {
-                data: &mlp.transposed[l],
-                stride: WIDTH,
-            },
-            Rows {
-                data: &mut next[..],
-                stride: WIDTH,
-            },
-            Store::Overwrite,
-        );
-        relu_mask(&mut next[..m * WIDTH], &s.h[l - 1][..m * WIDTH]);
+        let h = &s.h[l - 1];
+        weight_gradient(mlp, m, h, WIDTH, cur, &mut grad.layers[l], pa, pb);
+        input_gradient(mlp, l, m, cur, (0, WIDTH), next, pa);
+        relu_mask(&mut next[..m * WIDTH], &h[..m * WIDTH]);
         std::mem::swap(&mut cur, &mut next);
     }
     // First layer: dM0 += xᵀ · dh, dx = dh · M0ᵀ (only the requested columns).
-    gemm(
-        k_in,
-        WIDTH,
-        m,
-        Strided {
-            data: &s.x,
-            row_stride: 1,
-            col_stride: k_in,
-        },
-        Rows {
-            data: &cur[..],
-            stride: WIDTH,
-        },
-        Rows {
-            data: &mut grad.layers[0][..],
-            stride: WIDTH,
-        },
-        Store::Accumulate,
-    );
+    weight_gradient(mlp, m, &s.x, k_in, cur, &mut grad.layers[0], pa, pb);
     if let Some((first, cols, out)) = dx {
-        let ip = pad8(k_in);
         let start = first / 8 * 8;
         let n = pad8(first + cols) - start;
-        debug_assert!(start + n <= ip);
+        debug_assert!(start + n <= pad8(k_in));
         let mut tmp = vec![0f32; m * n];
-        gemm(
-            m,
-            n,
-            WIDTH,
-            Strided {
-                data: &cur[..],
-                row_stride: WIDTH,
-                col_stride: 1,
-            },
-            Rows {
-                data: &mlp.transposed[0][start..],
-                stride: ip,
-            },
-            Rows {
-                data: &mut tmp[..],
-                stride: n,
-            },
-            Store::Overwrite,
-        );
+        input_gradient(mlp, 0, m, cur, (start, n), &mut tmp, pa);
         let off = first - start;
         for i in 0..m {
             out[i * cols..(i + 1) * cols].copy_from_slice(&tmp[i * n + off..i * n + off + cols]);

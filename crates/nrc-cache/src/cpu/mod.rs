@@ -2,6 +2,7 @@
 //! hash-grid batch passes, Adam/EMA, and the fused training step and inference built from them.
 //! Parallel over batch tiles (or hash-grid levels) with rayon.
 
+pub mod bf16;
 pub mod gemm;
 pub mod grid;
 pub mod huge;

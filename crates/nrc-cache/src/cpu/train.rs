@@ -80,7 +80,7 @@ fn forward_backward(
     loss: LossSettings,
 ) -> (f64, MlpGrad, Vec<f32>) {
     let n = rows.len() / TRAIN_ROW;
-    let prepared = PreparedMlp::new(&layout.layers, mlp_w);
+    let prepared = PreparedMlp::new(&layout.layers, mlp_w, layout.mlp_precision);
     let k_in = prepared.inputs();
     let hidden = prepared.hidden();
     let (grid_col, grid_dims) = layout
