@@ -235,8 +235,17 @@ impl RadianceCache {
             enc.unpadded_dims,
             enc.padded_dims
         ));
+        let products = match self.layout.mlp_precision {
+            crate::config::MlpPrecision::F32 => "f32 products",
+            crate::config::MlpPrecision::Bf16 if crate::cpu::bf16::has_bf16() => {
+                "bf16 products on the fused CPU path (AVX-512 BF16)"
+            }
+            crate::config::MlpPrecision::Bf16 => {
+                "bf16 products on the fused CPU path (no AVX-512 BF16 here: emulated by the f32 kernels, slower than f32)"
+            }
+        };
         s.push_str(&format!(
-            "network: {} hidden layers × 64, ReLU, no biases, output {:?} × (diffuse + specular)\n",
+            "network: {} hidden layers × 64, ReLU, no biases, {products}, output {:?} × (diffuse + specular)\n",
             self.layout.layers.len() - 1,
             self.layout.output_activation
         ));

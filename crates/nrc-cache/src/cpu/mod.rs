@@ -1,6 +1,6 @@
-//! CPU kernels behind the Flex custom ops: small dense products, the fused MLP tile, the
-//! hash-grid batch passes, Adam/EMA, and the fused training step and inference built from them.
-//! Parallel over batch tiles (or hash-grid levels) with rayon.
+//! CPU kernels behind the Flex custom ops: small dense products (f32, and bfloat16 pairs), the
+//! fused MLP tile, the hash-grid batch passes, Adam/EMA, and the fused training step and
+//! inference built from them. Parallel over batch tiles (or hash-grid levels) with rayon.
 
 pub mod bf16;
 pub mod gemm;
