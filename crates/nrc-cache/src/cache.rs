@@ -237,12 +237,17 @@ impl RadianceCache {
         ));
         let products = match self.layout.mlp_precision {
             crate::config::MlpPrecision::F32 => "f32 products",
-            crate::config::MlpPrecision::Bf16 if crate::cpu::bf16::has_bf16() => {
-                "bf16 products on the fused CPU path (AVX-512 BF16)"
-            }
-            crate::config::MlpPrecision::Bf16 => {
-                "bf16 products on the fused CPU path (no AVX-512 BF16 here: emulated by the f32 kernels, slower than f32)"
-            }
+            crate::config::MlpPrecision::Bf16 => match crate::cpu::bf16::PairKernel::best() {
+                crate::cpu::bf16::PairKernel::Avx512Bf16 => {
+                    "bf16 products on the fused CPU path (AVX-512 BF16)"
+                }
+                crate::cpu::bf16::PairKernel::Avx2 => {
+                    "bf16 products on the fused CPU path (no AVX-512 BF16 here: AVX2 emulation, the same bits, slower than f32)"
+                }
+                crate::cpu::bf16::PairKernel::Expanded => {
+                    "bf16 products on the fused CPU path (no AVX-512 BF16 here: portable emulation, the same bits, slower than f32)"
+                }
+            },
         };
         s.push_str(&format!(
             "network: {} hidden layers × 64, ReLU, no biases, {products}, output {:?} × (diffuse + specular)\n",

@@ -243,7 +243,7 @@ impl<T> Block<T> {
 }
 
 #[cfg(target_arch = "x86_64")]
-mod avx2 {
+pub(super) mod avx2 {
     use super::{Block, Rows, Store, Strided};
     use std::arch::x86_64::*;
 
@@ -314,7 +314,23 @@ mod avx2 {
                     }
                 }
             }
-            let zero = _mm256_setzero_ps();
+            store_block(&acc, o);
+        }
+    }
+
+    /// Stores (or adds) an `MR × 8·NV` block of sums at `o`'s C, as `o.store` says.
+    ///
+    /// # Safety
+    /// The block lies inside C.
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    pub(in crate::cpu) unsafe fn store_block<T, const MR: usize, const NV: usize>(
+        acc: &[[__m256; NV]; MR],
+        o: Block<T>,
+    ) {
+        let zero = _mm256_setzero_ps();
+        // SAFETY: inside C (the caller's promise).
+        unsafe {
             for (i, acc_i) in acc.iter().enumerate() {
                 let crow = o.c.add(i * o.ldc);
                 for (v, accv) in acc_i.iter().enumerate() {
