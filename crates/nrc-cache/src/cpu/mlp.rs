@@ -122,8 +122,8 @@ impl TileScratch {
             out: vec![0.0; TILE * OUT_PAD],
             dout: vec![0.0; TILE * OUT_PAD],
             dh: [vec![0.0; TILE * WIDTH], vec![0.0; TILE * WIDTH]],
-            pairs_a: vec![0; TILE * pad8(inputs.max(WIDTH))],
-            pairs_b: vec![0; TILE * WIDTH],
+            pairs_a: vec![0; TILE * inputs.max(WIDTH).div_ceil(2)],
+            pairs_b: vec![0; TILE.div_ceil(2) * WIDTH],
         }
     }
 }
