@@ -191,15 +191,23 @@ pub fn gemm_pairs_with(
         rank(kernel) <= rank(PairKernel::best()),
         "gemm_pairs: this machine has no {kernel:?} kernel"
     );
-    match kernel {
-        // SAFETY (both): the machine has the kernel's features (checked above, detected at run
-        // time) and every access was bounds-checked above.
-        #[cfg(target_arch = "x86_64")]
-        PairKernel::Avx512Bf16 => unsafe { avx512::gemm(m, n, kp, a, b, c, store) },
-        #[cfg(target_arch = "x86_64")]
-        PairKernel::Avx2 => unsafe { avx2::gemm(m, n, kp, a, b, c, store) },
-        _ => gemm_pairs_expanded(m, n, kp, a, b, c, store),
+    #[cfg(target_arch = "x86_64")]
+    {
+        let blocks: &[(usize, RowKernel)] = match kernel {
+            PairKernel::Avx512Bf16 => &avx512::BLOCKS,
+            PairKernel::Avx2 => &avx2::BLOCKS,
+            PairKernel::Expanded => &[],
+        };
+        if !blocks.is_empty() {
+            let mut c = c;
+            let o = super::gemm::Block::new(kp, &a, &b, &mut c, store);
+            // SAFETY: the machine has the kernel's features (checked above, detected at run
+            // time) and every access was bounds-checked above.
+            unsafe { over_rows(m, n, o, blocks) };
+            return;
+        }
     }
+    gemm_pairs_expanded(m, n, kp, a, b, c, store);
 }
 
 /// [`gemm_pairs`] by the f32 kernels: the pairs expanded to f32, odd element first (public for
@@ -274,7 +282,6 @@ unsafe fn over_rows(m: usize, n: usize, o: super::gemm::Block<u32>, blocks: &[(u
 mod avx2 {
     use super::super::gemm::Block;
     use super::super::gemm::avx2::store_block;
-    use super::{Pairs, Rows, Store};
     use std::arch::x86_64::*;
 
     /// Eight floats rounded to bfloat16 as [`super::to_bf16`] does, each in the low 16 bits of
@@ -336,21 +343,8 @@ mod avx2 {
 
     /// Rows in blocks of 4 and columns in blocks of 16 (8 accumulators, 4 split B vectors), the
     /// rows left over one by one.
-    #[target_feature(enable = "avx2,fma")]
-    pub(super) unsafe fn gemm(
-        m: usize,
-        n: usize,
-        kp: usize,
-        a: Pairs<'_>,
-        b: Rows<&[u32]>,
-        mut c: Rows<&mut [f32]>,
-        store: Store,
-    ) {
-        let o = Block::new(kp, &a, &b, &mut c, store);
-        let blocks = [(4, row_block::<4> as super::RowKernel), (1, row_block::<1>)];
-        // SAFETY: the caller checked the operands' bounds; AVX2 and FMA are present.
-        unsafe { super::over_rows(m, n, o, &blocks) };
-    }
+    pub(super) const BLOCKS: [(usize, super::RowKernel); 2] =
+        [(4, row_block::<4> as super::RowKernel), (1, row_block::<1>)];
 
     #[inline]
     #[target_feature(enable = "avx2,fma")]
@@ -400,7 +394,6 @@ mod avx2 {
 mod avx512 {
     use super::super::gemm::Block;
     use super::super::gemm::avx512::store_block;
-    use super::{Pairs, Rows, Store};
     use std::arch::x86_64::*;
 
     /// Converts `2·out.len()` floats to pairs, sixteen pairs per step; returns how many pairs
@@ -446,25 +439,11 @@ mod avx512 {
 
     /// Rows in blocks of 12 and columns in blocks of 32 (24 accumulators); the rows left over
     /// in blocks of 4 (the 64- and 128-row products leave 4 or 8), then one by one.
-    #[target_feature(enable = "avx512f,avx512bf16,avx512bw")]
-    pub(super) unsafe fn gemm(
-        m: usize,
-        n: usize,
-        kp: usize,
-        a: Pairs<'_>,
-        b: Rows<&[u32]>,
-        mut c: Rows<&mut [f32]>,
-        store: Store,
-    ) {
-        let o = Block::new(kp, &a, &b, &mut c, store);
-        let blocks = [
-            (12, row_block::<12> as super::RowKernel),
-            (4, row_block::<4>),
-            (1, row_block::<1>),
-        ];
-        // SAFETY: the caller checked the operands' bounds; AVX-512 BF16 is present.
-        unsafe { super::over_rows(m, n, o, &blocks) };
-    }
+    pub(super) const BLOCKS: [(usize, super::RowKernel); 3] = [
+        (12, row_block::<12> as super::RowKernel),
+        (4, row_block::<4>),
+        (1, row_block::<1>),
+    ];
 
     #[inline]
     #[target_feature(enable = "avx512f,avx512bf16,avx512bw")]
