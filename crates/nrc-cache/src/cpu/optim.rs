@@ -155,7 +155,7 @@ pub fn unpack_records(f: usize, records: &[f32]) -> [Vec<f32>; 4] {
 pub fn half_weights(f: usize, records: &[f32]) -> Vec<f16> {
     use rayon::prelude::*;
     const CHUNK: usize = 1 << 14;
-    let mut out = vec![f16::ZERO; records.len() / RECORD];
+    let mut out = super::huge::huge_vec(records.len() / RECORD, f16::ZERO);
     out.par_chunks_mut(CHUNK * f)
         .zip(records.par_chunks(CHUNK * f * RECORD))
         .for_each(|(o, r)| {
