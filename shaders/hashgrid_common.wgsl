@@ -63,8 +63,31 @@ fn corner_vertex(cell: vec3<u32>, corner: u32) -> vec3<u32> {
     return cell + vec3<u32>(corner & 1u, (corner >> 1u) & 1u, (corner >> 2u) & 1u);
 }
 
-// One thread per (level, sample), level-major so that neighbouring threads read the same
-// level's table. The dispatch grid is 2-D because one dimension holds at most 65535 workgroups.
-fn thread_index(wid: vec3<u32>, nwg: vec3<u32>, lid: u32) -> u32 {
-    return (wid.y * nwg.x + wid.x) * WORKGROUP + lid;
+// A thread's work: one (level, sample), level-major so that neighbouring threads read the same
+// level's table, with the level's constants and the sample's cell. `valid` is false for the
+// threads past n · L in the last workgroup.
+struct Task {
+    valid: bool,
+    levels: u32,
+    level: u32,
+    sample: u32,
+    lv: Level,
+    c: Cell,
+}
+
+// The dispatch grid is 2-D because one dimension holds at most 65535 workgroups.
+fn task(wid: vec3<u32>, nwg: vec3<u32>, lid: u32) -> Task {
+    var t: Task;
+    let n = info[0];
+    t.levels = info[1];
+    let thread = (wid.y * nwg.x + wid.x) * WORKGROUP + lid;
+    t.valid = thread < n * t.levels;
+    if !t.valid {
+        return t;
+    }
+    t.level = thread / n;
+    t.sample = thread - t.level * n;
+    t.lv = load_level(t.level);
+    t.c = locate(t.lv, t.sample);
+    return t;
 }

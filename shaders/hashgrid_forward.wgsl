@@ -17,29 +17,23 @@ fn main(
     @builtin(num_workgroups) nwg: vec3<u32>,
     @builtin(local_invocation_index) lid: u32,
 ) {
-    let n = info[0];
-    let levels = info[1];
-    let thread = thread_index(wid, nwg, lid);
-    if thread >= n * levels {
+    let t = task(wid, nwg, lid);
+    if !t.valid {
         return;
     }
-    let level = thread / n;
-    let sample = thread - level * n;
-    let lv = load_level(level);
-    let c = locate(lv, sample);
 
     var acc: array<f32, FEATURES>;
     for (var f = 0u; f < FEATURES; f++) {
         acc[f] = 0.0;
     }
     for (var corner = 0u; corner < 8u; corner++) {
-        let weight = corner_weight(c.w, corner);
-        let base = lv.offset + grid_index(lv, corner_vertex(c.cell, corner)) * FEATURES;
+        let weight = corner_weight(t.c.w, corner);
+        let base = t.lv.offset + grid_index(t.lv, corner_vertex(t.c.cell, corner)) * FEATURES;
         for (var f = 0u; f < FEATURES; f++) {
             acc[f] += weight * params[base + f];
         }
     }
-    let out = sample * levels * FEATURES + level * FEATURES;
+    let out = t.sample * t.levels * FEATURES + t.level * FEATURES;
     for (var f = 0u; f < FEATURES; f++) {
         encoded[out + f] = acc[f];
     }

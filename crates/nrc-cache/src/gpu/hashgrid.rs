@@ -171,20 +171,12 @@ pub fn forward(positions: CubeTensor, params: CubeTensor, grid: &HashGrid) -> Cu
     if samples == 0 || levels.is_empty() {
         return encoded;
     }
-    let info = client.create_from_slice(bytemuck::cast_slice(&info_words(samples, &levels)));
-    let kernel = HashGridKernel {
-        pass: Pass::Forward,
-        features: features as u32,
-    };
-    client.launch(
-        Box::new(SourceKernel::new(kernel, CubeDim::new_1d(WORKGROUP))),
-        cube_count(samples * levels.len()),
-        KernelArguments::new().with_buffers(vec![
-            positions.handle.binding(),
-            params.handle.binding(),
-            encoded.handle.clone().binding(),
-            info.binding(),
-        ]),
+    launch(
+        Pass::Forward,
+        features,
+        samples,
+        &levels,
+        [&positions, &params, &encoded],
     );
     encoded
 }
@@ -214,21 +206,36 @@ pub fn backward(positions: CubeTensor, grad_encoded: CubeTensor, grid: &HashGrid
     if samples == 0 || levels.is_empty() {
         return grad_params;
     }
-    let client = positions.client.clone();
-    let info = client.create_from_slice(bytemuck::cast_slice(&info_words(samples, &levels)));
+    launch(
+        Pass::Backward,
+        features,
+        samples,
+        &levels,
+        [&positions, &grad_encoded, &grad_params],
+    );
+    grad_params
+}
+
+/// Launches `pass` over `samples` × `levels` threads on the kernel's first three bindings
+/// (`tensors`, in the shader's order) and the `info` buffer built here.
+fn launch(
+    pass: Pass,
+    features: usize,
+    samples: usize,
+    levels: &[GpuLevel],
+    tensors: [&CubeTensor; 3],
+) {
+    let client = &tensors[0].client;
+    let info = client.create_from_slice(bytemuck::cast_slice(&info_words(samples, levels)));
     let kernel = HashGridKernel {
-        pass: Pass::Backward,
+        pass,
         features: features as u32,
     };
+    let mut buffers: Vec<_> = tensors.iter().map(|t| t.handle.clone().binding()).collect();
+    buffers.push(info.binding());
     client.launch(
         Box::new(SourceKernel::new(kernel, CubeDim::new_1d(WORKGROUP))),
         cube_count(samples * levels.len()),
-        KernelArguments::new().with_buffers(vec![
-            positions.handle.binding(),
-            grad_encoded.handle.binding(),
-            grad_params.handle.clone().binding(),
-            info.binding(),
-        ]),
+        KernelArguments::new().with_buffers(buffers),
     );
-    grad_params
 }
