@@ -6,7 +6,8 @@
 use rayon::prelude::*;
 
 use crate::record::{
-    CacheQuery, RAW_INPUT_DIMS, TrainingBatch, query_is_finite, raw_inputs, reflectance_factor,
+    CacheQuery, RAW_INPUT_DIMS, SPHERICAL_GROUP, TrainingBatch, query_is_finite, raw_inputs,
+    raw_inputs_group, reflectance_factor,
 };
 
 /// Floats per training row.
@@ -79,17 +80,27 @@ pub fn pack_training(
     Ok(out)
 }
 
-/// Packs inference queries (non-finite fields are sanitised, see [`raw_inputs`]), in parallel:
-/// the spherical coordinates cost about as much per query as a thread's share of the cache's
-/// encoding.
+/// Packs inference queries (non-finite fields are sanitised, see [`raw_inputs`]), in parallel
+/// and eight at a time ([`raw_inputs_group`]): converted one at a time, the spherical
+/// coordinates took 5 % of inference's thread time (`perf`), about 1 % in groups.
 pub fn pack_queries(queries: &[CacheQuery]) -> Vec<f32> {
+    const G: usize = SPHERICAL_GROUP;
     let mut rows = vec![0f32; queries.len() * QUERY_ROW];
-    rows.par_chunks_mut(QUERY_ROW)
-        .zip(queries.par_iter())
-        .with_min_len(1024)
-        .for_each(|(row, q)| {
-            row[..RAW_INPUT_DIMS].copy_from_slice(&raw_inputs(q));
-            row[RAW_INPUT_DIMS..].copy_from_slice(&reflectance_factor(q));
+    rows.par_chunks_mut(QUERY_ROW * G)
+        .zip(queries.par_chunks(G))
+        .with_min_len(1024 / G)
+        .for_each(|(rows, qs)| {
+            match <&[CacheQuery; G]>::try_from(qs) {
+                Ok(group) => raw_inputs_group(group, rows, QUERY_ROW),
+                Err(_) => {
+                    for (row, q) in rows.chunks_exact_mut(QUERY_ROW).zip(qs) {
+                        row[..RAW_INPUT_DIMS].copy_from_slice(&raw_inputs(q));
+                    }
+                }
+            }
+            for (row, q) in rows.chunks_exact_mut(QUERY_ROW).zip(qs) {
+                row[RAW_INPUT_DIMS..].copy_from_slice(&reflectance_factor(q));
+            }
         });
     rows
 }

@@ -47,6 +47,36 @@ pub const RAW_INPUT_DIMS: usize = 14;
 /// Non-finite reflectances or roughness become 0; callers that need to know drop such queries
 /// beforehand ([`query_is_finite`]).
 pub fn raw_inputs(q: &CacheQuery) -> [f32; RAW_INPUT_DIMS] {
+    raw_inputs_with(q, spherical(q.direction), spherical(q.normal))
+}
+
+/// [`raw_inputs`] of a group of queries: the spherical coordinates of all their directions and
+/// normals are computed together ([`spherical_lanes`], which the compiler turns into vector
+/// instructions), the same bits as one query at a time. `out` holds `stride ≥ 14` floats per
+/// query, of which the first 14 are written.
+pub fn raw_inputs_group(queries: &[CacheQuery; SPHERICAL_GROUP], out: &mut [f32], stride: usize) {
+    let mut dirs = [[0f32; 3]; 2 * SPHERICAL_GROUP];
+    for (i, q) in queries.iter().enumerate() {
+        dirs[2 * i] = q.direction;
+        dirs[2 * i + 1] = q.normal;
+    }
+    let angles = spherical_lanes(&dirs);
+    for (i, q) in queries.iter().enumerate() {
+        let [d, n] = [angles[2 * i], angles[2 * i + 1]];
+        out[i * stride..i * stride + RAW_INPUT_DIMS].copy_from_slice(&raw_inputs_with(
+            q,
+            (d[0], d[1]),
+            (n[0], n[1]),
+        ));
+    }
+}
+
+/// Queries per group of [`raw_inputs_group`].
+pub const SPHERICAL_GROUP: usize = 8;
+
+/// [`raw_inputs`] with the spherical coordinates of the direction and normal given.
+#[inline(always)]
+fn raw_inputs_with(q: &CacheQuery, dir: (f32, f32), normal: (f32, f32)) -> [f32; RAW_INPUT_DIMS] {
     let mut out = [0.0; RAW_INPUT_DIMS];
     for (o, p) in out.iter_mut().zip(q.position) {
         *o = if p.is_finite() {
@@ -55,12 +85,8 @@ pub fn raw_inputs(q: &CacheQuery) -> [f32; RAW_INPUT_DIMS] {
             0.0
         };
     }
-    let (t, p) = spherical(q.direction);
-    out[3] = t;
-    out[4] = p;
-    let (t, p) = spherical(q.normal);
-    out[5] = t;
-    out[6] = p;
+    [out[3], out[4]] = [dir.0, dir.1];
+    [out[5], out[6]] = [normal.0, normal.1];
     let r = if q.roughness.is_finite() {
         q.roughness.max(0.0)
     } else {
@@ -117,6 +143,62 @@ pub fn spherical(v: [f32; 3]) -> (f32, f32) {
     (theta.clamp(0.0, 1.0), phi)
 }
 
+/// [`spherical`] of `N` vectors, `[θ/π, φ/(2π)]` each: the same operations written lane by lane
+/// with selects instead of branches, so the compiler can run the lanes in vector registers;
+/// the same bits as [`spherical`].
+pub fn spherical_lanes<const N: usize>(v: &[[f32; 3]; N]) -> [[f32; 2]; N] {
+    use std::f32::consts::FRAC_1_PI;
+    let lanes = |f: &dyn Fn(usize) -> f32| -> [f32; N] { std::array::from_fn(f) };
+    let (x, y, z) = (
+        lanes(&|i| v[i][0]),
+        lanes(&|i| v[i][1]),
+        lanes(&|i| v[i][2]),
+    );
+    let len2 = lanes(&|i| x[i] * x[i] + y[i] * y[i] + z[i] * z[i]);
+    let rho = lanes(&|i| (x[i] * x[i] + y[i] * y[i]).sqrt());
+    let theta = atan2_lanes(&rho, &z);
+    let phi = atan2_lanes(&y, &x);
+    std::array::from_fn(|i| {
+        let valid = len2[i].is_finite() && len2[i] >= 1e-30;
+        let theta = theta[i] * FRAC_1_PI;
+        let mut phi = phi[i] * (0.5 * FRAC_1_PI);
+        phi = if phi < 0.0 { phi + 1.0 } else { phi };
+        phi = if phi >= 1.0 { 0.0 } else { phi };
+        if valid {
+            [theta.clamp(0.0, 1.0), phi]
+        } else {
+            [0.0, 0.0]
+        }
+    })
+}
+
+/// [`atan2`] of `N` pairs, lane by lane (see [`spherical_lanes`]); the same bits.
+fn atan2_lanes<const N: usize>(y: &[f32; N], x: &[f32; N]) -> [f32; N] {
+    use std::f32::consts::{FRAC_PI_2, PI};
+    let (mut a, mut s, mut p) = ([0f32; N], [0f32; N], [0f32; N]);
+    for i in 0..N {
+        let (ax, ay) = (x[i].abs(), y[i].abs());
+        let (lo, hi) = (ax.min(ay), ax.max(ay));
+        a[i] = if hi > 0.0 { lo / hi } else { 0.0 };
+        s[i] = a[i] * a[i];
+    }
+    for c in ATAN_C.iter().rev() {
+        for i in 0..N {
+            p[i] = p[i] * s[i] + c;
+        }
+    }
+    std::array::from_fn(|i| {
+        let mut r = a[i] + a[i] * s[i] * p[i];
+        r = if y[i].abs() > x[i].abs() {
+            FRAC_PI_2 - r
+        } else {
+            r
+        };
+        r = if x[i] < 0.0 { PI - r } else { r };
+        if y[i] < 0.0 { -r } else { r }
+    })
+}
+
 /// `atan2(y, x)` in (−π, π] for finite arguments, within about 1e-7 rad of the correctly
 /// rounded value: the octant's `atan(min/max)` as the polynomial of Abramowitz & Stegun 4.4.49
 /// (error ≤ 2e-8 on [0, 1]), then the octant's symmetries. No branches the compiler cannot turn
@@ -124,21 +206,11 @@ pub fn spherical(v: [f32; 3]) -> (f32, f32) {
 /// the query packing called before. `atan2(±0, ±0)` is 0.
 pub fn atan2(y: f32, x: f32) -> f32 {
     use std::f32::consts::{FRAC_PI_2, PI};
-    const C: [f32; 8] = [
-        -0.333_331_45,
-        0.199_935_51,
-        -0.142_088_99,
-        0.106_562_64,
-        -0.075_289_64,
-        0.042_909_614,
-        -0.016_165_737,
-        0.002_866_225_7,
-    ];
     let (ax, ay) = (x.abs(), y.abs());
     let (lo, hi) = (ax.min(ay), ax.max(ay));
     let a = if hi > 0.0 { lo / hi } else { 0.0 };
     let s = a * a;
-    let p = C.iter().rev().fold(0.0f32, |acc, c| acc * s + c);
+    let p = ATAN_C.iter().rev().fold(0.0f32, |acc, c| acc * s + c);
     let mut r = a + a * s * p;
     if ay > ax {
         r = FRAC_PI_2 - r;
@@ -148,6 +220,18 @@ pub fn atan2(y: f32, x: f32) -> f32 {
     }
     if y < 0.0 { -r } else { r }
 }
+
+/// The coefficients of [`atan2`]'s polynomial in `s = a²`, lowest first.
+const ATAN_C: [f32; 8] = [
+    -0.333_331_45,
+    0.199_935_51,
+    -0.142_088_99,
+    0.106_562_64,
+    -0.075_289_64,
+    0.042_909_614,
+    -0.016_165_737,
+    0.002_866_225_7,
+];
 
 /// Rec. 709 luminance of a linear RGB triple.
 #[inline]

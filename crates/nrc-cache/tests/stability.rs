@@ -215,3 +215,67 @@ fn packing_atan2_matches_the_library() {
         );
     }
 }
+
+/// The inference packing converts eight queries' directions and normals at once
+/// (`spherical_lanes`, vectorised by the compiler): the rows are the same bits as converting one
+/// query at a time, for random, axis-aligned, signed-zero, tiny, huge, infinite and NaN vectors,
+/// with a batch that is not a multiple of eight (the remainder takes the per-query path).
+#[test]
+fn grouped_query_packing_matches_one_query_at_a_time() {
+    use nrc_cache::batch::{QUERY_ROW, pack_queries};
+    use nrc_cache::record::{RAW_INPUT_DIMS, raw_inputs, spherical, spherical_lanes};
+    let mut rng = Pcg64Mcg::seed_from_u64(23);
+    let special = [
+        [0.0, 0.0, 0.0],
+        [-0.0, -0.0, -0.0],
+        [0.0, 0.0, -1.0],
+        [-1.0, 0.0, 0.0],
+        [-1.0, -0.0, 0.0],
+        [0.0, -1.0, 0.0],
+        [1e-20, 0.0, 0.0],
+        [1e-16, -1e-16, 1e-16],
+        [1e20, 1e20, -1e20],
+        [3e38, 3e38, 0.0],
+        [f32::INFINITY, 0.0, 0.0],
+        [f32::NAN, 1.0, 0.0],
+        [1.0, 1.0, 1.0],
+        [-1.0, 1.0, -1.0],
+    ];
+    let mut vectors: Vec<[f32; 3]> = special.to_vec();
+    vectors.extend((0..4000).map(|_| {
+        let scale = 10f32.powi(rng.random_range(-8..8));
+        std::array::from_fn(|_| scale * rng.random_range(-1.0f32..1.0))
+    }));
+    for group in vectors.chunks_exact(16) {
+        let lanes = spherical_lanes::<16>(group.try_into().expect("16 vectors"));
+        for (v, got) in group.iter().zip(lanes) {
+            let (t, p) = spherical(*v);
+            assert_eq!(
+                [got[0].to_bits(), got[1].to_bits()],
+                [t.to_bits(), p.to_bits()],
+                "{v:?}: {got:?} vs ({t}, {p})"
+            );
+        }
+    }
+    let queries: Vec<CacheQuery> = vectors
+        .chunks_exact(2)
+        .take(1003)
+        .enumerate()
+        .map(|(i, pair)| CacheQuery {
+            position: [0.1 * (i % 10) as f32, 0.5, 2.0],
+            direction: pair[0],
+            normal: pair[1],
+            roughness: 0.3,
+            diffuse: [0.5, 0.4, 0.3],
+            specular: [0.04; 3],
+        })
+        .collect();
+    assert_eq!(queries.len() % 8, 3, "a remainder outside the groups");
+    let rows = pack_queries(&queries);
+    for (i, (row, q)) in rows.chunks_exact(QUERY_ROW).zip(&queries).enumerate() {
+        let want = raw_inputs(q);
+        for (j, (a, b)) in row[..RAW_INPUT_DIMS].iter().zip(&want).enumerate() {
+            assert_eq!(a.to_bits(), b.to_bits(), "query {i}, input {j}: {a} vs {b}");
+        }
+    }
+}
