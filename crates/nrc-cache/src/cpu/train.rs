@@ -71,7 +71,7 @@ pub struct LossSettings {
 
 /// Phase A of a step, parallel over tiles: forward, loss and backward of every tile, the hash
 /// grid read from `table`. Returns the summed loss, the MLP weight gradients, and
-/// ∂L/∂(hash-grid columns) `[n][L·F]`.
+/// ∂L/∂(hash-grid columns) level-major, `[L][n][F]`.
 fn forward_backward(
     layout: &ModelLayout,
     table: super::grid::Table,
@@ -93,19 +93,32 @@ fn forward_backward(
         .grid()
         .map(|(g, _)| g.fast_levels())
         .unwrap_or_default();
-    let mut dxg = vec![0f32; n * grid_dims.max(1)];
+    let features = layout.encoding.grid().map_or(1, |(g, _)| g.features());
+    // ∂L/∂(grid columns), level-major (`[level][sample][feature]`, what the per-level scatter
+    // reads), handed to the tiles as one slice per level.
+    let mut dxg = vec![0f32; n * grid_dims];
+    let tiles = n.div_ceil(TILE);
+    let mut tile_outs: Vec<Vec<&mut [f32]>> = (0..tiles).map(|_| Vec::new()).collect();
+    if grid_dims > 0 {
+        for level in dxg.chunks_mut(n * features) {
+            for (t, part) in level.chunks_mut(TILE * features).enumerate() {
+                tile_outs[t].push(part);
+            }
+        }
+    }
     let (loss_sum, mgrad) = rows
         .par_chunks(TILE * TRAIN_ROW)
-        .zip(dxg.par_chunks_mut(TILE * grid_dims.max(1)))
+        .zip(tile_outs.into_par_iter())
         .fold(
             || {
                 (
                     0f64,
                     MlpGrad::zeros(&prepared),
                     TileScratch::new(k_in, hidden),
+                    vec![0f32; TILE * grid_dims],
                 )
             },
-            |(mut loss_acc, mut grad, mut s), (rows_t, dxg_t)| {
+            |(mut loss_acc, mut grad, mut s, mut dx_rows), (rows_t, mut outs)| {
                 let m = rows_t.len() / TRAIN_ROW;
                 let t_encode = Instant::now();
                 super::encode_rows(layout, &fast, table, rows_t, TRAIN_ROW, &mut s.x, k_in);
@@ -130,13 +143,22 @@ fn forward_backward(
                     d[3..].fill(0.0);
                 }
                 let dx =
-                    (grid_dims > 0).then(|| (grid_col, grid_dims, &mut dxg_t[..m * grid_dims]));
+                    (grid_dims > 0).then(|| (grid_col, grid_dims, &mut dx_rows[..m * grid_dims]));
                 backward_tile(&prepared, m, &mut s, &mut grad, dx);
+                // The tile's gradient columns into their levels, from L1 (counted with the MLP):
+                // a pass over the whole batch in phase C cost 40–70 ns a sample more.
+                for (l, out) in outs.iter_mut().enumerate() {
+                    for i in 0..m {
+                        for q in 0..features {
+                            out[i * features + q] = dx_rows[i * grid_dims + l * features + q];
+                        }
+                    }
+                }
                 add_phase(1, t_mlp);
-                (loss_acc, grad, s)
+                (loss_acc, grad, s, dx_rows)
             },
         )
-        .map(|(l, g, _)| (l, g))
+        .map(|(l, g, _, _)| (l, g))
         .reduce(
             || (0.0, MlpGrad::zeros(&prepared)),
             |(la, mut ga), (lb, gb)| {
@@ -165,7 +187,6 @@ pub fn gradients(
     let mut grid = vec![0f32; grid_w.len()];
     if let Some((hg, part)) = layout.encoding.grid() {
         let f = hg.features();
-        let d = hg.output_dims();
         let levels = split_levels(hg, f, &mut grid[..]);
         levels.into_par_iter().enumerate().for_each(|(l, g)| {
             scatter_level(
@@ -176,7 +197,7 @@ pub fn gradients(
                     let r = &rows[i * TRAIN_ROW + part.in_offset..];
                     [r[0], r[1], r[2]]
                 },
-                |i| &dxg[i * d + l * f..i * d + (l + 1) * f],
+                |i| &dxg[(l * n + i) * f..(l * n + i + 1) * f],
                 g,
                 None,
             );
@@ -197,7 +218,7 @@ pub fn train_step(
 ) -> f64 {
     let n = rows.len() / TRAIN_ROW;
     let grid_part = layout.encoding.grid();
-    let (grid_dims, grid_in) = grid_part.map_or((0, 0), |(g, p)| (g.output_dims(), p.in_offset));
+    let grid_in = grid_part.map_or(0, |(_, p)| p.in_offset);
     let stride = grid_part.map_or(1, |(g, _)| g.features() * super::optim::RECORD);
     let table = match &grid {
         Some(GridState { half: Some(h), .. }) => super::grid::Table::F16(h),
@@ -216,18 +237,6 @@ pub fn train_step(
             Some(h) => split_levels(hg, f, h).into_iter().map(Some).collect(),
             None => (0..hg.levels.len()).map(|_| None).collect(),
         };
-        // Level-major copies of the gradient columns and compact positions, so each level's
-        // pass streams through ~130 KiB + 200 KiB instead of strided rows.
-        let mut by_level = vec![0f32; n * grid_dims];
-        by_level
-            .par_chunks_mut(n * f)
-            .enumerate()
-            .for_each(|(l, out)| {
-                for i in 0..n {
-                    out[i * f..(i + 1) * f]
-                        .copy_from_slice(&dxg[i * grid_dims + l * f..i * grid_dims + (l + 1) * f]);
-                }
-            });
         // Positions one axis per array, padded to whole groups of eight.
         let padded = n.next_multiple_of(8);
         let mut xyz = vec![0f32; 3 * padded];
@@ -237,7 +246,7 @@ pub fn train_step(
             }
         }
         let xyz = [&xyz[..padded], &xyz[padded..2 * padded], &xyz[2 * padded..]];
-        let by_level = &by_level;
+        let dxg = &dxg;
         let level_step = |l: usize, rec: &mut [f32], mut hl: Option<&mut [f16]>| {
             SCRATCH.with_borrow_mut(|scratch| {
                 let t_scatter = Instant::now();
@@ -252,7 +261,7 @@ pub fn train_step(
                     sparse_step(c, f, touched, rec, gr, half);
                     adam_nanos += t_adam.elapsed().as_nanos() as u64;
                 };
-                let dout = &by_level[l * n * f..(l + 1) * n * f];
+                let dout = &dxg[l * n * f..(l + 1) * n * f];
                 match f {
                     1 => scatter_binned::<1>(hg, l, xyz, dout, scratch, per_bin),
                     2 => scatter_binned::<2>(hg, l, xyz, dout, scratch, per_bin),
