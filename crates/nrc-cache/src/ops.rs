@@ -287,13 +287,10 @@ impl MlpOps for Flex {
                         d[..3].copy_from_slice(&dyt[i * 3..i * 3 + 3]);
                         d[3..].fill(0.0);
                     }
-                    backward_tile(
-                        &prepared,
-                        m,
-                        &mut s,
-                        &mut g,
-                        needs.input.then(|| (0, k, &mut dxt[..m * k])),
-                    );
+                    let mut write =
+                        |i: usize, row: &[f32]| dxt[i * k..(i + 1) * k].copy_from_slice(row);
+                    let dx = needs.input.then_some((0, k, &mut write as _));
+                    backward_tile(&prepared, m, &mut s, &mut g, dx);
                     (g, s)
                 },
             )

@@ -300,7 +300,8 @@ fn fused_mlp_tile_matches_f64_reference_and_finite_differences() {
     }
     let mut grad = MlpGrad::zeros(&prepared);
     let mut dx = vec![0f32; m * 32];
-    backward_tile(&prepared, m, &mut s, &mut grad, Some((0, 32, &mut dx)));
+    let mut write = |i: usize, row: &[f32]| dx[i * 32..(i + 1) * 32].copy_from_slice(row);
+    backward_tile(&prepared, m, &mut s, &mut grad, Some((0, 32, &mut write)));
     let mut gw = vec![0f32; nw];
     grad.write_flat(&ls, &mut gw);
     // L = Σ_i ⟨dy_i, mlp(x_i)⟩ in f64, central differences with h = 1e-6.

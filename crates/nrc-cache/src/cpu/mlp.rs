@@ -111,6 +111,8 @@ pub struct TileScratch {
     pairs_a: Vec<u32>,
     /// bfloat16 pairs of the backward gradient paired along the rows `[TILE/2][64]`.
     pairs_b: Vec<u32>,
+    /// ∂L/∂x of the first layer's requested columns, padded to whole groups of 8 `[TILE][≤ in]`.
+    dx: Vec<f32>,
 }
 
 impl TileScratch {
@@ -124,6 +126,7 @@ impl TileScratch {
             dh: [vec![0.0; TILE * WIDTH], vec![0.0; TILE * WIDTH]],
             pairs_a: vec![0; TILE * inputs.max(WIDTH).div_ceil(2)],
             pairs_b: vec![0; TILE.div_ceil(2) * WIDTH],
+            dx: vec![0.0; TILE * pad8(inputs)],
         }
     }
 }
@@ -327,15 +330,19 @@ fn input_gradient(
     }
 }
 
+/// Where [`backward_tile`] hands ∂L/∂x: `(first column, columns, sink)`; `sink(i, values)`
+/// receives row `i`'s gradient for those input columns, once per row of the tile.
+pub type InputGradient<'a> = (usize, usize, &'a mut dyn FnMut(usize, &[f32]));
+
 /// Backward pass of a tile after [`forward_tile`], with `scratch.dout` holding ∂L/∂out (zero in
-/// the padding columns): accumulates the weight gradients into `grad` and, when `dx` is given
-/// as `(first column, columns, buffer [m][columns])`, writes ∂L/∂x for those input columns.
+/// the padding columns): accumulates the weight gradients into `grad` and, when `dx` is given,
+/// hands ∂L/∂x for the requested input columns to its sink, row by row.
 pub fn backward_tile(
     mlp: &PreparedMlp,
     m: usize,
     s: &mut TileScratch,
     grad: &mut MlpGrad,
-    dx: Option<(usize, usize, &mut [f32])>,
+    dx: Option<InputGradient<'_>>,
 ) {
     let hidden = mlp.hidden();
     let k_in = mlp.inputs();
@@ -391,15 +398,15 @@ pub fn backward_tile(
     }
     // First layer: dM0 += xᵀ · dh, dx = dh · M0ᵀ (only the requested columns).
     weight_gradient(mlp, m, &s.x, k_in, cur, &mut grad.layers[0], pa, pb);
-    if let Some((first, cols, out)) = dx {
+    if let Some((first, cols, sink)) = dx {
         let start = first / 8 * 8;
         let n = pad8(first + cols) - start;
         debug_assert!(start + n <= pad8(k_in));
-        let mut tmp = vec![0f32; m * n];
-        input_gradient(mlp, 0, m, cur, (start, n), &mut tmp, pa);
+        let tmp = &mut s.dx[..m * n];
+        input_gradient(mlp, 0, m, cur, (start, n), tmp, pa);
         let off = first - start;
         for i in 0..m {
-            out[i * cols..(i + 1) * cols].copy_from_slice(&tmp[i * n + off..i * n + off + cols]);
+            sink(i, &tmp[i * n + off..i * n + off + cols]);
         }
     }
 }

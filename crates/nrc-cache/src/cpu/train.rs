@@ -115,10 +115,9 @@ fn forward_backward(
                     0f64,
                     MlpGrad::zeros(&prepared),
                     TileScratch::new(k_in, hidden),
-                    vec![0f32; TILE * grid_dims],
                 )
             },
-            |(mut loss_acc, mut grad, mut s, mut dx_rows), (rows_t, mut outs)| {
+            |(mut loss_acc, mut grad, mut s), (rows_t, mut outs)| {
                 let m = rows_t.len() / TRAIN_ROW;
                 let t_encode = Instant::now();
                 super::encode_rows(layout, &fast, table, rows_t, TRAIN_ROW, &mut s.x, k_in);
@@ -142,23 +141,23 @@ fn forward_backward(
                     d[..3].copy_from_slice(&g);
                     d[3..].fill(0.0);
                 }
-                let dx =
-                    (grid_dims > 0).then(|| (grid_col, grid_dims, &mut dx_rows[..m * grid_dims]));
-                backward_tile(&prepared, m, &mut s, &mut grad, dx);
-                // The tile's gradient columns into their levels, from L1 (counted with the MLP):
-                // a pass over the whole batch in phase C cost 40–70 ns a sample more.
-                for (l, out) in outs.iter_mut().enumerate() {
-                    for i in 0..m {
-                        for q in 0..features {
-                            out[i * features + q] = dx_rows[i * grid_dims + l * features + q];
+                // Each row's gradient columns straight into their levels (a pass over the
+                // whole batch in phase C cost 40–70 ns a sample more).
+                let mut to_levels = |i: usize, row: &[f32]| {
+                    // (Element by element: `copy_from_slice` of two floats calls `memmove`.)
+                    for (out, g) in outs.iter_mut().zip(row.chunks_exact(features)) {
+                        for (o, v) in out[i * features..(i + 1) * features].iter_mut().zip(g) {
+                            *o = *v;
                         }
                     }
-                }
+                };
+                let dx = (grid_dims > 0).then_some((grid_col, grid_dims, &mut to_levels as _));
+                backward_tile(&prepared, m, &mut s, &mut grad, dx);
                 add_phase(1, t_mlp);
-                (loss_acc, grad, s, dx_rows)
+                (loss_acc, grad, s)
             },
         )
-        .map(|(l, g, _, _)| (l, g))
+        .map(|(l, g, _)| (l, g))
         .reduce(
             || (0.0, MlpGrad::zeros(&prepared)),
             |(la, mut ga), (lb, gb)| {
