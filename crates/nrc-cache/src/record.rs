@@ -125,27 +125,13 @@ fn finite_or_zero(v: f32) -> f32 {
 /// Spherical coordinates of a vector, normalised to [0,1]: (θ/π, φ/(2π) in [0,1)).
 /// Zero-length or non-finite vectors map to +z, i.e. (0, 0).
 pub fn spherical(v: [f32; 3]) -> (f32, f32) {
-    let len2 = v[0] * v[0] + v[1] * v[1] + v[2] * v[2];
-    if !len2.is_finite() || len2 < 1e-30 {
-        return (0.0, 0.0);
-    }
-    // θ = atan2(√(x² + y²), z) and φ = atan2(y, x): the scale of `v` cancels, so it is not
-    // normalised.
-    let rho = (v[0] * v[0] + v[1] * v[1]).sqrt();
-    let theta = atan2(rho, v[2]) * std::f32::consts::FRAC_1_PI;
-    let mut phi = atan2(v[1], v[0]) * (0.5 * std::f32::consts::FRAC_1_PI);
-    if phi < 0.0 {
-        phi += 1.0;
-    }
-    if phi >= 1.0 {
-        phi = 0.0;
-    }
-    (theta.clamp(0.0, 1.0), phi)
+    let [[theta, phi]] = spherical_lanes(&[v]);
+    (theta, phi)
 }
 
-/// [`spherical`] of `N` vectors, `[θ/π, φ/(2π)]` each: the same operations written lane by lane
-/// with selects instead of branches, so the compiler can run the lanes in vector registers;
-/// the same bits as [`spherical`].
+/// [`spherical`] of `N` vectors, `[θ/π, φ/(2π)]` each, written lane by lane with selects
+/// instead of branches, so the compiler can run the lanes in vector registers ([`spherical`]
+/// is the one-lane case, so every `N` gives the same bits).
 pub fn spherical_lanes<const N: usize>(v: &[[f32; 3]; N]) -> [[f32; 2]; N] {
     use std::f32::consts::FRAC_1_PI;
     let lanes = |f: &dyn Fn(usize) -> f32| -> [f32; N] { std::array::from_fn(f) };
@@ -172,7 +158,8 @@ pub fn spherical_lanes<const N: usize>(v: &[[f32; 3]; N]) -> [[f32; 2]; N] {
     })
 }
 
-/// [`atan2`] of `N` pairs, lane by lane (see [`spherical_lanes`]); the same bits.
+/// [`atan2`] of `N` pairs, lane by lane (see [`spherical_lanes`]; [`atan2`] is the one-lane
+/// case).
 fn atan2_lanes<const N: usize>(y: &[f32; N], x: &[f32; N]) -> [f32; N] {
     use std::f32::consts::{FRAC_PI_2, PI};
     let (mut a, mut s, mut p) = ([0f32; N], [0f32; N], [0f32; N]);
@@ -205,20 +192,7 @@ fn atan2_lanes<const N: usize>(y: &[f32; N], x: &[f32; N]) -> [f32; N] {
 /// into selects, and about a fifth of the time of the C library's `atan2f` and `acosf` that
 /// the query packing called before. `atan2(±0, ±0)` is 0.
 pub fn atan2(y: f32, x: f32) -> f32 {
-    use std::f32::consts::{FRAC_PI_2, PI};
-    let (ax, ay) = (x.abs(), y.abs());
-    let (lo, hi) = (ax.min(ay), ax.max(ay));
-    let a = if hi > 0.0 { lo / hi } else { 0.0 };
-    let s = a * a;
-    let p = ATAN_C.iter().rev().fold(0.0f32, |acc, c| acc * s + c);
-    let mut r = a + a * s * p;
-    if ay > ax {
-        r = FRAC_PI_2 - r;
-    }
-    if x < 0.0 {
-        r = PI - r;
-    }
-    if y < 0.0 { -r } else { r }
+    atan2_lanes(&[y], &[x])[0]
 }
 
 /// The coefficients of [`atan2`]'s polynomial in `s = a²`, lowest first.
