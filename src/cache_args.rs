@@ -4,8 +4,8 @@ use std::path::PathBuf;
 
 use anyhow::{Context, Result, bail};
 use nrc_cache::{CacheConfig, CacheDevice};
-use nrc_train::Termination;
-use nrc_train::methods::CacheMethodSettings;
+use nrc_harness::CacheMethodSettings;
+use nrc_render::Termination;
 use nrc_train::producer::ProducerOptions;
 
 /// Where the cache computes.

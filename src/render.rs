@@ -112,43 +112,63 @@ pub struct RenderArgs {
 
     /// With --cache: where paths end in it (first, diffuse[:R], spread[:C], bth[:K]).
     #[arg(long, default_value = "spread", value_parser = crate::cache_args::parse_termination)]
-    pub termination: nrc_train::Termination,
+    pub termination: nrc_render::Termination,
 
     /// With --cache: where the cache computes.
     #[arg(long, value_enum, default_value_t = crate::cache_args::DeviceArg::Cpu)]
     pub device: crate::cache_args::DeviceArg,
+
+    /// The pass: pt, pt-nonee, pt-light (the reference path tracer, instead of --strategy), or
+    /// cache[-TERMINATION][-nonee] (paths ending in the --cache snapshot, instead of
+    /// --termination).
+    #[arg(long)]
+    pub pass: Option<nrc_render::PassSpec>,
+
+    /// Render with a --cache snapshot trained on another scene (or another version of this
+    /// one) instead of refusing it.
+    #[arg(long)]
+    pub allow_other_scene: bool,
 }
 
 /// Renders from a cache snapshot: cache-terminated paths at `spp`, NEE per --strategy
 /// (MIS unless `bsdf`).
 fn render_cached(
     args: &RenderArgs,
+    pass: nrc_render::PassSpec,
     snapshot: &std::path::Path,
     scene: &nrc_scene::Scene,
 ) -> Result<nrc_scene::Image> {
     let cache = nrc_cache::RadianceCache::load(snapshot, args.device.resolve_and_print())
         .with_context(|| format!("cannot load the cache snapshot {}", snapshot.display()))?;
-    let tracer = args.tracer.tracer();
-    let renderer = nrc_train::CacheRenderer {
-        termination: args.termination,
-        nee: tracer.strategy != LightStrategy::BsdfOnly,
-        tracer,
-        queries: nrc_train::QueryMaker {
-            scene_box: cache.scene_box(),
-        },
-    };
+    let content = nrc_harness::reference::scene_content_hash(&args.scene.scene)?;
+    let scene_box = nrc_train::QueryMaker::new(&scene.bounds()).scene_box;
+    if let Err(e) = nrc_cache::check_scene(
+        cache.scene_content(),
+        cache.scene_box(),
+        &content,
+        scene_box,
+    ) {
+        if !args.allow_other_scene {
+            bail!("{}: {e}", snapshot.display());
+        }
+        eprintln!(
+            "warning: {}: {e} (allowed by --allow-other-scene)",
+            snapshot.display()
+        );
+    }
+    let mut pass = pass.build(&args.tracer.tracer());
     let pool = thread_pool(args.threads)?;
     let start = std::time::Instant::now();
+    let input = nrc_render::FrameInput {
+        scene,
+        camera: &scene.camera,
+        width: args.width,
+        height: args.height,
+        spp: args.spp,
+        seed: args.seed,
+    };
     let out = pool.install(|| {
-        renderer.render(
-            scene,
-            &scene.camera,
-            &cache,
-            args.width,
-            args.height,
-            args.spp,
-            args.seed,
-        )
+        nrc_render::passes::run(pass.as_mut(), &input, &nrc_train::CacheSource::new(&cache))
     });
     if out.stats.invalid_samples > 0 {
         eprintln!(
@@ -157,10 +177,11 @@ fn render_cached(
         );
     }
     println!(
-        "rendered {}x{} at {} spp from the cache {} in {:.3} s ({} cache queries, {:.1} ms in the cache)",
+        "rendered {}x{} at {} spp with {} from the cache {} in {:.3} s ({} cache queries, {:.1} ms in the cache)",
         args.width,
         args.height,
         args.spp,
+        pass.name(),
         snapshot.display(),
         start.elapsed().as_secs_f64(),
         out.stats.queries,
@@ -169,7 +190,6 @@ fn render_cached(
     Ok(out.image)
 }
 
-/// A rayon pool of `threads` workers (all cores when `None`).
 pub fn thread_pool(threads: Option<usize>) -> Result<rayon::ThreadPool> {
     if threads == Some(0) {
         bail!("--threads must be at least 1");
@@ -212,11 +232,25 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     for w in scene.warnings() {
         eprintln!("warning: {w}");
     }
-    if let Some(snapshot) = &args.cache {
+    let tracer = args.tracer.tracer();
+    let pass = args.pass.unwrap_or(if args.cache.is_some() {
+        nrc_render::PassSpec::CacheTerminated {
+            termination: args.termination,
+            nee: tracer.strategy != LightStrategy::BsdfOnly,
+        }
+    } else {
+        nrc_render::PassSpec::PathTraced {
+            strategy: tracer.strategy,
+        }
+    });
+    if pass.uses_source() {
+        let Some(snapshot) = &args.cache else {
+            bail!("the pass {pass} ends paths in a cache: give it one with --cache snapshot.nrc");
+        };
         if args.variance.is_some() {
             bail!("--variance is not available with --cache");
         }
-        let image = render_cached(args, snapshot, &scene)?;
+        let image = render_cached(args, pass, snapshot, &scene)?;
         image.write_exr(&args.out)?;
         if let Some(png) = &args.png {
             image.write_png_preview(png, args.exposure)?;
@@ -240,11 +274,15 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     );
     // Updating the bar from every tile would contend on its lock; batch the counts.
     let done = AtomicU64::new(0);
+    let strategy = match pass {
+        nrc_render::PassSpec::PathTraced { strategy } => strategy,
+        _ => tracer.strategy,
+    };
     let out = pool.install(|| {
         render(
             &scene,
             &scene.camera,
-            &args.tracer.tracer(),
+            &PathTracer { strategy, ..tracer },
             &settings,
             &|n| {
                 let d = done.fetch_add(n, Ordering::Relaxed) + n;

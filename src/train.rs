@@ -7,8 +7,10 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, Result, bail};
 use glam::Vec3;
 use indicatif::{ProgressBar, ProgressStyle};
+use nrc_render::PassSpec;
+use nrc_render::Termination;
 use nrc_scene::{Camera, Scene};
-use nrc_train::{FrameStats, ProducerSpec, Termination};
+use nrc_train::{FrameStats, ProducerSpec};
 
 use crate::cache_args::{RadianceCacheArgs, parse_termination};
 use crate::render::TracerArgs;
@@ -72,6 +74,12 @@ pub struct TrainArgs {
     /// Next-event estimation off in the inference pass (BSDF sampling only).
     #[arg(long)]
     pub no_nee: bool,
+
+    /// The inference pass, instead of --termination/--no-nee: cache[-TERMINATION][-nonee]
+    /// (paths ending in the cache), or pt, pt-nonee, pt-light (the reference path tracer; the
+    /// cache is trained but not read).
+    #[arg(long, conflicts_with_all = ["termination", "no_nee"])]
+    pub pass: Option<PassSpec>,
 
     /// Fraction of training queries aimed at the previous frame's termination points.
     #[arg(long, default_value_t = 0.0)]
@@ -211,15 +219,13 @@ pub fn run(args: &TrainArgs) -> Result<()> {
     }
     let settings = args.cache.method_settings(0, args.seed, true)?;
     let tracer = args.tracer.tracer();
-    let mut trainer = nrc_train::methods::scene_trainer(
-        &scene,
-        args.producer.clone(),
-        args.termination,
-        &settings,
-        tracer,
-    )
-    .map_err(anyhow::Error::msg)?;
-    trainer.settings.renderer.nee = !args.no_nee;
+    let pass = args.pass.unwrap_or(PassSpec::CacheTerminated {
+        termination: args.termination,
+        nee: !args.no_nee,
+    });
+    let mut trainer =
+        nrc_harness::methods::scene_trainer(&scene, args.producer.clone(), pass, &settings, tracer)
+            .map_err(anyhow::Error::msg)?;
     trainer.settings.spp = args.spp;
     trainer.settings.from_terminations = args.from_terminations;
     eprintln!("{}", trainer.cache.describe());
@@ -255,6 +261,12 @@ pub fn run(args: &TrainArgs) -> Result<()> {
         write_stats(path, &all)?;
     }
     if let Some(path) = &args.snapshot {
+        // The snapshot names its scene, so that rendering another one with it is refused.
+        trainer
+            .cache
+            .set_scene_content(Some(nrc_harness::reference::scene_content_hash(
+                &args.scene.scene,
+            )?));
         trainer.cache.save(path)?;
     }
     let n = all.len() as f64;

@@ -128,6 +128,34 @@ fn train_then_render_from_the_snapshot() {
         &p("t.exr"),
     ]);
     assert_error(&o, "t.nrc");
+
+    // The snapshot knows its scene: rendering another scene with it is refused (it once
+    // rendered silently), unless explicitly allowed.
+    let ajar = cornell().with_file_name("ajar.gltf");
+    let (snapshot, other_out) = (p("c.nrc"), p("other.exr"));
+    let other = |extra: &[&str]| {
+        let mut a = vec![
+            "render",
+            "--scene",
+            ajar.to_str().unwrap(),
+            "--cache",
+            &snapshot,
+            "--width",
+            "8",
+            "--height",
+            "8",
+            "--spp",
+            "1",
+            "--out",
+            &other_out,
+        ];
+        a.extend_from_slice(extra);
+        nrc(&a)
+    };
+    assert_error(&other(&[]), "another scene");
+    let o = other(&["--allow-other-scene"]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    assert!(text(&o.stderr).contains("warning:"), "{}", text(&o.stderr));
 }
 
 #[test]
@@ -147,9 +175,43 @@ fn bad_training_options_are_clear_errors() {
             vec!["--lt-surface-balance", "0.8", "--lt-camera-balance", "0.5"],
             "at most 1",
         ),
+        (vec!["--pass", "cache-last"], "unknown termination"),
+        (vec!["--pass", "nope"], "unknown pass"),
+        // Light paths cannot carry the background's light: refused, naming why.
+        (vec!["--producer", "bt", "--background", "1"], "background"),
+        (
+            vec!["--producer", "mix:pt-sl=0.5,sppc=0.5", "--background", "1"],
+            "sppc",
+        ),
     ] {
         let mut all = vec!["train", "--scene", s, "--width", "8", "--height", "8"];
         all.extend(args.iter());
         assert_error(&nrc(&all), needle);
     }
+}
+
+/// `--pass` chooses the inference pass of `nrc train` and `nrc render`; a pass that ends paths
+/// in a cache needs one.
+#[test]
+fn passes_are_chosen_by_name() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = |n: &str| dir.path().join(n).to_str().unwrap().to_string();
+    let scene = cornell();
+    let s = scene.to_str().unwrap();
+    let small = ["--width", "8", "--height", "8"];
+    let (stats, x, y) = (p("s.json"), p("x.exr"), p("y.exr"));
+    for pass in ["cache-first", "cache-bth:8-nonee", "pt"] {
+        let mut a = vec!["train", "--scene", s, "--frames", "2", "--records", "512"];
+        a.extend(small);
+        a.extend(["--pass", pass, "--stats", &stats]);
+        let o = nrc(&a);
+        assert!(o.status.success(), "{pass}: {}", text(&o.stderr));
+    }
+    let mut a = vec!["render", "--scene", s, "--pass", "cache-first", "--out", &x];
+    a.extend(small);
+    assert_error(&nrc(&a), "--cache");
+    let mut a = vec!["render", "--scene", s, "--pass", "pt-nonee", "--out", &y];
+    a.extend(small);
+    let o = nrc(&a);
+    assert!(o.status.success(), "{}", text(&o.stderr));
 }

@@ -52,6 +52,8 @@ pub struct RadianceCache {
     config: CacheConfig,
     layout: Arc<ModelLayout>,
     scene_box: SceneBox,
+    /// Content hash of the scene (hex, given by the caller), stored in snapshots.
+    scene_content: Option<String>,
     device: CacheDevice,
     burn_device: Device,
     path: ComputePath,
@@ -141,6 +143,7 @@ impl RadianceCache {
             config,
             layout,
             scene_box,
+            scene_content: None,
             device,
             burn_device,
             path,
@@ -171,6 +174,18 @@ impl RadianceCache {
     /// Sets the scene box (stored in snapshots; use [`SceneBox::normalize`] on positions).
     pub fn set_scene_box(&mut self, scene_box: SceneBox) {
         self.scene_box = scene_box;
+    }
+
+    /// The content hash of the scene the cache is trained on (hex, as given to
+    /// [`RadianceCache::set_scene_content`] or read from a snapshot); `None` when unknown.
+    pub fn scene_content(&self) -> Option<&str> {
+        self.scene_content.as_deref()
+    }
+
+    /// Sets the scene's content hash (a hex digest computed by the caller: the cache knows
+    /// nothing of scenes), stored in snapshots; see [`snapshot::check_scene`].
+    pub fn set_scene_content(&mut self, content: Option<String>) {
+        self.scene_content = content;
     }
 
     /// The compute device.
@@ -235,20 +250,11 @@ impl RadianceCache {
             enc.unpadded_dims,
             enc.padded_dims
         ));
-        let products = match self.layout.mlp_precision {
-            crate::config::MlpPrecision::F32 => "f32 products",
-            crate::config::MlpPrecision::Bf16 => match crate::cpu::bf16::PairKernel::best() {
-                crate::cpu::bf16::PairKernel::Avx512Bf16 => {
-                    "bf16 products on the fused CPU path (AVX-512 BF16)"
-                }
-                crate::cpu::bf16::PairKernel::Avx2 => {
-                    "bf16 products on the fused CPU path (no AVX-512 BF16 here: AVX2 emulation, the same bits, slower than f32)"
-                }
-                crate::cpu::bf16::PairKernel::Expanded => {
-                    "bf16 products on the fused CPU path (no AVX-512 BF16 here: portable emulation, the same bits, slower than f32)"
-                }
-            },
-        };
+        let products = mlp_products(
+            self.device,
+            self.layout.mlp_precision,
+            crate::cpu::bf16::PairKernel::best(),
+        );
         s.push_str(&format!(
             "network: {} hidden layers × 64, ReLU, no biases, {products}, output {:?} × (diffuse + specular)\n",
             self.layout.layers.len() - 1,
@@ -522,7 +528,14 @@ impl RadianceCache {
     /// Writes a snapshot (see [`crate::snapshot`] for the format), atomically.
     pub fn save(&mut self, path: &Path) -> Result<(), CacheError> {
         let host = self.host_state();
-        snapshot::write(path, &self.config, &self.scene_box, self.step, &host)
+        snapshot::write(
+            path,
+            &self.config,
+            &self.scene_box,
+            self.scene_content.as_deref(),
+            self.step,
+            &host,
+        )
     }
 
     /// Loads a snapshot onto `device` (its default path).
@@ -532,14 +545,16 @@ impl RadianceCache {
 
     /// A cache on `device` (its default path) holding what a snapshot held.
     fn from_snapshot(s: snapshot::Snapshot, device: CacheDevice) -> Result<Self, CacheError> {
-        Self::from_host(
+        let mut cache = Self::from_host(
             s.config,
             s.scene_box,
             device,
             device.default_path(),
             s.state,
             s.step,
-        )
+        )?;
+        cache.scene_content = s.scene_content;
+        Ok(cache)
     }
 
     /// Loads a snapshot and checks that it was made with `expected` (otherwise an error naming
@@ -560,14 +575,174 @@ impl RadianceCache {
             return Ok(());
         }
         let host = self.host_state();
-        *self = Self::from_host(
+        let scene_content = self.scene_content.take();
+        let moved = Self::from_host(
             self.config.clone(),
             self.scene_box,
             self.device,
             path,
             host,
             self.step,
-        )?;
-        Ok(())
+        );
+        match moved {
+            Ok(mut cache) => {
+                cache.scene_content = scene_content;
+                *self = cache;
+                Ok(())
+            }
+            Err(e) => {
+                self.scene_content = scene_content;
+                Err(e)
+            }
+        }
+    }
+}
+
+/// The MLP products part of [`RadianceCache::describe`]'s network line: the bf16 kernels exist
+/// on the fused CPU (Flex) path only; wgpu multiplies in f32 whatever the configuration says.
+fn mlp_products(
+    device: CacheDevice,
+    precision: crate::config::MlpPrecision,
+    kernel: crate::cpu::bf16::PairKernel,
+) -> &'static str {
+    use crate::config::MlpPrecision;
+    use crate::cpu::bf16::PairKernel;
+    match (device, precision) {
+        (CacheDevice::Wgpu, MlpPrecision::F32) => "MLP products f32 on wgpu",
+        (CacheDevice::Wgpu, MlpPrecision::Bf16) => {
+            "MLP products f32 on wgpu (the bf16 precision applies to the fused CPU path only)"
+        }
+        (CacheDevice::Cpu, MlpPrecision::F32) => "f32 products",
+        (CacheDevice::Cpu, MlpPrecision::Bf16) => match kernel {
+            PairKernel::Avx512Bf16 => "bf16 products on the fused CPU path (AVX-512 BF16)",
+            PairKernel::Avx2 => {
+                "bf16 products on the fused CPU path (no AVX-512 BF16 here: AVX2 emulation, the same bits, slower than f32)"
+            }
+            PairKernel::Expanded => {
+                "bf16 products on the fused CPU path (no AVX-512 BF16 here: portable emulation, the same bits, slower than f32)"
+            }
+        },
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::config::MlpPrecision;
+    use crate::cpu::bf16::PairKernel;
+
+    #[test]
+    fn wgpu_description_claims_no_cpu_kernels() {
+        for precision in [MlpPrecision::F32, MlpPrecision::Bf16] {
+            for kernel in [
+                PairKernel::Expanded,
+                PairKernel::Avx2,
+                PairKernel::Avx512Bf16,
+            ] {
+                let text = mlp_products(CacheDevice::Wgpu, precision, kernel);
+                assert!(text.starts_with("MLP products f32 on wgpu"), "{text}");
+                assert!(!text.contains("AVX"), "{text}");
+                assert!(!text.contains("bf16 products"), "{text}");
+            }
+        }
+    }
+
+    #[test]
+    fn cpu_description_names_its_kernel() {
+        assert_eq!(
+            mlp_products(CacheDevice::Cpu, MlpPrecision::F32, PairKernel::Avx512Bf16),
+            "f32 products"
+        );
+        let text = mlp_products(CacheDevice::Cpu, MlpPrecision::Bf16, PairKernel::Avx512Bf16);
+        assert!(text.contains("AVX-512 BF16"), "{text}");
+        let text = mlp_products(CacheDevice::Cpu, MlpPrecision::Bf16, PairKernel::Avx2);
+        assert!(text.contains("AVX2 emulation"), "{text}");
+    }
+
+    /// A small hash-grid cache on the CPU, with a few steps of training.
+    fn small_cache() -> RadianceCache {
+        use crate::config::NestedEncoding;
+        let mut config = CacheConfig::hash_grid_preset();
+        if let Some(NestedEncoding::HashGrid {
+            log2_hashmap_size, ..
+        }) = config.encoding.nested.first_mut()
+        {
+            *log2_hashmap_size = 12;
+        }
+        let scene_box = SceneBox {
+            min: [-1.0, -2.0, -3.0],
+            max: [4.0, 5.0, 6.0],
+        };
+        let mut cache =
+            RadianceCache::with_path(config, scene_box, CacheDevice::Cpu, ComputePath::Fused)
+                .expect("cache");
+        let q = CacheQuery {
+            position: [0.25, 0.5, 0.75],
+            normal: [0.0, 0.0, 1.0],
+            direction: [0.0, 0.0, 1.0],
+            diffuse: [0.5; 3],
+            ..Default::default()
+        };
+        let batch = TrainingBatch {
+            queries: vec![q; 256],
+            targets: vec![[1.0, 0.5, 0.25]; 256],
+            weights: None,
+        };
+        cache.train(&batch, 2).expect("train");
+        cache
+    }
+
+    #[test]
+    fn scene_content_round_trips_through_save_and_load() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let file = dir.path().join("cache.nrc");
+        let mut cache = small_cache();
+        assert_eq!(cache.scene_content(), None);
+        let hash = "1a2b3c4d5e6f7a8b9c0d1e2f3a4b5c6d7e8f9a0b1c2d3e4f5a6b7c8d9e0f1a2b";
+        cache.set_scene_content(Some(hash.to_string()));
+        assert_eq!(cache.scene_content(), Some(hash));
+        // Changing the compute path keeps it.
+        cache.set_path(ComputePath::CustomOps).expect("set_path");
+        assert_eq!(cache.scene_content(), Some(hash));
+        cache.save(&file).expect("save");
+        let loaded = RadianceCache::load(&file, CacheDevice::Cpu).expect("load");
+        assert_eq!(loaded.scene_content(), Some(hash));
+        assert_eq!(loaded.scene_box(), cache.scene_box());
+        let s = snapshot::read(&file).expect("read");
+        assert_eq!(s.scene_content.as_deref(), Some(hash));
+        assert_eq!(
+            snapshot::check_scene(
+                s.scene_content.as_deref(),
+                s.scene_box,
+                hash,
+                cache.scene_box()
+            ),
+            Ok(())
+        );
+        // No temporary file is left behind.
+        assert_eq!(std::fs::read_dir(dir.path()).expect("dir").count(), 1);
+    }
+
+    #[test]
+    fn snapshot_without_scene_content_loads_as_none() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let file = dir.path().join("cache.nrc");
+        let mut cache = small_cache();
+        cache.save(&file).expect("save");
+        // Saved without a content hash, the metadata has no such key at all (as older files).
+        let bytes = std::fs::read(&file).expect("read");
+        let (_, header) = safetensors::SafeTensors::read_metadata(&bytes).expect("header");
+        let json = header
+            .metadata()
+            .as_ref()
+            .and_then(|m| m.get("nrc_cache"))
+            .expect("metadata")
+            .clone();
+        assert!(!json.contains("scene_content"), "{json}");
+        let loaded = RadianceCache::load(&file, CacheDevice::Cpu).expect("load");
+        assert_eq!(loaded.scene_content(), None);
+        assert_eq!(loaded.step_count(), cache.step_count());
+        // Checked by its box only.
+        assert!(snapshot::check_scene(None, loaded.scene_box(), "00ff", cache.scene_box()).is_ok());
     }
 }

@@ -46,3 +46,4 @@ pub use config::{CacheConfig, SceneBox, Sizing};
 pub use device::{CacheDevice, ComputePath};
 pub use error::CacheError;
 pub use record::{CacheQuery, TrainingBatch};
+pub use snapshot::check_scene;

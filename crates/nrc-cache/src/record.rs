@@ -30,6 +30,36 @@ pub struct TrainingBatch {
     pub weights: Option<Vec<f32>>,
 }
 
+impl TrainingBatch {
+    /// Appends `other`'s records, keeping both batches' weights (a batch without weights
+    /// counts 1 per record).
+    pub fn append(&mut self, other: TrainingBatch) {
+        let (n, m) = (self.queries.len(), other.queries.len());
+        match (&mut self.weights, other.weights) {
+            (None, None) => {}
+            (Some(w), None) => w.resize(n + m, 1.0),
+            (mine, Some(theirs)) => {
+                let w = mine.get_or_insert_with(|| vec![1.0; n]);
+                w.extend(theirs);
+            }
+        }
+        self.queries.extend(other.queries);
+        self.targets.extend(other.targets);
+    }
+
+    /// The records at `indices`, in that order, with their weights.
+    pub fn select(&self, indices: &[usize]) -> TrainingBatch {
+        TrainingBatch {
+            queries: indices.iter().map(|&i| self.queries[i]).collect(),
+            targets: indices.iter().map(|&i| self.targets[i]).collect(),
+            weights: self
+                .weights
+                .as_ref()
+                .map(|w| indices.iter().map(|&i| w[i]).collect()),
+        }
+    }
+}
+
 /// Number of raw input dimensions a query becomes before encoding (see [`raw_inputs`]).
 pub const RAW_INPUT_DIMS: usize = 14;
 

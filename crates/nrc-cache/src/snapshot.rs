@@ -12,12 +12,17 @@
 //! { "magic": "nrc-cache-snapshot", "version": 1, "step": 1200,
 //!   "config": { ...the cache configuration... },
 //!   "scene_box": { "min": [..], "max": [..] },
+//!   "scene_content": "1a2b3c4d5e6f...",
 //!   "param_count": 12345, "checksum": "fnv1a64:0123456789abcdef" }
 //! ```
 //!
+//! `scene_content` is optional (absent in older files, and when the caller gave none): a hex
+//! content hash of the scene the cache was trained on, computed by the caller (this crate knows
+//! nothing of scenes); [`check_scene`] compares it and the scene box with another scene's.
 //! `checksum` is FNV-1a (64-bit) over the little-endian 64-bit words of the eight tensors'
-//! bytes in the order above (a final partial word zero-padded). The EMA tensors hold the raw
-//! EMA at `step`. Files are written to a temporary name in the same directory and renamed.
+//! bytes in the order above (a final partial word zero-padded); it does not cover the metadata.
+//! The EMA tensors hold the raw EMA at `step`. Files are written to a temporary file in the same
+//! directory (`tempfile`), synced, and renamed into place.
 
 use std::io::Write;
 use std::path::Path;
@@ -53,6 +58,9 @@ struct Metadata {
     step: u32,
     config: serde_json::Value,
     scene_box: SceneBox,
+    /// Hex content hash of the scene, given by the caller; absent in older files.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    scene_content: Option<String>,
     param_count: usize,
     checksum: String,
 }
@@ -64,6 +72,9 @@ pub struct Snapshot {
     pub config: CacheConfig,
     /// Its scene box.
     pub scene_box: SceneBox,
+    /// The content hash of its scene (hex, computed by whoever saved it); `None` when the file
+    /// has none (older snapshots, or saved without one).
+    pub scene_content: Option<String>,
     /// Steps taken.
     pub step: u32,
     /// The training state.
@@ -117,11 +128,13 @@ fn bad(path: &Path, message: impl Into<String>) -> CacheError {
     }
 }
 
-/// Writes a snapshot atomically (temporary file in the same directory, then rename).
+/// Writes a snapshot atomically (temporary file in the same directory, synced, then renamed
+/// over `path`). `scene_content` is the scene's content hash, stored as given.
 pub fn write(
     path: &Path,
     config: &CacheConfig,
     scene_box: &SceneBox,
+    scene_content: Option<&str>,
     step: u32,
     state: &HostState,
 ) -> Result<(), CacheError> {
@@ -135,6 +148,7 @@ pub fn write(
         step,
         config: serde_json::to_value(config).expect("config serialises"),
         scene_box: *scene_box,
+        scene_content: scene_content.map(str::to_owned),
         param_count: state.grid.len() + state.mlp.len(),
         checksum: checksum(&bytes),
     };
@@ -158,21 +172,36 @@ pub fn write(
     let name = path
         .file_name()
         .ok_or_else(|| io_err(path, "not a file path"))?;
-    let tmp = dir.join(format!(
-        ".{}.tmp-{}",
-        name.to_string_lossy(),
-        std::process::id()
-    ));
-    let result = (|| {
-        let mut f = std::fs::File::create(&tmp)?;
-        f.write_all(&data)?;
-        f.sync_all()?;
-        std::fs::rename(&tmp, path)
-    })();
-    if let Err(e) = result {
-        let _ = std::fs::remove_file(&tmp);
-        return Err(io_err(path, e));
+    // Named after the target so that a leftover (after a crash) says what it was.
+    let prefix = format!(".{}.", name.to_string_lossy());
+    let mut builder = tempfile::Builder::new();
+    builder.prefix(&prefix).suffix(".tmp");
+    // The default of tempfile is 0o600; a snapshot gets the permissions `File::create` gives
+    // (0o666 less the umask).
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        builder.permissions(std::fs::Permissions::from_mode(0o666));
     }
+    let mut tmp = builder.tempfile_in(dir).map_err(|e| {
+        io_err(
+            path,
+            format!("cannot create a temporary file in {}: {e}", dir.display()),
+        )
+    })?;
+    // On any error below, dropping `tmp` removes the temporary file.
+    let written = (|| {
+        tmp.write_all(&data)?;
+        tmp.flush()?;
+        tmp.as_file().sync_all()
+    })();
+    written.map_err(|e| io_err(path, format!("cannot write the snapshot: {e}")))?;
+    tmp.persist(path).map_err(|e| {
+        io_err(
+            path,
+            format!("cannot move the temporary file into place: {}", e.error),
+        )
+    })?;
     Ok(())
 }
 
@@ -286,6 +315,7 @@ pub fn read(path: &Path) -> Result<Snapshot, CacheError> {
     Ok(Snapshot {
         config,
         scene_box: meta.scene_box,
+        scene_content: meta.scene_content,
         step: meta.step,
         state,
     })
@@ -335,4 +365,118 @@ pub fn check_config(
         }
     }
     Ok(())
+}
+
+/// Abbreviates a content hash to its first 12 characters for messages.
+fn abbreviate(hash: &str) -> String {
+    let mut chars = hash.chars();
+    let head: String = chars.by_ref().take(12).collect();
+    if chars.next().is_some() {
+        format!("{head}…")
+    } else {
+        head
+    }
+}
+
+/// Whether two boxes agree to 1e-4 of the larger box diagonal, corner by corner.
+fn same_box(a: SceneBox, b: SceneBox) -> bool {
+    let diagonal = |s: SceneBox| {
+        s.extent()
+            .iter()
+            .map(|&e| f64::from(e) * f64::from(e))
+            .sum::<f64>()
+            .sqrt()
+    };
+    let tolerance = 1e-4 * diagonal(a).max(diagonal(b));
+    let close = |x: &[f32; 3], y: &[f32; 3]| {
+        x.iter()
+            .zip(y)
+            .all(|(&p, &q)| (f64::from(p) - f64::from(q)).abs() <= tolerance)
+    };
+    close(&a.min, &b.min) && close(&a.max, &b.max)
+}
+
+/// Error unless a snapshot belongs to a scene: its content hash (when it has one) must equal
+/// `scene_content` (hex, compared ignoring ASCII case) and its box must equal `scene_box` to
+/// 1e-4 of the box diagonal. A snapshot without a content hash is checked by its box only.
+/// The message names both hashes (abbreviated to 12 characters) or both boxes.
+pub fn check_scene(
+    snapshot_content: Option<&str>,
+    snapshot_box: SceneBox,
+    scene_content: &str,
+    scene_box: SceneBox,
+) -> Result<(), String> {
+    if let Some(stored) = snapshot_content.filter(|s| !s.eq_ignore_ascii_case(scene_content)) {
+        return Err(format!(
+            "the snapshot was trained on another scene (content {}, this scene {}); pass --allow-other-scene to use it anyway",
+            abbreviate(stored),
+            abbreviate(scene_content)
+        ));
+    }
+    if !same_box(snapshot_box, scene_box) {
+        return Err(format!(
+            "the snapshot was trained on another scene box (min {:?} max {:?}, this scene min {:?} max {:?}); pass --allow-other-scene to use it anyway",
+            snapshot_box.min, snapshot_box.max, scene_box.min, scene_box.max
+        ));
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn scene_box(min: [f32; 3], max: [f32; 3]) -> SceneBox {
+        SceneBox { min, max }
+    }
+
+    const HASH_A: &str = "1a2b3c4d5e6f7a8b9c0d1e2f3a4b5c6d";
+    const HASH_B: &str = "9f8e7d6c5b4a39281706f5e4d3c2b1a0";
+
+    #[test]
+    fn check_scene_accepts_the_same_scene() {
+        let b = scene_box([-1.0, -2.0, -3.0], [4.0, 5.0, 6.0]);
+        assert_eq!(check_scene(Some(HASH_A), b, HASH_A, b), Ok(()));
+        // Case of the hex digits does not matter.
+        assert_eq!(
+            check_scene(Some(HASH_A.to_ascii_uppercase().as_str()), b, HASH_A, b),
+            Ok(())
+        );
+        // A snapshot without a hash is checked by its box only.
+        assert_eq!(check_scene(None, b, HASH_B, b), Ok(()));
+        // Rounding-level differences of the box are accepted.
+        let nudged = scene_box([-1.0 + 1e-6, -2.0, -3.0], [4.0, 5.0, 6.0 - 1e-6]);
+        assert_eq!(check_scene(Some(HASH_A), b, HASH_A, nudged), Ok(()));
+    }
+
+    #[test]
+    fn check_scene_rejects_another_content_hash() {
+        let b = SceneBox::default();
+        let e = check_scene(Some(HASH_A), b, HASH_B, b).unwrap_err();
+        assert!(e.contains("another scene"), "{e}");
+        assert!(e.contains("1a2b3c4d5e6f…"), "{e}");
+        assert!(e.contains("9f8e7d6c5b4a…"), "{e}");
+        assert!(!e.contains(HASH_A) && !e.contains(HASH_B), "{e}");
+        assert!(e.contains("--allow-other-scene"), "{e}");
+        assert!(!e.contains('\n'), "{e}");
+    }
+
+    #[test]
+    fn check_scene_rejects_another_box() {
+        let a = scene_box([-1.0, -2.0, -3.0], [4.0, 5.0, 6.0]);
+        let b = scene_box([-1.0, -2.0, -3.0], [4.0, 5.0, 6.1]);
+        for content in [Some(HASH_A), None] {
+            let e = check_scene(content, a, HASH_A, b).unwrap_err();
+            assert!(e.contains("box"), "{e}");
+            assert!(e.contains("6.1"), "{e}");
+            assert!(e.contains("--allow-other-scene"), "{e}");
+        }
+    }
+
+    #[test]
+    fn abbreviation_keeps_short_hashes_whole() {
+        assert_eq!(abbreviate("abc"), "abc");
+        assert_eq!(abbreviate("0123456789ab"), "0123456789ab");
+        assert_eq!(abbreviate("0123456789abc"), "0123456789ab…");
+    }
 }

@@ -1,17 +1,31 @@
-//! Rendering for the neural radiance cache.
+//! Rendering for the neural radiance cache, free of burn.
 //!
-//! Today: the unbiased reference path tracer that every cache estimator is judged against
-//! ([`PathTracer`], whose per-path estimate [`PathTracer::radiance`] later passes reuse) and
-//! the image loop around it ([`render()`]). Later: the cache inference passes
-//! (cache-terminated rendering) and the online frame loop.
+//! - [`transport`]: the path-vertex step written once ([`transport::PathWalk`]), used by the
+//!   reference path tracer, the cache-terminated pass and the path-tracing producer;
+//!   [`nee`]: next-event estimation and its MIS weight; [`light_path`]: paths traced from the
+//!   lights (flux weights, the adjoint scale) for the light-side producers.
+//! - [`path_tracer`]: the unbiased reference path tracer's settings and per-path estimate;
+//!   [`render()`]: its image loop (tiles, per-pixel mean and variance).
+//! - [`source`]: the radiance-source interface ([`RadianceSource`]: a batch of queries in, RGB
+//!   radiance out) and exact sources for tests.
+//! - [`passes`]: the inference passes, one file per technique, behind one trait
+//!   ([`RenderPass`]) and one spec enum ([`PassSpec`]).
+//! - [`spread`]: the area-spread heuristic of Müller et al. 2021 (termination of inference
+//!   paths and of training suffixes).
 
-pub mod methods;
+pub mod light_path;
+pub mod nee;
+pub mod passes;
 pub mod path_tracer;
 pub mod render;
 pub mod sampler;
+pub mod source;
+pub mod spread;
 pub mod tiles;
+pub mod transport;
 
-pub use methods::{Budget, Frame, FrameRequest, Method, MethodSettings, MethodSpec, render_frame};
+pub use passes::{FrameInput, PassOutput, PassSpec, PassStats, RenderPass, Termination};
 pub use path_tracer::{LightStrategy, PathStats, PathTracer};
 pub use render::{RenderOutput, RenderSettings, RenderStats, render};
-pub use sampler::PixelSampler;
+pub use sampler::{PixelSampler, pass_seed};
+pub use source::{PathTracedSource, RadianceQuery, RadianceSource, ZeroSource};

@@ -9,29 +9,22 @@
 //! - [`producer`]: the [`Producer`] trait and the configuration that chooses and mixes
 //!   producers; the producers themselves in [`producers`] (path tracing with self-learning,
 //!   bidirectional training, light training, sparse progressive photon collection).
-//! - [`inference`]: cache-terminated camera paths with the termination strategies
-//!   ([`Termination`]), all termination queries of a frame answered by one cache call.
+//! - [`source`]: the cache as an [`nrc_render::RadianceSource`] (the adapter the passes
+//!   reach it through).
 //! - [`online`]: the per-frame loop produce → train → infer, with per-phase statistics.
-//! - [`methods`]: the cache methods of the comparison registry (`nrc-pt`, `nrc-sppc`, ...).
 //!
 //! Shared vocabulary: [`query::QueryMaker`] turns a surface point into a
-//! [`nrc_cache::CacheQuery`]; [`view::RadianceView`] is the read-only face of a cache (the
-//! trained cache, or an exact radiance field in tests); [`spread::Spread`] is the area-spread
-//! heuristic of Müller et al. 2021 used both to terminate rendering paths and training
-//! suffixes.
+//! [`nrc_cache::CacheQuery`]. The inference passes, the path-vertex step, light paths and the
+//! area-spread heuristic live in [`nrc_render`].
 
-pub mod inference;
-pub mod methods;
 pub mod online;
 pub mod producer;
 pub mod producers;
 pub mod query;
-pub mod spread;
+pub mod source;
 pub mod starts;
-pub mod view;
 
-pub use inference::{CacheRenderer, InferenceOutput, Termination};
 pub use online::{FrameStats, OnlineSettings, OnlineTrainer};
 pub use producer::{Produced, Producer, ProducerContext, ProducerSpec};
 pub use query::QueryMaker;
-pub use view::RadianceView;
+pub use source::CacheSource;

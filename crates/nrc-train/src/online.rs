@@ -3,15 +3,18 @@
 
 use std::time::Instant;
 
-use nrc_cache::{CacheError, RadianceCache, TrainingBatch};
-use nrc_render::methods::pass_seed;
-use nrc_render::{PathTracer, PixelSampler};
+use nrc_cache::{CacheError, RadianceCache};
+use nrc_render::passes::{self, FrameInput, PassOutput, PassSpec, PassStats, RenderPass};
+use nrc_render::{PathTracer, PixelSampler, pass_seed};
 use nrc_scene::{Camera, Scene};
 
-use crate::inference::{CacheRenderer, InferenceOutput, InferenceStats};
 use crate::producer::{ProducerContext, ProducerMix, ProducerOptions, ProducerSpec, ProducerStats};
 use crate::query::QueryMaker;
+use crate::source::CacheSource;
 use crate::starts::{self, TerminationPoint};
+
+/// Training records produced per frame by default.
+pub const DEFAULT_RECORDS_PER_FRAME: usize = 1 << 16;
 
 /// Settings of the online loop.
 #[derive(Clone, Debug, PartialEq)]
@@ -30,8 +33,10 @@ pub struct OnlineSettings {
     pub from_terminations: f32,
     /// Depth and Russian roulette of training paths.
     pub tracer: PathTracer,
-    /// The inference pass.
-    pub renderer: CacheRenderer,
+    /// The inference pass (its depth limit and Russian roulette are `tracer`'s).
+    pub pass: PassSpec,
+    /// The scene box of the cache's queries.
+    pub queries: QueryMaker,
     /// Samples per pixel of the inference pass.
     pub spp: u32,
     pub seed: u64,
@@ -44,16 +49,12 @@ impl OnlineSettings {
         Self {
             producer,
             producer_options: ProducerOptions::default(),
-            records_per_frame: 1 << 16,
+            records_per_frame: DEFAULT_RECORDS_PER_FRAME,
             batch_size: 1 << 14,
             from_terminations: 0.0,
             tracer,
-            renderer: CacheRenderer {
-                termination: Default::default(),
-                nee: true,
-                tracer,
-                queries: QueryMaker::new(&scene.bounds()),
-            },
+            pass: PassSpec::default(),
+            queries: QueryMaker::new(&scene.bounds()),
             spp: 1,
             seed: 0,
         }
@@ -103,7 +104,7 @@ pub struct FrameStats {
     /// Mean loss of the frame's last step.
     pub loss: f32,
     pub producer: ProducerStats,
-    pub inference: InferenceStats,
+    pub inference: PassStats,
 }
 
 /// A cache trained online on one scene.
@@ -111,21 +112,44 @@ pub struct OnlineTrainer {
     pub cache: RadianceCache,
     pub settings: OnlineSettings,
     mix: ProducerMix,
+    pass: Box<dyn RenderPass>,
     previous: Vec<TerminationPoint>,
     frame: u64,
 }
 
 impl OnlineTrainer {
-    /// A trainer of `cache` (whose scene box should be `settings.renderer.queries.scene_box`).
-    pub fn new(cache: RadianceCache, settings: OnlineSettings) -> Result<Self, String> {
+    /// A trainer of `cache` (whose scene box should be `settings.queries.scene_box`) on
+    /// `scene`; an error names a bad setting or a producer that cannot serve the scene.
+    pub fn new(
+        cache: RadianceCache,
+        settings: OnlineSettings,
+        scene: &Scene,
+    ) -> Result<Self, String> {
         settings.validate()?;
+        let mix = ProducerMix::new(&settings.producer, &settings.producer_options);
+        mix.check(scene)?;
         Ok(Self {
             cache,
-            mix: ProducerMix::new(&settings.producer, &settings.producer_options),
+            mix,
+            pass: settings.pass.build(&settings.tracer),
             settings,
             previous: Vec::new(),
             frame: 0,
         })
+    }
+
+    /// The inference pass with its state.
+    pub fn pass(&mut self) -> &mut dyn RenderPass {
+        self.pass.as_mut()
+    }
+
+    /// Renders a frame with the inference pass and the cache as it is (no training).
+    pub fn render(&mut self, input: &FrameInput) -> PassOutput {
+        let source = CacheSource {
+            cache: &self.cache,
+            queries: self.settings.queries,
+        };
+        passes::run(self.pass.as_mut(), input, &source)
     }
 
     /// Frames run so far.
@@ -142,7 +166,7 @@ impl OnlineTrainer {
         width: u32,
         height: u32,
         render: bool,
-    ) -> Result<(FrameStats, Option<InferenceOutput>), CacheError> {
+    ) -> Result<(FrameStats, Option<PassOutput>), CacheError> {
         let s = &self.settings;
         let seed = pass_seed(s.seed, self.frame as u32);
         let mut stats = FrameStats {
@@ -163,8 +187,11 @@ impl OnlineTrainer {
         let ctx = ProducerContext {
             scene,
             camera,
-            cache: &self.cache,
-            queries: &s.renderer.queries,
+            cache: &CacheSource {
+                cache: &self.cache,
+                queries: s.queries,
+            },
+            queries: &s.queries,
             starts: &starts,
             tracer: s.tracer,
         };
@@ -176,11 +203,7 @@ impl OnlineTrainer {
         let t = Instant::now();
         let order = shuffled(produced.batch.queries.len(), seed);
         for chunk in order.chunks(s.batch_size) {
-            let batch = TrainingBatch {
-                queries: chunk.iter().map(|&i| produced.batch.queries[i]).collect(),
-                targets: chunk.iter().map(|&i| produced.batch.targets[i]).collect(),
-                weights: None,
-            };
+            let batch = produced.batch.select(chunk);
             let st = self.cache.train(&batch, 1)?;
             stats.used += st.used;
             stats.dropped_nonfinite += st.dropped_nonfinite;
@@ -195,15 +218,19 @@ impl OnlineTrainer {
         let mut output = None;
         if render {
             let t = Instant::now();
-            let out = s.renderer.render(
+            let input = FrameInput {
                 scene,
                 camera,
-                &self.cache,
                 width,
                 height,
-                s.spp,
-                seed ^ 0x1F3D_5B79,
-            );
+                spp: s.spp,
+                seed: seed ^ 0x1F3D_5B79,
+            };
+            let source = CacheSource {
+                cache: &self.cache,
+                queries: s.queries,
+            };
+            let out = passes::run(self.pass.as_mut(), &input, &source);
             stats.infer_ms = t.elapsed().as_secs_f64() * 1e3;
             stats.inference = out.stats;
             self.previous = out.terminations.clone();

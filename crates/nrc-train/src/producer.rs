@@ -4,7 +4,7 @@ use std::fmt;
 use std::str::FromStr;
 
 use nrc_cache::TrainingBatch;
-use nrc_render::PathTracer;
+use nrc_render::{PathTracer, RadianceSource};
 use nrc_scene::{Camera, Scene};
 
 use crate::producers::{
@@ -12,14 +12,13 @@ use crate::producers::{
 };
 use crate::query::QueryMaker;
 use crate::starts::StartRay;
-use crate::view::RadianceView;
 
 /// What a producer may read in a frame.
 pub struct ProducerContext<'a> {
     pub scene: &'a Scene,
     pub camera: &'a Camera,
-    /// The cache, read-only (self-learning targets).
-    pub cache: &'a dyn RadianceView,
+    /// The cache, read-only, as a radiance source (self-learning targets).
+    pub cache: &'a dyn RadianceSource,
     pub queries: &'a QueryMaker,
     /// Query prediction: the rays whose first hits are this frame's training queries (camera
     /// tiles and previous termination points); producers that start at the camera use them in
@@ -64,6 +63,26 @@ pub trait Producer: Send {
     /// About `budget` training records (never more) for this frame; `seed` chooses the random
     /// streams.
     fn produce(&mut self, ctx: &ProducerContext, budget: usize, seed: u64) -> Produced;
+
+    /// Whether the producer can serve `scene`; an error names why not. Default: any scene.
+    fn check(&self, _scene: &Scene) -> Result<(), String> {
+        Ok(())
+    }
+}
+
+/// The check of the producers that start light paths at the scene's emissive triangles: light
+/// from the constant background never enters a light path, so their targets would miss it
+/// (until environment lights can emit light paths, issue 16). Refused rather than trained
+/// silently toward too little light.
+pub(crate) fn check_light_paths(name: &str, scene: &Scene) -> Result<(), String> {
+    let bg = scene.background;
+    if bg.max_element() > 0.0 {
+        return Err(format!(
+            "producer {name} cannot serve this scene: it is lit by the background ({}, {}, {}), and {name}'s light paths start only at emissive triangles, so its targets would leave that light out; use pt or pt-sl (or mix them in)",
+            bg.x, bg.y, bg.z
+        ));
+    }
+    Ok(())
 }
 
 /// Settings of the producers that have any (defaults: the producers' own).
@@ -262,7 +281,13 @@ impl ProducerMix {
         }
     }
 
-    /// Runs every producer on its share of `budget` and concatenates the batches.
+    /// Whether every producer of the mix can serve `scene`; the first error.
+    pub fn check(&self, scene: &Scene) -> Result<(), String> {
+        self.parts.iter().try_for_each(|(p, _)| p.check(scene))
+    }
+
+    /// Runs every producer on its share of `budget` and concatenates the batches (with their
+    /// weights).
     pub fn produce(&mut self, ctx: &ProducerContext, budget: usize, seed: u64) -> Produced {
         let mut out = Produced::default();
         let mut left = budget;
@@ -280,8 +305,7 @@ impl ProducerMix {
                 b,
                 seed ^ (i as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15),
             );
-            out.batch.queries.extend(p.batch.queries);
-            out.batch.targets.extend(p.batch.targets);
+            out.batch.append(p.batch);
             out.stats.add(&p.stats);
         }
         out
@@ -291,6 +315,101 @@ impl ProducerMix {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A scene of one unlit triangle.
+    fn one_triangle() -> Scene {
+        Scene::from_description(nrc_scene::SceneDescription {
+            positions: vec![glam::Vec3::ZERO, glam::Vec3::X, glam::Vec3::Y],
+            triangles: vec![[0, 1, 2]],
+            triangle_materials: vec![0],
+            triangle_meshes: vec![0],
+            mesh_names: vec!["t".into()],
+            materials: vec![nrc_scene::Material::default()],
+            ..Default::default()
+        })
+        .unwrap()
+    }
+
+    /// A producer of `budget` records weighted `w` (or unweighted).
+    struct Weighted(Option<f32>);
+
+    impl Producer for Weighted {
+        fn name(&self) -> &str {
+            "weighted"
+        }
+        fn produce(&mut self, _: &ProducerContext, budget: usize, _: u64) -> Produced {
+            let mut batch = TrainingBatch::default();
+            batch.queries = vec![Default::default(); budget];
+            batch.targets = vec![[1.0; 3]; budget];
+            batch.weights = self.0.map(|w| vec![w; budget]);
+            Produced {
+                batch,
+                stats: Default::default(),
+            }
+        }
+    }
+
+    /// The mix keeps every producer's record weights (it dropped them once).
+    #[test]
+    fn a_mix_keeps_the_weights_of_its_producers() {
+        let scene = one_triangle();
+        let queries = QueryMaker::new(&scene.bounds());
+        let ctx = ProducerContext {
+            scene: &scene,
+            camera: &scene.camera,
+            cache: &nrc_render::ZeroSource,
+            queries: &queries,
+            starts: &[],
+            tracer: PathTracer::default(),
+        };
+        let mut mix = ProducerMix {
+            parts: vec![
+                (Box::new(Weighted(Some(0.25))), 0.5),
+                (Box::new(Weighted(None)), 0.25),
+                (Box::new(Weighted(Some(3.0))), 0.25),
+            ],
+        };
+        let out = mix.produce(&ctx, 8, 1);
+        assert_eq!(out.batch.queries.len(), 8);
+        assert_eq!(
+            out.batch.weights.as_deref(),
+            Some(&[0.25, 0.25, 0.25, 0.25, 1.0, 1.0, 3.0, 3.0][..])
+        );
+        // Chunks taken for the optimisation steps keep them too.
+        let chunk = out.batch.select(&[7, 0, 4]);
+        assert_eq!(chunk.weights.as_deref(), Some(&[3.0, 0.25, 1.0][..]));
+        let unweighted = ProducerMix {
+            parts: vec![(Box::new(Weighted(None)), 1.0)],
+        }
+        .produce(&ctx, 4, 1);
+        assert_eq!(unweighted.batch.weights, None);
+    }
+
+    /// Light-path producers refuse a scene lit by the background, which their light paths
+    /// cannot carry (they produced all-zero targets there once, silently); path tracing serves
+    /// it.
+    #[test]
+    fn light_path_producers_refuse_a_background_lit_scene() {
+        let mut scene = one_triangle();
+        let options = ProducerOptions::default();
+        for name in ["bt", "lt", "sppc", "mix:pt-sl=0.5,sppc=0.5"] {
+            let mix = ProducerMix::new(&name.parse().unwrap(), &options);
+            assert!(mix.check(&scene).is_ok(), "{name} without a background");
+        }
+        scene.background = glam::Vec3::splat(1.0);
+        for name in ["bt", "lt", "sppc", "mix:pt-sl=0.5,sppc=0.5"] {
+            let mix = ProducerMix::new(&name.parse().unwrap(), &options);
+            let e = mix.check(&scene).unwrap_err();
+            assert!(
+                e.contains("background") && e.contains("pt-sl"),
+                "{name}: {e}"
+            );
+        }
+        for name in ["pt", "pt-sl"] {
+            let mix = ProducerMix::new(&name.parse().unwrap(), &options);
+            assert!(mix.check(&scene).is_ok(), "{name}");
+        }
+    }
 
     #[test]
     fn specs_parse_and_print() {

@@ -2,6 +2,7 @@
 
 use glam::Vec3;
 use nrc_cache::{CacheQuery, SceneBox};
+use nrc_render::RadianceQuery;
 use nrc_scene::{bsdf::Bsdf, geometry::Aabb, interaction::SurfaceInteraction};
 
 /// Builds [`CacheQuery`]s for one scene: positions normalised to the scene's box.
@@ -39,13 +40,18 @@ impl QueryMaker {
 
     /// The query for the radiance leaving `si` toward `wo` (unit, world space).
     pub fn query_toward(&self, si: &SurfaceInteraction, bsdf: &Bsdf, wo: Vec3) -> CacheQuery {
+        self.cache_query(&RadianceQuery::at(si, bsdf, wo))
+    }
+
+    /// A world-space radiance query as the cache's record: its position normalised to the box.
+    pub fn cache_query(&self, q: &RadianceQuery) -> CacheQuery {
         CacheQuery {
-            position: self.scene_box.normalize(si.p.to_array()),
-            direction: wo.to_array(),
-            normal: si.ns.to_array(),
-            roughness: bsdf.roughness(),
-            diffuse: bsdf.diffuse_reflectance().to_array(),
-            specular: bsdf.specular_reflectance().to_array(),
+            position: self.scene_box.normalize(q.position.to_array()),
+            direction: q.direction.to_array(),
+            normal: q.normal.to_array(),
+            roughness: q.roughness,
+            diffuse: q.diffuse.to_array(),
+            specular: q.specular.to_array(),
         }
     }
 }

@@ -6,22 +6,15 @@
 //! (re-entered along the segment that reached them, so their training paths continue from
 //! the same incoming direction).
 
-use glam::{Vec2, Vec3};
+use glam::Vec2;
 use nrc_render::PixelSampler;
+pub use nrc_render::passes::TerminationPoint;
 use nrc_scene::{Camera, Ray};
 
 /// A training path's first segment.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct StartRay {
     pub ray: Ray,
-}
-
-/// Where the previous frame's inference paths ended in the cache: the vertex and the point the
-/// segment reaching it came from.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct TerminationPoint {
-    pub from: Vec3,
-    pub to: Vec3,
 }
 
 /// `n` camera rays, one per tile of a near-square tiling of the `width × height` image, each at
@@ -103,6 +96,7 @@ pub fn predict(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use glam::Vec3;
 
     #[test]
     fn tiles_cover_the_image_evenly() {

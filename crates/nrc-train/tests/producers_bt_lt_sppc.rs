@@ -20,10 +20,10 @@ use common::{Mesh, SceneBuilder, mat};
 use glam::Vec3;
 use nrc_cache::TrainingBatch;
 use nrc_render::PathTracer;
+use nrc_render::ZeroSource;
 use nrc_scene::{Ray, Scene};
 use nrc_train::producers::{bt::BidirectionalProducer, lt::LightProducer, sppc::SppcProducer};
 use nrc_train::starts::{StartRay, camera_tiles};
-use nrc_train::view::ZeroView;
 use nrc_train::{Producer, ProducerContext, QueryMaker};
 
 const RHO: Vec3 = Vec3::new(0.2, 0.5, 0.8);
@@ -62,7 +62,7 @@ fn with_ctx<R>(scene: &Scene, starts: &[StartRay], f: impl FnOnce(&ProducerConte
     let ctx = ProducerContext {
         scene,
         camera: &scene.camera,
-        cache: &ZeroView,
+        cache: &ZeroSource,
         queries: &queries,
         starts,
         tracer: tracer(),
@@ -156,7 +156,7 @@ fn bt_with_depth_two_sees_direct_light_only() {
     let ctx = ProducerContext {
         scene: &scene,
         camera: &scene.camera,
-        cache: &ZeroView,
+        cache: &ZeroSource,
         queries: &queries,
         starts: &starts,
         tracer: PathTracer {

@@ -9,14 +9,16 @@ mod common;
 use common::{Mesh, SceneBuilder, mat};
 use glam::Vec3;
 use nrc_cache::TrainingBatch;
-use nrc_render::methods::pass_seed;
-use nrc_render::{PathTracer, RenderSettings, render};
+use nrc_render::passes::{self, FrameInput, PassOutput, PassSpec};
+use nrc_render::{
+    PathTracedSource, PathTracer, RadianceQuery, RadianceSource, RenderSettings, Termination,
+    ZeroSource, pass_seed, render,
+};
 use nrc_scene::Scene;
 use nrc_train::producer::Producer;
 use nrc_train::producers::pt::PathProducer;
 use nrc_train::starts::camera_tiles;
-use nrc_train::view::{PathTracedView, RadianceView, ZeroView};
-use nrc_train::{CacheRenderer, ProducerContext, QueryMaker, Termination};
+use nrc_train::{ProducerContext, QueryMaker};
 
 const LE: f32 = 1.0;
 const RHO: f32 = 0.5;
@@ -53,7 +55,7 @@ fn mean_and_se(batch: &TrainingBatch, groups: usize) -> (f64, f64) {
 fn produce(
     scene: &Scene,
     producer: &mut dyn Producer,
-    cache: &dyn RadianceView,
+    cache: &dyn RadianceSource,
     budget: usize,
     seed: u64,
 ) -> TrainingBatch {
@@ -73,16 +75,46 @@ fn produce(
 /// Exact cache for the enclosure.
 struct EnclosureView;
 
-impl RadianceView for EnclosureView {
-    fn predict(&self, q: &[nrc_cache::CacheQuery]) -> Vec<[f32; 3]> {
-        vec![[EXACT; 3]; q.len()]
+impl RadianceSource for EnclosureView {
+    fn radiance(&self, q: &[RadianceQuery]) -> Vec<Vec3> {
+        vec![Vec3::splat(EXACT); q.len()]
     }
+}
+
+/// One frame of the cache-terminated pass ending paths by `termination`, reading `source`.
+#[allow(clippy::too_many_arguments)]
+fn cache_pass(
+    scene: &Scene,
+    termination: Termination,
+    nee: bool,
+    source: &dyn RadianceSource,
+    w: u32,
+    h: u32,
+    spp: u32,
+    seed: u64,
+) -> PassOutput {
+    let mut pass = PassSpec::CacheTerminated { termination, nee }.build(&PathTracer::default());
+    let input = FrameInput {
+        scene,
+        camera: &scene.camera,
+        width: w,
+        height: h,
+        spp,
+        seed,
+    };
+    passes::run(pass.as_mut(), &input, source)
 }
 
 #[test]
 fn pt_targets_are_unbiased_in_the_enclosure() {
     let scene = enclosure();
-    let batch = produce(&scene, &mut PathProducer::new(false), &ZeroView, 40_000, 1);
+    let batch = produce(
+        &scene,
+        &mut PathProducer::new(false),
+        &ZeroSource,
+        40_000,
+        1,
+    );
     assert_eq!(batch.queries.len(), 40_000);
     assert!(
         batch
@@ -118,7 +150,7 @@ fn self_learning_with_an_exact_cache_is_unbiased_and_needs_the_cache() {
     println!("standard error: self-learning {se:.5}, unbiased {se_u:.5}");
     // ... and with a cache that knows nothing, their targets miss the light beyond the
     // suffix: clearly below the exact value.
-    let zero = produce(&scene, &mut PathProducer::new(true), &ZeroView, 40_000, 2);
+    let zero = produce(&scene, &mut PathProducer::new(true), &ZeroSource, 40_000, 2);
     let (mz, sez) = mean_and_se(&zero, 40);
     println!("pt-sl with a zero cache: {mz:.5} ± {sez:.5}");
     assert!((EXACT as f64 - mz) / sez > 6.0, "{mz} ± {sez}");
@@ -178,7 +210,6 @@ impl Check {
     fn run(&self, scene: &Scene, terminations: &[Termination], nees: &[bool]) {
         let ((w, h), passes) = (self.size, self.passes);
         let tracer = PathTracer::default();
-        let queries = QueryMaker::new(&scene.bounds());
         let (ref_m, ref_se) = pass_means(passes, |seed| {
             let s = RenderSettings {
                 width: w,
@@ -192,23 +223,14 @@ impl Check {
         println!("reference: {ref_m:.5} ± {ref_se:.5}");
         for &termination in terminations {
             for &nee in nees {
-                let renderer = CacheRenderer {
-                    termination,
-                    nee,
-                    tracer,
-                    queries,
-                };
                 let (m, se) = pass_means(passes, |seed| {
-                    let exact = PathTracedView {
+                    let exact = PathTracedSource {
                         scene,
-                        queries,
                         tracer,
                         samples: 8,
                         seed: seed ^ self.cache_seed,
                     };
-                    renderer
-                        .render(scene, &scene.camera, &exact, w, h, self.spp, seed)
-                        .image
+                    cache_pass(scene, termination, nee, &exact, w, h, self.spp, seed).image
                 });
                 let z = (m - ref_m) / (se * se + ref_se * ref_se).sqrt();
                 println!("{termination} (nee {nee}): {m:.5} ± {se:.5}, z = {z:.2}");
@@ -243,17 +265,7 @@ fn every_termination_with_an_exact_cache_reproduces_the_reference() {
 #[test]
 fn terminations_end_where_they_say() {
     let scene = enclosure();
-    let queries = QueryMaker::new(&scene.bounds());
-    let tracer = PathTracer::default();
-    let render = |termination| {
-        let r = CacheRenderer {
-            termination,
-            nee: true,
-            tracer,
-            queries,
-        };
-        r.render(&scene, &scene.camera, &EnclosureView, 16, 16, 4, 5)
-    };
+    let render = |termination| cache_pass(&scene, termination, true, &EnclosureView, 16, 16, 4, 5);
     // First vertex: every path ends at its primary hit; the image is exactly Le + exact.
     let first = render(Termination::FirstVertex);
     assert_eq!(first.stats.queries, 16 * 16 * 4);

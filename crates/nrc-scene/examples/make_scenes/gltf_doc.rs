@@ -562,11 +562,8 @@ impl Document {
     }
 }
 
-/// Writes `bytes` to `path` through `<path>.tmp` and a rename, so that a reader never sees
-/// a half-written file.
+/// Writes `bytes` to `path` atomically (the library's one way: a `tempfile` in the same
+/// folder, renamed), so that a reader never sees a half-written file.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
-    let mut tmp = path.as_os_str().to_owned();
-    tmp.push(".tmp");
-    std::fs::write(&tmp, bytes)?;
-    std::fs::rename(&tmp, path)
+    nrc_scene::image::write_atomic(path, bytes).map_err(std::io::Error::other)
 }

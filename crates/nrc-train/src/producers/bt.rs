@@ -31,7 +31,9 @@ use glam::Vec3;
 use nrc_render::{PathStats, PixelSampler};
 use nrc_scene::{SurfaceInteraction, bsdf::Bsdf, sampling::Frame, spawn_ray_between};
 
-use super::lt::{LightPath, fill_rounds, light_vertex_limit, push_records, trace_light_path};
+use nrc_render::light_path::{LightPath, light_vertex_limit, trace_light_path};
+
+use super::lt::{fill_rounds, push_records};
 use crate::producer::{Produced, Producer, ProducerContext, ProducerStats};
 
 /// The bidirectional-training producer: one record per camera primary hit. It has no
@@ -114,6 +116,10 @@ impl Producer for BidirectionalProducer {
         "bt"
     }
 
+    fn check(&self, scene: &nrc_scene::Scene) -> Result<(), String> {
+        crate::producer::check_light_paths(self.name(), scene)
+    }
+
     fn produce(&mut self, ctx: &ProducerContext, budget: usize, seed: u64) -> Produced {
         let mut stats = ProducerStats::default();
         if budget == 0 || ctx.starts.is_empty() {
@@ -122,7 +128,7 @@ impl Producer for BidirectionalProducer {
         let scene = ctx.scene;
         // Connected vertex y_j: j + 2 segments from the camera.
         let max_j = light_vertex_limit(&ctx.tracer, 2);
-        let max_j = if ctx.tracer.max_depth > 0 && ctx.tracer.max_depth < 2 {
+        let max_j = if ctx.tracer.segment_limit() < 2 {
             None
         } else {
             Some(max_j)

@@ -19,14 +19,12 @@
 
 use glam::Vec3;
 use nrc_cache::{CacheQuery, TrainingBatch};
-use nrc_render::path_tracer::{emission_mis_weight, next_event};
-use nrc_render::{PathStats, PixelSampler};
-use nrc_scene::{bsdf::Bsdf, sampling::Frame, spawn_ray};
+use nrc_render::spread::Spread;
+use nrc_render::transport::{Arrival, PathWalk};
+use nrc_render::{LightStrategy, PathStats, PathTracer, PixelSampler, RadianceQuery};
 use rayon::prelude::*;
 
 use crate::producer::{Produced, Producer, ProducerContext, ProducerStats};
-use crate::query::v3;
-use crate::spread::Spread;
 use crate::starts::StartRay;
 
 /// The path-tracing producer.
@@ -66,12 +64,14 @@ struct Vertex {
 #[derive(Clone, Debug, Default)]
 struct TracedPath {
     vertices: Vec<Vertex>,
-    tail: Option<CacheQuery>,
+    tail: Option<RadianceQuery>,
     rays: u64,
 }
 
 impl PathProducer {
-    /// Traces one training path from `start`.
+    /// Traces one training path from `start`, through the path-vertex step of
+    /// [`nrc_render::transport`] (NEE and BSDF sampling by MIS, Russian roulette on the
+    /// throughput, the tracer's depth limit).
     fn trace(
         &self,
         ctx: &ProducerContext,
@@ -80,51 +80,41 @@ impl PathProducer {
         unbiased: bool,
     ) -> TracedPath {
         let scene = ctx.scene;
-        let limit = if ctx.tracer.max_depth <= 0 {
-            u32::MAX
-        } else {
-            ctx.tracer.max_depth as u32
+        let tracer = PathTracer {
+            strategy: LightStrategy::Mis,
+            ..ctx.tracer
         };
-        let use_nee = scene.light_count() > 0;
         let heuristic = self.self_learning && !unbiased;
         let mut out = TracedPath::default();
         let mut stats = PathStats::default();
-        let mut ray = start.ray;
-        let (mut prev_pdf, mut prev_delta) = (0.0f32, true);
+        let mut walk = PathWalk::from_ray(scene, &tracer, start.ray);
         let mut spread = Spread::new(self.spread_c);
         let mut in_suffix = false;
         let mut fired = false;
-        // Segments traced so far (the camera-side segment counts, as in the path tracer).
-        let mut depth: u32 = 0;
         loop {
-            stats.closest_rays += 1;
-            let Some(hit) = scene.intersect(&ray) else {
-                if let Some(last) = out.vertices.last_mut() {
-                    last.direct += last.weight * scene.background;
+            let h = match walk.arrive(scene, &mut stats) {
+                Arrival::Escaped { background } => {
+                    if let Some(last) = out.vertices.last_mut() {
+                        last.direct += last.weight * background;
+                    }
+                    break;
                 }
-                break;
+                Arrival::Hit(h) => h,
             };
-            let si = scene.interaction(&ray, &hit);
-            let dist = hit.t * ray.d.length();
             // Emission found by the segment belongs to the previous vertex's radiance.
-            if let Some(last) = out.vertices.last_mut() {
-                let le = scene.emission(&si);
-                if le != Vec3::ZERO {
-                    last.direct += last.weight
-                        * le
-                        * emission_mis_weight(scene, &si, dist, prev_pdf, prev_delta || !use_nee);
-                }
+            if let Some(last) = out.vertices.last_mut()
+                && h.le != Vec3::ZERO
+            {
+                last.direct += last.weight * h.le * h.mis;
             }
-            let bsdf = Bsdf::from_pbr(&scene.pbr(&si));
-            let query = ctx.queries.query(&si, &bsdf);
+            let v = &h.vertex;
+            let query = v.query();
             if heuristic {
-                let cos = si.ng.dot(si.wo);
-                let pdf = (!prev_delta).then_some(prev_pdf);
                 // `fired` stays set once the spread exceeds the threshold: a suffix never
                 // closes at a delta vertex (the cache cannot hold its radiance), it goes on to
                 // the next one.
-                fired |= spread.arrive(dist * dist, pdf, cos);
-                if fired && !bsdf.is_delta() {
+                fired |= spread.arrive(h.dist * h.dist, h.prev_pdf, v.si.ng.dot(v.si.wo));
+                if fired && !v.bsdf.is_delta() {
                     fired = false;
                     if in_suffix {
                         out.tail = Some(query);
@@ -136,49 +126,23 @@ impl PathProducer {
                     spread.restart();
                 }
             }
-            if depth + 1 >= limit {
+            if walk.at_depth_limit() {
                 // The depth limit: self-learning paths close in the cache, others are cut.
                 if heuristic {
                     out.tail = Some(query);
                 }
                 break;
             }
+            let direct = walk.next_event(scene, v, sampler, &mut stats);
             out.vertices.push(Vertex {
-                query,
-                direct: Vec3::ZERO,
+                query: ctx.queries.cache_query(&query),
+                direct,
                 weight: Vec3::ZERO,
             });
-            let vertex = out.vertices.last_mut().expect("just pushed");
-            let frame = Frame::from_normal(si.ns);
-            let wo = frame.to_local(si.wo);
-            if use_nee && !bsdf.is_delta() {
-                vertex.direct +=
-                    next_event(scene, &si, &bsdf, &frame, wo, true, sampler, &mut stats);
-            }
-            let u_lobe = sampler.next_1d();
-            let u_dir = sampler.next_2d();
-            let Some(bs) = bsdf.sample(wo, u_dir, u_lobe) else {
+            let Some(s) = walk.scatter(v, sampler) else {
                 break;
             };
-            let mut weight = bs.weight;
-            depth += 1;
-            if depth >= ctx.tracer.rr_depth {
-                // Russian roulette on the throughput from the path's start (Mitsuba's rule).
-                let before = &out.vertices[..out.vertices.len() - 1];
-                let throughput = before.iter().fold(Vec3::ONE, |t, v| t * v.weight) * weight;
-                let q = throughput.max_element().min(0.95);
-                if q.is_nan() || q <= 0.0 || sampler.next_1d() >= q {
-                    break;
-                }
-                weight /= q;
-            }
-            out.vertices.last_mut().expect("vertex").weight = weight;
-            if weight == Vec3::ZERO {
-                break;
-            }
-            prev_pdf = bs.pdf;
-            prev_delta = bs.delta;
-            ray = spawn_ray(si.p, si.ng, frame.to_world(bs.wi));
+            out.vertices.last_mut().expect("just pushed").weight = s.weight;
         }
         out.rays = stats.rays();
         out
@@ -227,17 +191,17 @@ impl Producer for PathProducer {
         }
         stats.rays = paths.iter().map(|p| p.rays).sum();
         // Self-learning: every path's closing query in one cache call.
-        let tails: Vec<CacheQuery> = paths.iter().filter_map(|p| p.tail).collect();
+        let tails: Vec<RadianceQuery> = paths.iter().filter_map(|p| p.tail).collect();
         let predicted = if tails.is_empty() {
             Vec::new()
         } else {
-            ctx.cache.predict(&tails)
+            ctx.cache.radiance(&tails)
         };
         let mut predicted = predicted.into_iter();
         let mut batch = TrainingBatch::default();
         for p in &paths {
             let mut radiance = match p.tail {
-                Some(_) => v3(predicted.next().expect("one prediction per tail")),
+                Some(_) => predicted.next().expect("one prediction per tail"),
                 None => Vec3::ZERO,
             };
             let start = batch.queries.len();

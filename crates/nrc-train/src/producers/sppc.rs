@@ -10,7 +10,7 @@
 //! replaced by new balls.
 //!
 //! **Photons.** Each frame `budget × photons_per_record` light paths are traced
-//! ([`super::lt::trace_light_path`]: a light point chosen by power, a cosine-distributed
+//! ([`nrc_render::light_path::trace_light_path`]: a light point chosen by power, a cosine-distributed
 //! emission direction, BSDF sampling, Russian roulette). At every non-delta photon hit `y_j`,
 //! `j ≥ 1` (the first hit too, so direct illumination is collected), the photon's flux weight
 //! `β_j` is gathered into every ball containing `y_j`: `Φ_M += f_ball(ωo, ω_{y_j→y_{j−1}}) β_j`
@@ -44,7 +44,9 @@ use nrc_scene::{bsdf::Bsdf, sampling::Frame};
 use obvhs::{BvhBuildParams, aabb::Aabb as BoxA, bvh2::Bvh2, bvh2::builder::build_bvh2};
 use rayon::prelude::*;
 
-use super::lt::{LightVertex, light_vertex_limit, push_records, trace_light_path};
+use nrc_render::light_path::{LightVertex, light_vertex_limit, trace_light_path};
+
+use super::lt::push_records;
 use crate::producer::{Produced, Producer, ProducerContext, ProducerStats};
 
 /// One persistent query of progressive photon collection.
@@ -232,6 +234,10 @@ impl SppcProducer {
 impl Producer for SppcProducer {
     fn name(&self) -> &str {
         "sppc"
+    }
+
+    fn check(&self, scene: &nrc_scene::Scene) -> Result<(), String> {
+        crate::producer::check_light_paths(self.name(), scene)
     }
 
     fn produce(&mut self, ctx: &ProducerContext, budget: usize, seed: u64) -> Produced {

@@ -1,5 +1,5 @@
-//! Cache-terminated rendering: camera paths traced with BSDF sampling (optionally NEE with
-//! MIS) that end at a vertex chosen by a [`Termination`] strategy, where the cache's
+//! The cache-terminated pass: camera paths traced with BSDF sampling (optionally NEE with
+//! MIS) that end at a vertex chosen by a [`Termination`] strategy, where the radiance source's
 //! prediction of the outgoing radiance replaces the rest of the path.
 //!
 //! A sample's value is `prefix + throughput ⊙ cache(x_n)`: `prefix` holds the emission found
@@ -16,19 +16,17 @@
 
 use std::fmt;
 use std::str::FromStr;
-use std::time::Instant;
 
 use glam::{Vec2, Vec3};
-use nrc_cache::CacheQuery;
-use nrc_render::path_tracer::{emission_mis_weight, next_event};
-use nrc_render::{PathStats, PathTracer, PixelSampler};
-use nrc_scene::{Camera, Image, Scene, bsdf::Bsdf, sampling::Frame, spawn_ray};
 use rayon::prelude::*;
 
-use crate::query::{QueryMaker, v3};
+use super::{FrameInput, PassOutput, PassSpec, PassStats, RenderPass};
+use crate::path_tracer::{LightStrategy, PathStats, PathTracer};
+use crate::sampler::PixelSampler;
+use crate::source::RadianceQuery;
 use crate::spread::Spread;
-use crate::starts::TerminationPoint;
-use crate::view::RadianceView;
+use crate::transport::{Arrival, PathWalk};
+use nrc_scene::{Image, bsdf::Bsdf};
 
 /// Where a rendering path ends in the cache.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -108,55 +106,52 @@ impl fmt::Display for Termination {
     }
 }
 
-/// The settings of the inference pass.
+/// Where an inference path ended in the source: the vertex and the point the segment reaching
+/// it came from (the next frame's training queries re-enter along it).
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct CacheRenderer {
-    pub termination: Termination,
-    /// Next-event estimation at the vertices before termination (MIS with BSDF sampling).
-    pub nee: bool,
-    /// Depth limit and Russian roulette of paths that have not ended in the cache.
-    pub tracer: PathTracer,
-    pub queries: QueryMaker,
+pub struct TerminationPoint {
+    pub from: Vec3,
+    pub to: Vec3,
 }
 
-/// What an inference pass counted.
-#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
-pub struct InferenceStats {
-    /// Camera paths traced (pixels × samples).
-    pub paths: u64,
-    /// Rays traced.
-    pub rays: u64,
-    /// Paths that ended in the cache (queries sent to it).
-    pub queries: u64,
-    /// Samples whose value was NaN or infinite (counted as black).
-    pub invalid_samples: u64,
-    /// Milliseconds tracing paths.
-    pub trace_ms: f64,
-    /// Milliseconds in the cache call.
-    pub cache_ms: f64,
-}
-
-/// A rendered inference pass.
-#[derive(Clone, Debug)]
-pub struct InferenceOutput {
-    /// Per-pixel mean radiance.
-    pub image: Image,
-    /// Where paths ended in the cache (for the next frame's query prediction).
-    pub terminations: Vec<TerminationPoint>,
-    pub stats: InferenceStats,
-}
-
-/// One camera sample before the cache is asked.
+/// One camera sample before the source is asked.
 #[derive(Clone, Copy, Debug)]
 struct SamplePath {
     prefix: Vec3,
     throughput: Vec3,
-    end: Option<(CacheQuery, TerminationPoint)>,
+    end: Option<(RadianceQuery, TerminationPoint)>,
     rays: u64,
 }
 
-impl CacheRenderer {
-    /// Whether the path ends in the cache at a vertex with `bsdf`, given the spread so far.
+/// The cache-terminated pass: its settings and the samples of the frame being traced.
+#[derive(Clone, Debug)]
+pub struct CacheTerminatedPass {
+    pub termination: Termination,
+    /// Depth limit, Russian roulette, and NEE at the vertices before termination (MIS with
+    /// BSDF sampling) unless the strategy is BSDF sampling only.
+    pub tracer: PathTracer,
+    samples: Vec<SamplePath>,
+}
+
+impl CacheTerminatedPass {
+    /// The pass ending paths by `termination`, with NEE (MIS) or without, and `tracer`'s depth
+    /// limit and Russian roulette.
+    pub fn new(termination: Termination, nee: bool, tracer: &PathTracer) -> Self {
+        Self {
+            termination,
+            tracer: PathTracer {
+                strategy: if nee {
+                    LightStrategy::Mis
+                } else {
+                    LightStrategy::BsdfOnly
+                },
+                ..*tracer
+            },
+            samples: Vec::new(),
+        }
+    }
+
+    /// Whether the path ends in the source at a vertex with `bsdf`, given the spread so far.
     fn ends_here(
         &self,
         bsdf: &Bsdf,
@@ -192,20 +187,14 @@ impl CacheRenderer {
         }
     }
 
-    /// Traces one camera sample until it ends in the cache or otherwise.
-    fn trace(
+    /// Traces one camera sample until it ends in the source or otherwise.
+    fn trace_sample(
         &self,
-        scene: &Scene,
+        scene: &nrc_scene::Scene,
         camera_pos: Vec3,
-        mut ray: nrc_scene::Ray,
+        ray: nrc_scene::Ray,
         sampler: &mut PixelSampler,
     ) -> SamplePath {
-        let limit = if self.tracer.max_depth <= 0 {
-            u32::MAX
-        } else {
-            self.tracer.max_depth as u32
-        };
-        let use_nee = self.nee && scene.light_count() > 0;
         let mut stats = PathStats::default();
         let mut out = SamplePath {
             prefix: Vec3::ZERO,
@@ -213,95 +202,70 @@ impl CacheRenderer {
             end: None,
             rays: 0,
         };
-        let (mut prev_pdf, mut prev_delta) = (0.0f32, true);
+        let mut walk = PathWalk::from_ray(scene, &self.tracer, ray);
         let mut prev_point = camera_pos;
         let mut spread = match self.termination {
             Termination::SpreadAngle { c } => Some(Spread::new(c)),
             _ => None,
         };
-        let mut depth = 0u32;
         loop {
-            stats.closest_rays += 1;
-            let Some(hit) = scene.intersect(&ray) else {
-                out.prefix += out.throughput * scene.background;
-                break;
+            let h = match walk.arrive(scene, &mut stats) {
+                Arrival::Escaped { background } => {
+                    out.prefix += walk.throughput() * background;
+                    break;
+                }
+                Arrival::Hit(h) => h,
             };
-            let si = scene.interaction(&ray, &hit);
-            let dist = hit.t * ray.d.length();
-            let le = scene.emission(&si);
-            if le != Vec3::ZERO {
-                out.prefix += out.throughput
-                    * le
-                    * emission_mis_weight(scene, &si, dist, prev_pdf, prev_delta || !use_nee);
+            if h.le != Vec3::ZERO {
+                out.prefix += walk.throughput() * h.le * h.mis;
             }
-            let bsdf = Bsdf::from_pbr(&scene.pbr(&si));
-            let frame = Frame::from_normal(si.ns);
-            let wo = frame.to_local(si.wo);
-            let arrival = spread.as_mut().map(|s| {
-                s.arrive(
-                    dist * dist,
-                    (!prev_delta).then_some(prev_pdf),
-                    si.ng.dot(si.wo),
-                )
-            });
-            if self.ends_here(&bsdf, wo, arrival, sampler) {
+            let v = &h.vertex;
+            let arrival = spread
+                .as_mut()
+                .map(|s| s.arrive(h.dist * h.dist, h.prev_pdf, v.si.ng.dot(v.si.wo)));
+            if self.ends_here(&v.bsdf, v.wo, arrival, sampler) {
+                out.throughput = walk.throughput();
                 out.end = Some((
-                    self.queries.query(&si, &bsdf),
+                    v.query(),
                     TerminationPoint {
                         from: prev_point,
-                        to: si.p,
+                        to: v.si.p,
                     },
                 ));
                 break;
             }
-            if depth + 1 >= limit {
+            if walk.at_depth_limit() {
                 break;
             }
-            if use_nee && !bsdf.is_delta() {
-                out.prefix += out.throughput
-                    * next_event(scene, &si, &bsdf, &frame, wo, true, sampler, &mut stats);
-            }
-            let u_lobe = sampler.next_1d();
-            let u_dir = sampler.next_2d();
-            let Some(bs) = bsdf.sample(wo, u_dir, u_lobe) else {
-                break;
-            };
-            out.throughput *= bs.weight;
-            prev_pdf = bs.pdf;
-            prev_delta = bs.delta;
-            prev_point = si.p;
-            ray = spawn_ray(si.p, si.ng, frame.to_world(bs.wi));
-            depth += 1;
-            if out.throughput == Vec3::ZERO {
+            out.prefix += walk.throughput() * walk.next_event(scene, v, sampler, &mut stats);
+            if walk.scatter(v, sampler).is_none() {
                 break;
             }
-            if depth >= self.tracer.rr_depth {
-                let q = out.throughput.max_element().min(0.95);
-                if sampler.next_1d() >= q {
-                    out.throughput = Vec3::ZERO;
-                    break;
-                }
-                out.throughput /= q;
-            }
+            prev_point = v.si.p;
         }
         out.rays = stats.rays();
         out
     }
+}
 
-    /// Renders `spp` cache-terminated samples per pixel; `seed` chooses the random streams.
-    pub fn render(
-        &self,
-        scene: &Scene,
-        camera: &Camera,
-        cache: &dyn RadianceView,
-        width: u32,
-        height: u32,
-        spp: u32,
-        seed: u64,
-    ) -> InferenceOutput {
-        let spp = spp.max(1);
-        let t0 = Instant::now();
-        let samples: Vec<SamplePath> = (0..height)
+impl RenderPass for CacheTerminatedPass {
+    fn name(&self) -> String {
+        PassSpec::CacheTerminated {
+            termination: self.termination,
+            nee: self.tracer.strategy != LightStrategy::BsdfOnly,
+        }
+        .to_string()
+    }
+
+    fn uses_source(&self) -> bool {
+        true
+    }
+
+    fn trace(&mut self, input: &FrameInput) -> Vec<RadianceQuery> {
+        let (width, spp, seed) = (input.width, input.spp.max(1), input.seed);
+        let (scene, camera) = (input.scene, input.camera);
+        let this = &*self;
+        let samples: Vec<SamplePath> = (0..input.height)
             .into_par_iter()
             .flat_map_iter(|y| {
                 (0..width).flat_map(move |x| {
@@ -309,37 +273,33 @@ impl CacheRenderer {
                     (0..spp).map(move |s| {
                         let mut sampler = PixelSampler::new(seed, index, s as u64);
                         let film = Vec2::new(x as f32, y as f32) + sampler.next_2d();
-                        let ray = camera.generate_ray(film, width, height);
-                        self.trace(scene, camera.position, ray, &mut sampler)
+                        let ray = camera.generate_ray(film, width, input.height);
+                        this.trace_sample(scene, camera.position, ray, &mut sampler)
                     })
                 })
             })
             .collect();
-        let trace_ms = t0.elapsed().as_secs_f64() * 1e3;
-        let t1 = Instant::now();
-        let queries: Vec<CacheQuery> = samples.iter().filter_map(|s| s.end.map(|e| e.0)).collect();
-        let predicted = if queries.is_empty() {
-            Vec::new()
-        } else {
-            cache.predict(&queries)
-        };
-        let cache_ms = t1.elapsed().as_secs_f64() * 1e3;
-        let mut predicted = predicted.into_iter();
-        let mut stats = InferenceStats {
+        let queries = samples.iter().filter_map(|s| s.end.map(|e| e.0)).collect();
+        self.samples = samples;
+        queries
+    }
+
+    fn resolve(&mut self, input: &FrameInput, answers: &[Vec3]) -> PassOutput {
+        let (width, height, spp) = (input.width, input.height, input.spp.max(1));
+        let samples = std::mem::take(&mut self.samples);
+        let mut answers = answers.iter();
+        let mut stats = PassStats {
             paths: samples.len() as u64,
-            queries: queries.len() as u64,
-            trace_ms,
-            cache_ms,
             ..Default::default()
         };
-        let mut terminations = Vec::with_capacity(queries.len());
+        let mut terminations = Vec::new();
         let mut data = vec![Vec3::ZERO; width as usize * height as usize];
         let inv = 1.0 / spp as f32;
         for (i, s) in samples.iter().enumerate() {
             stats.rays += s.rays;
             let mut l = s.prefix;
             if let Some((_, point)) = s.end {
-                l += s.throughput * v3(predicted.next().expect("one prediction per query"));
+                l += s.throughput * *answers.next().expect("one answer per query");
                 terminations.push(point);
             }
             if !l.is_finite() {
@@ -348,9 +308,10 @@ impl CacheRenderer {
             }
             data[i / spp as usize] += l * inv;
         }
-        InferenceOutput {
+        PassOutput {
             image: Image::from_data(width as usize, height as usize, data)
                 .expect("one value per pixel"),
+            variance: None,
             terminations,
             stats,
         }

@@ -1,153 +1,29 @@
-//! The registry of rendering methods that the comparison harness (`nrc compare`) judges.
+//! Budgets and the frame loop of the comparison harness.
 //!
-//! A method is named on the command line (`pt-16spp`, `pt-4spp-nonee`); the name parses into a
-//! [`MethodSpec`], the config enum of all methods, which [`MethodSpec::build`]s the method's
-//! state: a [`Method`]. Later estimators (cache-terminated paths such as `nrc-pt`) add a variant
-//! to the enum and an implementation of the trait; the harness needs nothing else.
+//! A method's unit of work is an **estimate**: one independent estimate of the frame at the
+//! method's stated samples per pixel (its random streams chosen by a seed). [`render_frame`]
+//! averages estimates until the [`Budget`] is spent:
 //!
-//! A method's unit of work is a **pass**: one independent estimate of the frame at the method's
-//! stated samples per pixel (its random streams chosen by a seed). [`render_frame`] averages
-//! passes until the [`Budget`] is spent:
-//!
-//! - [`Budget::Passes`]`(n)` (equal samples): exactly `n` passes, so `pt-4spp` at 2 passes
-//!   holds 8 samples per pixel; methods stating the same samples per pixel get the same count.
-//! - [`Budget::Time`]`(t)` (equal time): passes follow each other while finishing one more is
-//!   predicted to end nearer the budget than stopping now (predicted with the mean pass time so
-//!   far, i.e. another pass starts while `elapsed + mean/2 ≤ t`). At least one pass is made, even
-//!   if it alone exceeds the budget. **Tolerance:** the frame's wall time is within one pass of
-//!   the budget, `|elapsed − t| ≤` [`Frame::longest_pass`] (with steady pass times, within half
-//!   a pass); the last pass is always kept whole, never cut or weighted.
+//! - [`Budget::Passes`]`(n)` (equal samples): exactly `n` estimates, so `pt-4spp` at 2 holds 8
+//!   samples per pixel; methods stating the same samples per pixel get the same count.
+//! - [`Budget::Time`]`(t)` (equal time): estimates follow each other while finishing one more
+//!   is predicted to end nearer the budget than stopping now (predicted with the mean time so
+//!   far, i.e. another starts while `elapsed + mean/2 ≤ t`). At least one is made, even if it
+//!   alone exceeds the budget. **Tolerance:** the frame's wall time is within one estimate of
+//!   the budget, `|elapsed − t| ≤` [`Frame::longest_pass`] (with steady times, within half of
+//!   one); the last estimate is always kept whole, never cut or weighted.
 
 use std::fmt;
-use std::str::FromStr;
 use std::time::{Duration, Instant};
 
 use glam::{DVec3, Vec3};
 use nrc_scene::{Camera, Image, Scene};
 
-use crate::path_tracer::{LightStrategy, PathTracer};
-use crate::render::{RenderSettings, render};
+use nrc_render::pass_seed;
 
-/// The grammar of method names, for help texts and error messages.
-pub const METHOD_NAMES: &str = "pt-<N>spp (reference path tracer, N samples per pixel per pass, NEE and BSDF sampling combined by MIS), \
-     pt-<N>spp-nonee (the same with next-event estimation off: BSDF sampling only)";
-
-/// A rendering method and its settings, as named on the command line.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-pub enum MethodSpec {
-    /// The reference path tracer ([`PathTracer`]) at `spp` samples per pixel per pass, with
-    /// next-event estimation (MIS with BSDF sampling) or without (BSDF sampling only).
-    PathTracer { spp: u32, nee: bool },
-}
-
-/// Settings every method shares (how deep paths go), set once for a whole comparison so that
-/// methods and the reference estimate the same image.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct MethodSettings {
-    /// Path depth and Russian roulette; the light strategy is the method's own.
-    pub tracer: PathTracer,
-}
-
-/// A name that is not a method.
-#[derive(Clone, Debug, PartialEq, Eq)]
-pub struct ParseMethodError {
-    pub name: String,
-    pub reason: String,
-}
-
-impl fmt::Display for ParseMethodError {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(
-            f,
-            "unknown method `{}`: {}; known methods: {METHOD_NAMES}",
-            self.name, self.reason
-        )
-    }
-}
-
-impl std::error::Error for ParseMethodError {}
-
-impl FromStr for MethodSpec {
-    type Err = ParseMethodError;
-
-    fn from_str(s: &str) -> Result<Self, Self::Err> {
-        let err = |reason: &str| ParseMethodError {
-            name: s.to_string(),
-            reason: reason.to_string(),
-        };
-        let mut parts = s.trim().split('-');
-        match parts.next() {
-            Some("pt") => {}
-            _ => return Err(err("no such method family")),
-        }
-        let spp = parts
-            .next()
-            .and_then(|p| p.strip_suffix("spp"))
-            .ok_or_else(|| {
-                err("the path tracer's name needs its samples per pixel, e.g. pt-16spp")
-            })?;
-        let spp: u32 = spp
-            .parse()
-            .map_err(|_| err("samples per pixel must be a whole number, e.g. pt-16spp"))?;
-        if spp == 0 {
-            return Err(err("samples per pixel must be at least 1"));
-        }
-        let nee = match parts.next() {
-            None | Some("nee") => true,
-            Some("nonee") => false,
-            Some(_) => {
-                return Err(err(
-                    "the only path tracer options are -nee (default) and -nonee",
-                ));
-            }
-        };
-        if parts.next().is_some() {
-            return Err(err("too many parts"));
-        }
-        Ok(MethodSpec::PathTracer { spp, nee })
-    }
-}
-
-impl fmt::Display for MethodSpec {
-    /// The canonical name (parses back to the same spec).
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        match self {
-            MethodSpec::PathTracer { spp, nee: true } => write!(f, "pt-{spp}spp"),
-            MethodSpec::PathTracer { spp, nee: false } => write!(f, "pt-{spp}spp-nonee"),
-        }
-    }
-}
-
-impl MethodSpec {
-    /// Samples per pixel of one pass.
-    pub fn samples_per_pass(&self) -> u32 {
-        match self {
-            MethodSpec::PathTracer { spp, .. } => *spp,
-        }
-    }
-
-    /// The method's state, ready to render.
-    pub fn build(&self, settings: &MethodSettings) -> Box<dyn Method> {
-        match *self {
-            MethodSpec::PathTracer { spp, nee } => Box::new(PathTracerMethod {
-                name: self.to_string(),
-                spp,
-                tracer: PathTracer {
-                    strategy: if nee {
-                        LightStrategy::Mis
-                    } else {
-                        LightStrategy::BsdfOnly
-                    },
-                    ..settings.tracer
-                },
-            }),
-        }
-    }
-}
-
-/// One pass of a method: an independent estimate of the frame.
+/// One independent estimate of the frame by a method.
 #[derive(Clone, Debug)]
-pub struct Pass {
+pub struct Estimate {
     /// Per-pixel mean radiance of the pass.
     pub image: Image,
     /// Samples whose estimate was NaN or infinite (counted as black).
@@ -177,54 +53,14 @@ pub trait Method: Send {
 
     /// Renders one pass of `width × height` pixels from `camera`; `seed` chooses the random
     /// streams, so passes with different seeds are independent estimates.
-    fn render_pass(
+    fn render_estimate(
         &mut self,
         scene: &Scene,
         camera: &Camera,
         width: u32,
         height: u32,
         seed: u64,
-    ) -> Pass;
-}
-
-/// The reference path tracer as a method.
-#[derive(Clone, Debug)]
-struct PathTracerMethod {
-    name: String,
-    spp: u32,
-    tracer: PathTracer,
-}
-
-impl Method for PathTracerMethod {
-    fn name(&self) -> &str {
-        &self.name
-    }
-
-    fn samples_per_pass(&self) -> u32 {
-        self.spp
-    }
-
-    fn render_pass(
-        &mut self,
-        scene: &Scene,
-        camera: &Camera,
-        width: u32,
-        height: u32,
-        seed: u64,
-    ) -> Pass {
-        let settings = RenderSettings {
-            width,
-            height,
-            spp: self.spp,
-            seed,
-            variance: false,
-        };
-        let out = render(scene, camera, &self.tracer, &settings, &|_| {});
-        Pass {
-            image: out.mean,
-            invalid_samples: out.stats.invalid_samples,
-        }
-    }
+    ) -> Estimate;
 }
 
 /// How much a frame may spend.
@@ -275,15 +111,6 @@ impl fmt::Display for BudgetError {
 
 impl std::error::Error for BudgetError {}
 
-/// The seed of pass `pass` of a frame seeded `seed`: a bijective mix (SplitMix64's finaliser)
-/// of both, so passes of a frame, and frames of nearby seeds, get unrelated random streams.
-pub fn pass_seed(seed: u64, pass: u32) -> u64 {
-    let mut z = seed ^ (pass as u64 + 1).wrapping_mul(0x9E37_79B9_7F4A_7C15);
-    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-    z ^ (z >> 31)
-}
-
 /// Renders one frame of `method` within `request.budget`: passes with seeds
 /// [`pass_seed`]`(request.seed, 0, 1, …)`, averaged with equal weights.
 pub fn render_frame(
@@ -310,7 +137,7 @@ pub fn render_frame(
     let mut longest_pass = Duration::ZERO;
     let mut last_check = Duration::ZERO;
     loop {
-        let pass = method.render_pass(scene, camera, w, h, pass_seed(request.seed, passes));
+        let pass = method.render_estimate(scene, camera, w, h, pass_seed(request.seed, passes));
         for (s, p) in sum.iter_mut().zip(&pass.image.data) {
             *s += p.as_dvec3();
         }
@@ -346,43 +173,6 @@ pub fn render_frame(
 mod tests {
     use super::*;
 
-    #[test]
-    fn names_parse_and_print_back() {
-        for (name, spec) in [
-            ("pt-1spp", MethodSpec::PathTracer { spp: 1, nee: true }),
-            ("pt-16spp", MethodSpec::PathTracer { spp: 16, nee: true }),
-            (
-                "pt-4spp-nonee",
-                MethodSpec::PathTracer { spp: 4, nee: false },
-            ),
-        ] {
-            let parsed: MethodSpec = name.parse().unwrap();
-            assert_eq!(parsed, spec);
-            assert_eq!(parsed.to_string(), name);
-        }
-        assert_eq!(
-            "pt-8spp-nee".parse::<MethodSpec>().unwrap().to_string(),
-            "pt-8spp"
-        );
-        for bad in [
-            "",
-            "pt",
-            "pt-0spp",
-            "pt-xspp",
-            "pt-4",
-            "pt-4spp-foo",
-            "pt-4spp-nonee-x",
-            "nrc-1spp",
-            "pt--1spp",
-        ] {
-            let e = bad.parse::<MethodSpec>().unwrap_err();
-            assert!(
-                e.to_string().contains("unknown method") && e.to_string().contains("pt-<N>spp"),
-                "{e}"
-            );
-        }
-    }
-
     /// A method whose passes are constant images worth `pass index + 1` and take a fixed time.
     struct Fake {
         passes: u32,
@@ -396,7 +186,14 @@ mod tests {
         fn samples_per_pass(&self) -> u32 {
             3
         }
-        fn render_pass(&mut self, _: &Scene, _: &Camera, width: u32, height: u32, _: u64) -> Pass {
+        fn render_estimate(
+            &mut self,
+            _: &Scene,
+            _: &Camera,
+            width: u32,
+            height: u32,
+            _: u64,
+        ) -> Estimate {
             std::thread::sleep(self.sleep);
             self.passes += 1;
             let image = Image::from_data(
@@ -405,7 +202,7 @@ mod tests {
                 vec![Vec3::splat(self.passes as f32); (width * height) as usize],
             )
             .unwrap();
-            Pass {
+            Estimate {
                 image,
                 invalid_samples: 0,
             }

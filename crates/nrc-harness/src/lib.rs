@@ -1,0 +1,26 @@
+//! # nrc-harness: the evaluation harness
+//!
+//! Everything `nrc compare`, `nrc reference` and `nrc bench` do besides parsing arguments and
+//! printing:
+//!
+//! - [`methods`]: the method registry, one [`MethodSpec`] (pass × radiance source ×
+//!   producers), building each method's state;
+//! - [`bench`]: the path tracer's benchmark (`nrc bench trace`);
+//! - [`budget`]: the [`Method`] trait, budgets (equal samples, equal time) and the frame loop;
+//! - [`compare`]: the comparison loop (errors, bias and variance, sweeps, the report, the
+//!   images) and the `runs.json` schema ([`compare::RunsFile`]);
+//! - [`emitters`]: the emitter-excluded image;
+//! - [`reference`]: the reference store (references cached by the content of their scene and
+//!   settings, with their variance);
+//!
+//! The CLI (`src/` of the workspace root) parses arguments into these types and prints.
+
+pub mod bench;
+pub mod budget;
+pub mod compare;
+pub mod emitters;
+pub mod methods;
+pub mod reference;
+
+pub use budget::{Budget, Estimate, Frame, FrameRequest, Method, render_frame};
+pub use methods::{CacheMethodSettings, MethodSpec};

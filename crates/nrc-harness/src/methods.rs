@@ -1,0 +1,457 @@
+//! The method registry: every name `nrc compare` accepts, as one [`MethodSpec`] (a pass × a
+//! radiance source × the producers that train it).
+//!
+//! - `pt-<N>spp[-nonee]`: the reference path tracer ([`PassSpec::PathTraced`]) at N samples
+//!   per pixel per estimate, NEE and BSDF sampling by MIS (or BSDF sampling only); no source.
+//! - `nrc-<producer>[-<termination>]`: a cache trained online by a producer (`pt`, `pt-sl`,
+//!   `bt`, `lt`, `sppc`), rendered at 1 sample per pixel by the cache-terminated pass with paths
+//!   ending in it by the termination strategy (default `spread`; see [`Termination`]), e.g.
+//!   `nrc-pt-sl`, `nrc-sppc-first`, `nrc-pt-bth:8`.
+//!
+//! A cache method is trained for [`CacheMethodSettings::train_frames`] frames in
+//! [`Method::prepare`] (untimed), then each estimate is one online frame: produce, train
+//! (unless frozen) and the inference pass. Its time per frame therefore includes training.
+
+use std::fmt;
+use std::str::FromStr;
+
+use nrc_cache::{CacheConfig, CacheDevice, RadianceCache};
+use nrc_render::passes::{self, FrameInput, RenderPass, TERMINATION_NAMES, Termination};
+use nrc_render::{LightStrategy, PassSpec, PathTracer, ZeroSource};
+use nrc_scene::{Camera, Scene};
+use nrc_train::online::{OnlineSettings, OnlineTrainer};
+use nrc_train::producer::{PRODUCER_NAMES, ProducerOptions, ProducerSpec};
+use nrc_train::query::QueryMaker;
+
+use crate::budget::{Estimate, Method};
+
+/// The grammar of all method names.
+pub fn method_names() -> String {
+    format!(
+        "pt-<N>spp (reference path tracer, N samples per pixel per estimate, NEE and BSDF sampling combined by MIS), \
+         pt-<N>spp-nonee (the same with next-event estimation off: BSDF sampling only), \
+         nrc-<producer>[-<termination>] (a cache trained online, 1 spp; producers: {PRODUCER_NAMES}; terminations: {TERMINATION_NAMES})"
+    )
+}
+
+/// A rendering method: a pass, its samples per pixel per estimate, and the producers of the
+/// cache it reads (`None`: the pass reads no source).
+#[derive(Clone, Debug, PartialEq)]
+pub struct MethodSpec {
+    pub pass: PassSpec,
+    pub spp: u32,
+    pub producer: Option<ProducerSpec>,
+}
+
+/// A name that is not a method.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct ParseMethodError {
+    pub name: String,
+    pub reason: String,
+}
+
+impl fmt::Display for ParseMethodError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(
+            f,
+            "unknown method `{}`: {}; known methods: {}",
+            self.name,
+            self.reason,
+            method_names()
+        )
+    }
+}
+
+impl std::error::Error for ParseMethodError {}
+
+impl FromStr for MethodSpec {
+    type Err = ParseMethodError;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        let s = s.trim();
+        let err = |reason: &str| ParseMethodError {
+            name: s.to_string(),
+            reason: reason.to_string(),
+        };
+        if let Some(rest) = s.strip_prefix("nrc-") {
+            if rest.starts_with("mix:") {
+                return Err(err(
+                    "mixes are not method names; train a mix with `nrc train --producer mix:...`",
+                ));
+            }
+            // `<producer>-<termination>` when the last part is a termination, else all producer.
+            let (producer, termination) = match rest.rsplit_once('-') {
+                Some((p, t)) if t.parse::<Termination>().is_ok() => {
+                    (p, t.parse::<Termination>().expect("just parsed"))
+                }
+                _ => (rest, Termination::default()),
+            };
+            let producer = producer.parse::<ProducerSpec>().map_err(|e| err(&e))?;
+            return Ok(Self {
+                pass: PassSpec::CacheTerminated {
+                    termination,
+                    nee: true,
+                },
+                spp: 1,
+                producer: Some(producer),
+            });
+        }
+        let mut parts = s.split('-');
+        if parts.next() != Some("pt") {
+            return Err(err(
+                "no such method family (cache methods: nrc-<producer>[-<termination>])",
+            ));
+        }
+        let spp = parts
+            .next()
+            .and_then(|p| p.strip_suffix("spp"))
+            .ok_or_else(|| {
+                err("the path tracer's name needs its samples per pixel, e.g. pt-16spp")
+            })?;
+        let spp: u32 = spp
+            .parse()
+            .map_err(|_| err("samples per pixel must be a whole number, e.g. pt-16spp"))?;
+        if spp == 0 {
+            return Err(err("samples per pixel must be at least 1"));
+        }
+        let strategy = match parts.next() {
+            None | Some("nee") => LightStrategy::Mis,
+            Some("nonee") => LightStrategy::BsdfOnly,
+            Some(_) => {
+                return Err(err(
+                    "the only path tracer options are -nee (default) and -nonee",
+                ));
+            }
+        };
+        if parts.next().is_some() {
+            return Err(err("too many parts"));
+        }
+        Ok(Self {
+            pass: PassSpec::PathTraced { strategy },
+            spp,
+            producer: None,
+        })
+    }
+}
+
+impl fmt::Display for MethodSpec {
+    /// The canonical name (parses back to the same spec).
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match (&self.pass, &self.producer) {
+            (PassSpec::CacheTerminated { termination, .. }, Some(p)) => {
+                if *termination == Termination::default() {
+                    write!(f, "nrc-{p}")
+                } else {
+                    write!(f, "nrc-{p}-{termination}")
+                }
+            }
+            (PassSpec::PathTraced { strategy }, _) => {
+                write!(f, "pt-{}spp", self.spp)?;
+                if *strategy == LightStrategy::BsdfOnly {
+                    f.write_str("-nonee")?;
+                }
+                Ok(())
+            }
+            (pass, p) => write!(
+                f,
+                "{pass}@{}spp{}",
+                self.spp,
+                p.as_ref().map(|p| format!("+{p}")).unwrap_or_default()
+            ),
+        }
+    }
+}
+
+/// How cache methods are set up (shared by all cache methods of a comparison).
+#[derive(Clone, Debug, PartialEq)]
+pub struct CacheMethodSettings {
+    pub config: CacheConfig,
+    pub device: CacheDevice,
+    /// Finest resolution of the encoding along the scene's longest axis (the smallest feature
+    /// resolved is the longest extent divided by it).
+    pub resolution: u32,
+    /// Frames of online training before measurement.
+    pub train_frames: u32,
+    pub records_per_frame: usize,
+    pub batch_size: usize,
+    /// Keep training during measurement (each estimate is a full online frame); else frozen.
+    pub online: bool,
+    /// The producers' own settings.
+    pub producer_options: ProducerOptions,
+    pub seed: u64,
+}
+
+impl CacheMethodSettings {
+    pub fn new(config: CacheConfig, device: CacheDevice) -> Self {
+        Self {
+            config,
+            device,
+            resolution: 512,
+            train_frames: 64,
+            records_per_frame: nrc_train::online::DEFAULT_RECORDS_PER_FRAME,
+            batch_size: 1 << 14,
+            online: true,
+            producer_options: ProducerOptions::default(),
+            seed: 0,
+        }
+    }
+}
+
+impl MethodSpec {
+    /// Samples per pixel of one estimate.
+    pub fn samples_per_pass(&self) -> u32 {
+        self.spp
+    }
+
+    /// The method's state, ready to prepare and render; `tracer`: the depth limit and Russian
+    /// roulette every method of a comparison shares (the light strategy is the pass's own).
+    pub fn build(&self, tracer: &PathTracer, cache: &CacheMethodSettings) -> Box<dyn Method> {
+        match &self.producer {
+            None => Box::new(PassMethod {
+                name: self.to_string(),
+                spp: self.spp,
+                pass: self.pass.build(tracer),
+            }),
+            Some(producer) => Box::new(CacheMethod {
+                name: self.to_string(),
+                spec: self.clone(),
+                producer: producer.clone(),
+                settings: cache.clone(),
+                tracer: *tracer,
+                trainer: None,
+            }),
+        }
+    }
+}
+
+/// A pass that reads no source (the reference path tracer) as a method.
+struct PassMethod {
+    name: String,
+    spp: u32,
+    pass: Box<dyn RenderPass>,
+}
+
+impl Method for PassMethod {
+    fn name(&self) -> &str {
+        &self.name
+    }
+
+    fn samples_per_pass(&self) -> u32 {
+        self.spp
+    }
+
+    fn render_estimate(
+        &mut self,
+        scene: &Scene,
+        camera: &Camera,
+        width: u32,
+        height: u32,
+        seed: u64,
+    ) -> Estimate {
+        let input = FrameInput {
+            scene,
+            camera,
+            width,
+            height,
+            spp: self.spp,
+            seed,
+        };
+        let out = passes::run(self.pass.as_mut(), &input, &ZeroSource);
+        Estimate {
+            image: out.image,
+            invalid_samples: out.stats.invalid_samples,
+        }
+    }
+}
+
+/// A pass reading a cache trained online, with its trainer.
+struct CacheMethod {
+    name: String,
+    spec: MethodSpec,
+    producer: ProducerSpec,
+    settings: CacheMethodSettings,
+    tracer: PathTracer,
+    trainer: Option<OnlineTrainer>,
+}
+
+/// Builds a cache sized for `scene` and its online trainer, rendering with `pass`.
+pub fn scene_trainer(
+    scene: &Scene,
+    producer: ProducerSpec,
+    pass: PassSpec,
+    settings: &CacheMethodSettings,
+    tracer: PathTracer,
+) -> Result<OnlineTrainer, String> {
+    let queries = QueryMaker::new(&scene.bounds());
+    let ext = queries.scene_box.extent();
+    let longest = ext.iter().copied().fold(0.0f32, f32::max);
+    if settings.resolution == 0 {
+        return Err("the cache resolution must be at least 1".into());
+    }
+    let (cache, _) = RadianceCache::for_scene_extent(
+        &settings.config,
+        queries.scene_box,
+        longest / settings.resolution as f32,
+        settings.device,
+    )
+    .map_err(|e| e.to_string())?;
+    let mut online = OnlineSettings::new(producer, scene, tracer);
+    online.records_per_frame = settings.records_per_frame;
+    online.producer_options = settings.producer_options;
+    online.batch_size = settings.batch_size;
+    online.pass = pass;
+    online.queries = queries;
+    online.seed = settings.seed;
+    OnlineTrainer::new(cache, online, scene)
+}
+
+impl CacheMethod {
+    fn trainer(
+        &mut self,
+        scene: &Scene,
+        camera: &Camera,
+        width: u32,
+        height: u32,
+    ) -> Result<&mut OnlineTrainer, String> {
+        if self.trainer.is_none() {
+            let mut t = scene_trainer(
+                scene,
+                self.producer.clone(),
+                self.spec.pass,
+                &self.settings,
+                self.tracer,
+            )?;
+            for _ in 0..self.settings.train_frames {
+                t.frame(scene, camera, width, height, false)
+                    .map_err(|e| e.to_string())?;
+            }
+            self.trainer = Some(t);
+        }
+        Ok(self.trainer.as_mut().expect("just built"))
+    }
+}
+
+impl Method for CacheMethod {
+    fn name(&self) -> &str {
+        &self.name
+    }
+
+    fn samples_per_pass(&self) -> u32 {
+        self.spec.spp
+    }
+
+    fn prepare(
+        &mut self,
+        scene: &Scene,
+        camera: &Camera,
+        width: u32,
+        height: u32,
+    ) -> Result<(), String> {
+        self.trainer(scene, camera, width, height).map(|_| ())
+    }
+
+    fn render_estimate(
+        &mut self,
+        scene: &Scene,
+        camera: &Camera,
+        width: u32,
+        height: u32,
+        seed: u64,
+    ) -> Estimate {
+        let online = self.settings.online;
+        let name = self.name.clone();
+        let spp = self.spec.spp;
+        let trainer = match self.trainer(scene, camera, width, height) {
+            Ok(t) => t,
+            Err(e) => {
+                // Only reachable without prepare(); an unusable cache renders black, counted.
+                eprintln!("{name}: {e}");
+                return Estimate {
+                    image: nrc_scene::Image::from_data(
+                        width as usize,
+                        height as usize,
+                        vec![glam::Vec3::ZERO; width as usize * height as usize],
+                    )
+                    .expect("one value per pixel"),
+                    invalid_samples: width as u64 * height as u64,
+                };
+            }
+        };
+        if online && let Err(e) = trainer.frame(scene, camera, width, height, false) {
+            eprintln!("{name}: training skipped: {e}");
+        }
+        let out = trainer.render(&FrameInput {
+            scene,
+            camera,
+            width,
+            height,
+            spp,
+            seed,
+        });
+        Estimate {
+            image: out.image,
+            invalid_samples: out.stats.invalid_samples,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn names_parse_and_print_back() {
+        for name in [
+            "pt-1spp",
+            "pt-16spp",
+            "pt-4spp",
+            "pt-1spp-nonee",
+            "nrc-pt",
+            "nrc-pt-sl",
+            "nrc-bt",
+            "nrc-lt",
+            "nrc-sppc",
+            "nrc-pt-first",
+            "nrc-pt-sl-bth:8",
+            "nrc-sppc-diffuse",
+        ] {
+            let spec: MethodSpec = name.parse().unwrap();
+            assert_eq!(spec.to_string(), name);
+        }
+        assert_eq!(
+            "pt-4spp-nonee".parse::<MethodSpec>().unwrap(),
+            MethodSpec {
+                pass: PassSpec::PathTraced {
+                    strategy: LightStrategy::BsdfOnly
+                },
+                spp: 4,
+                producer: None
+            }
+        );
+        for (alias, canonical) in [("nrc-pt-spread", "nrc-pt"), ("pt-8spp-nee", "pt-8spp")] {
+            assert_eq!(alias.parse::<MethodSpec>().unwrap().to_string(), canonical);
+        }
+        for bad in [
+            "",
+            "pt",
+            "pt-0spp",
+            "pt-xspp",
+            "pt-4",
+            "pt-4spp-foo",
+            "pt-4spp-nonee-x",
+            "pt--1spp",
+            "nrc-",
+            "nrc-foo",
+            "nrc-pt-foo",
+            "nrc-mix:pt=1",
+            "px-1spp",
+            "nrc-pt-sl-spread:0",
+        ] {
+            let e = bad.parse::<MethodSpec>().unwrap_err().to_string();
+            assert!(
+                e.contains("unknown method") && e.contains("pt-<N>spp"),
+                "{bad}: {e}"
+            );
+        }
+    }
+}

@@ -1,0 +1,290 @@
+//! Inference passes: the techniques that turn a scene, a camera and (for most) a radiance
+//! source into a frame. One file per technique, each a state struct kept across frames with
+//! named phases, in the manner of kajiya's renderers:
+//!
+//! 1. [`RenderPass::prepare`]: per-frame upkeep before tracing (history buffers, probe or
+//!    light updates);
+//! 2. [`RenderPass::trace`]: the frame's paths, up to the points where they want far-field
+//!    radiance; returns those queries;
+//! 3. the radiance source answers every query of the frame in one batch ([`run`] does this);
+//! 4. [`RenderPass::resolve`]: the answers combined into the image.
+//!
+//! A pass is chosen by a [`PassSpec`], which parses from the command line (`--pass NAME`) and
+//! from JSON (the same name as a string). Adding a technique: one file here with its state
+//! struct and its [`RenderPass`] implementation, one variant of [`PassSpec`] (with its name in
+//! `FromStr`/`Display` and its `build` arm).
+//!
+//! Passes know nothing of burn: the cache reaches them as a [`RadianceSource`].
+
+pub mod cache_terminated;
+pub mod path_traced;
+
+use std::fmt;
+use std::str::FromStr;
+use std::time::Instant;
+
+use glam::Vec3;
+use nrc_scene::{Camera, Image, Scene};
+
+use crate::path_tracer::{LightStrategy, PathTracer};
+use crate::source::{RadianceQuery, RadianceSource};
+pub use cache_terminated::{CacheTerminatedPass, TERMINATION_NAMES, Termination, TerminationPoint};
+pub use path_traced::PathTracedPass;
+
+/// What a pass renders this frame.
+#[derive(Clone, Copy, Debug)]
+pub struct FrameInput<'a> {
+    pub scene: &'a Scene,
+    pub camera: &'a Camera,
+    pub width: u32,
+    pub height: u32,
+    /// Samples per pixel, at least 1.
+    pub spp: u32,
+    /// Seed of the frame's random streams: the image is a function of it alone, whatever the
+    /// thread count.
+    pub seed: u64,
+}
+
+/// What a pass counted in a frame.
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
+pub struct PassStats {
+    /// Camera paths traced (pixels × samples).
+    pub paths: u64,
+    /// Rays traced (closest-hit and shadow).
+    pub rays: u64,
+    /// Queries sent to the radiance source.
+    pub queries: u64,
+    /// Samples whose value was NaN or infinite (counted as black).
+    pub invalid_samples: u64,
+    /// Milliseconds in the trace phase.
+    pub trace_ms: f64,
+    /// Milliseconds in the radiance source's call.
+    pub cache_ms: f64,
+}
+
+/// A rendered frame.
+#[derive(Clone, Debug)]
+pub struct PassOutput {
+    /// Per-pixel mean radiance.
+    pub image: Image,
+    /// Per-pixel sample variance of one sample's estimate, where the pass computes it.
+    pub variance: Option<Image>,
+    /// Where paths ended in the source (the next frame's training-query prediction).
+    pub terminations: Vec<TerminationPoint>,
+    pub stats: PassStats,
+}
+
+/// An inference pass with its state across frames (see the module documentation).
+pub trait RenderPass: Send {
+    /// The pass's canonical name (parses back to its spec).
+    fn name(&self) -> String;
+
+    /// Whether the pass asks a radiance source anything (a pass that does not renders alone).
+    fn uses_source(&self) -> bool;
+
+    /// Per-frame upkeep before tracing. Default: nothing.
+    fn prepare(&mut self, _input: &FrameInput) {}
+
+    /// Traces the frame's paths; returns the queries the radiance source must answer.
+    fn trace(&mut self, input: &FrameInput) -> Vec<RadianceQuery>;
+
+    /// Combines the answers (one per query of [`RenderPass::trace`], in order) into the frame.
+    fn resolve(&mut self, input: &FrameInput, answers: &[Vec3]) -> PassOutput;
+}
+
+/// One frame of `pass`: prepare, trace, one batch call of `source`, resolve; the trace and
+/// source phases timed in the output's statistics.
+pub fn run(
+    pass: &mut dyn RenderPass,
+    input: &FrameInput,
+    source: &dyn RadianceSource,
+) -> PassOutput {
+    pass.prepare(input);
+    let t0 = Instant::now();
+    let queries = pass.trace(input);
+    let trace_ms = t0.elapsed().as_secs_f64() * 1e3;
+    let t1 = Instant::now();
+    let answers = if queries.is_empty() {
+        Vec::new()
+    } else {
+        source.radiance(&queries)
+    };
+    assert_eq!(
+        answers.len(),
+        queries.len(),
+        "a radiance source answers every query"
+    );
+    let cache_ms = t1.elapsed().as_secs_f64() * 1e3;
+    let mut out = pass.resolve(input, &answers);
+    out.stats.trace_ms = trace_ms;
+    out.stats.cache_ms = cache_ms;
+    out.stats.queries = queries.len() as u64;
+    out
+}
+
+/// A pass and its settings, as named on the command line and in run files.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum PassSpec {
+    /// The reference path tracer: `pt` (NEE and BSDF sampling by MIS), `pt-nonee` (BSDF
+    /// sampling only), `pt-light` (NEE only).
+    PathTraced { strategy: LightStrategy },
+    /// Camera paths that end in the radiance source: `cache[-TERMINATION][-nonee]`, e.g.
+    /// `cache` (the spread heuristic), `cache-first`, `cache-bth:8`.
+    CacheTerminated { termination: Termination, nee: bool },
+}
+
+impl Default for PassSpec {
+    fn default() -> Self {
+        Self::CacheTerminated {
+            termination: Termination::default(),
+            nee: true,
+        }
+    }
+}
+
+/// The grammar of pass names, for help texts and errors.
+pub fn pass_names() -> String {
+    format!(
+        "pt, pt-nonee, pt-light (the reference path tracer: MIS, BSDF sampling only, NEE only); \
+         cache[-TERMINATION][-nonee] (paths ending in the radiance source; terminations: {TERMINATION_NAMES})"
+    )
+}
+
+impl FromStr for PassSpec {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, String> {
+        let s = s.trim();
+        let err = || format!("unknown pass `{s}`; known: {}", pass_names());
+        match s {
+            "pt" => {
+                return Ok(Self::PathTraced {
+                    strategy: LightStrategy::Mis,
+                });
+            }
+            "pt-nonee" => {
+                return Ok(Self::PathTraced {
+                    strategy: LightStrategy::BsdfOnly,
+                });
+            }
+            "pt-light" => {
+                return Ok(Self::PathTraced {
+                    strategy: LightStrategy::LightOnly,
+                });
+            }
+            _ => {}
+        }
+        let rest = s.strip_prefix("cache").ok_or_else(err)?;
+        let (rest, nee) = match rest.strip_suffix("-nonee") {
+            Some(r) => (r, false),
+            None => (rest, true),
+        };
+        let termination = match rest {
+            "" => Termination::default(),
+            r => r
+                .strip_prefix('-')
+                .ok_or_else(err)?
+                .parse::<Termination>()
+                .map_err(|e| format!("pass `{s}`: {e}"))?,
+        };
+        Ok(Self::CacheTerminated { termination, nee })
+    }
+}
+
+impl fmt::Display for PassSpec {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match *self {
+            Self::PathTraced { strategy } => f.write_str(match strategy {
+                LightStrategy::Mis => "pt",
+                LightStrategy::BsdfOnly => "pt-nonee",
+                LightStrategy::LightOnly => "pt-light",
+            }),
+            Self::CacheTerminated { termination, nee } => {
+                f.write_str("cache")?;
+                if termination != Termination::default() {
+                    write!(f, "-{termination}")?;
+                }
+                if !nee {
+                    f.write_str("-nonee")?;
+                }
+                Ok(())
+            }
+        }
+    }
+}
+
+impl serde::Serialize for PassSpec {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        s.collect_str(self)
+    }
+}
+
+impl<'de> serde::Deserialize<'de> for PassSpec {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        let s = String::deserialize(d)?;
+        s.parse().map_err(serde::de::Error::custom)
+    }
+}
+
+impl PassSpec {
+    /// Whether the pass asks a radiance source anything.
+    pub fn uses_source(&self) -> bool {
+        matches!(self, Self::CacheTerminated { .. })
+    }
+
+    /// The pass's state, with `tracer`'s depth limit and Russian roulette (its light strategy
+    /// is the pass's own).
+    pub fn build(&self, tracer: &PathTracer) -> Box<dyn RenderPass> {
+        match *self {
+            Self::PathTraced { strategy } => Box::new(PathTracedPass::new(PathTracer {
+                strategy,
+                ..*tracer
+            })),
+            Self::CacheTerminated { termination, nee } => {
+                Box::new(CacheTerminatedPass::new(termination, nee, tracer))
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn names_parse_print_and_round_trip_through_json() {
+        for name in [
+            "pt",
+            "pt-nonee",
+            "pt-light",
+            "cache",
+            "cache-first",
+            "cache-diffuse:0.5",
+            "cache-bth:8",
+            "cache-nonee",
+            "cache-first-nonee",
+        ] {
+            let spec: PassSpec = name.parse().unwrap();
+            assert_eq!(spec.to_string(), name);
+            let json = serde_json::to_string(&spec).unwrap();
+            assert_eq!(serde_json::from_str::<PassSpec>(&json).unwrap(), spec);
+        }
+        assert_eq!(
+            "cache-spread".parse::<PassSpec>().unwrap().to_string(),
+            "cache"
+        );
+        for bad in [
+            "",
+            "ptx",
+            "cache-",
+            "cache-last",
+            "cachefirst",
+            "cache-spread:0",
+            "pt-first",
+        ] {
+            let e = bad.parse::<PassSpec>().unwrap_err();
+            assert!(e.contains("pass"), "{bad}: {e}");
+        }
+        assert!(serde_json::from_str::<PassSpec>("\"cache-nope\"").is_err());
+    }
+}

@@ -1,0 +1,250 @@
+//! The path-vertex step, written once: every camera-side path in the project (the reference
+//! path tracer, the cache-terminated pass, the path-tracing producer) walks the scene through
+//! a [`PathWalk`]:
+//!
+//! ```text
+//! walk.arrive()  → Hit { vertex, emission and its MIS weight, segment length } | Escaped
+//! (the caller adds the emission, tests its own termination rule)
+//! walk.at_depth_limit()   the maximum-depth rule (Mitsuba's segment count)
+//! walk.next_event()       direct light at the vertex (NEE), MIS-weighted against BSDF sampling
+//! walk.scatter()          BSDF sample, throughput update, Russian roulette, the next ray
+//! ```
+//!
+//! The random numbers are drawn in the same order whoever walks: three for NEE at every vertex
+//! that reaches it (drawn even where NEE is skipped, so streams stay aligned whatever the
+//! strategy), three for the BSDF sample, one for Russian roulette from `rr_depth` on. The
+//! reference path tracer's images are bit for bit those it made before this module existed.
+
+use glam::Vec3;
+use nrc_scene::{Ray, Scene, SurfaceInteraction, bsdf::Bsdf, sampling::Frame, spawn_ray};
+
+use crate::nee::{emission_mis_weight, next_event};
+use crate::path_tracer::{LightStrategy, PathStats, PathTracer};
+use crate::sampler::PixelSampler;
+use crate::source::RadianceQuery;
+
+/// A surface vertex of a path, with its BSDF in its shading frame.
+#[derive(Clone, Copy, Debug)]
+pub struct Vertex {
+    pub si: SurfaceInteraction,
+    pub bsdf: Bsdf,
+    pub frame: Frame,
+    /// The direction the radiance is wanted in (toward the previous vertex, unless the walk
+    /// started here with another), in the shading frame.
+    pub wo: Vec3,
+    /// The same direction in world space.
+    pub wo_world: Vec3,
+}
+
+impl Vertex {
+    /// The vertex at `si`, asked for the radiance leaving toward `wo_world` (unit).
+    pub fn new(scene: &Scene, si: &SurfaceInteraction, wo_world: Vec3) -> Self {
+        let bsdf = Bsdf::from_pbr(&scene.pbr(si));
+        let frame = Frame::from_normal(si.ns);
+        Self {
+            si: *si,
+            bsdf,
+            frame,
+            wo: frame.to_local(wo_world),
+            wo_world,
+        }
+    }
+
+    /// The radiance query of this vertex (toward `wo_world`).
+    pub fn query(&self) -> RadianceQuery {
+        RadianceQuery::at(&self.si, &self.bsdf, self.wo_world)
+    }
+}
+
+/// What the segment just traced reached.
+#[derive(Clone, Copy, Debug)]
+pub enum Arrival {
+    /// A surface.
+    Hit(Hit),
+    /// Nothing: the path left the scene; the radiance it brings back is `background`.
+    Escaped { background: Vec3 },
+}
+
+/// A surface reached by a segment.
+#[derive(Clone, Copy, Debug)]
+pub struct Hit {
+    pub vertex: Vertex,
+    /// The emission of the surface toward the path (zero for non-emitters) ...
+    pub le: Vec3,
+    /// ... and its MIS weight against NEE at the previous vertex (1 where NEE could not have
+    /// found it). The path's radiance gains `throughput · le · mis`.
+    pub mis: f32,
+    /// Length of the segment.
+    pub dist: f32,
+    /// Solid-angle density with which the previous vertex sampled the segment; `None` for the
+    /// first segment and after delta scattering (the area-spread heuristic's input).
+    pub prev_pdf: Option<f32>,
+}
+
+/// A BSDF sample taken by [`PathWalk::scatter`].
+#[derive(Clone, Copy, Debug)]
+pub struct Scatter {
+    /// `f |cos| / p`, divided by the Russian-roulette survival probability where that applied:
+    /// the factor by which the throughput grew.
+    pub weight: Vec3,
+    /// Solid-angle density of the sampled direction.
+    pub pdf: f32,
+    pub delta: bool,
+}
+
+/// One path being traced: its throughput, segment count and the previous scattering event.
+#[derive(Clone, Copy, Debug)]
+pub struct PathWalk {
+    tracer: PathTracer,
+    /// NEE runs at non-delta vertices (the strategy allows it and the scene has lights).
+    use_nee: bool,
+    ray: Ray,
+    throughput: Vec3,
+    prev_pdf: f32,
+    prev_delta: bool,
+    /// Segments used, including the one in flight.
+    segments: u32,
+    limit: u32,
+}
+
+impl PathWalk {
+    /// A path whose first segment is `ray` (a camera ray, or any ray whose first hit counts
+    /// fully: emission found by it has weight 1).
+    pub fn from_ray(scene: &Scene, tracer: &PathTracer, ray: Ray) -> Self {
+        Self {
+            tracer: *tracer,
+            use_nee: tracer.strategy != LightStrategy::BsdfOnly && scene.light_count() > 0,
+            ray,
+            throughput: Vec3::ONE,
+            prev_pdf: 0.0,
+            prev_delta: true,
+            segments: 1,
+            limit: tracer.segment_limit(),
+        }
+    }
+
+    /// A path that has used `segments` segments (at least 1) to reach the vertex it continues
+    /// from; the caller starts with [`PathWalk::next_event`] and [`PathWalk::scatter`] there.
+    pub fn from_vertex(scene: &Scene, tracer: &PathTracer, segments: u32) -> Self {
+        Self {
+            segments: segments.max(1),
+            ..Self::from_ray(scene, tracer, Ray::new(Vec3::ZERO, Vec3::Z))
+        }
+    }
+
+    /// The throughput of the path up to its latest vertex (or segment in flight).
+    pub fn throughput(&self) -> Vec3 {
+        self.throughput
+    }
+
+    /// Segments used so far.
+    pub fn segments(&self) -> u32 {
+        self.segments
+    }
+
+    /// Whether NEE runs at this path's non-delta vertices.
+    pub fn uses_nee(&self) -> bool {
+        self.use_nee
+    }
+
+    /// Traces the segment in flight.
+    pub fn arrive(&mut self, scene: &Scene, stats: &mut PathStats) -> Arrival {
+        stats.closest_rays += 1;
+        let ray = self.ray;
+        let Some(hit) = scene.intersect(&ray) else {
+            // Constant background radiance: not light-sampled, so weight 1.
+            return Arrival::Escaped {
+                background: scene.background,
+            };
+        };
+        let si = scene.interaction(&ray, &hit);
+        let dist = hit.t * ray.d.length();
+        let le = scene.emission(&si);
+        // Emission found by the ray, weighted against NEE finding it (the solid-angle density
+        // of the sampled direction, and whether it was a delta lobe).
+        let mis = if le == Vec3::ZERO {
+            0.0
+        } else if self.tracer.strategy == LightStrategy::LightOnly
+            && self.use_nee
+            && !self.prev_delta
+            && scene.light_pdf_area(si.tri) > 0.0
+        {
+            // NEE alone accounts for emitters it can reach after non-delta scattering.
+            0.0
+        } else {
+            emission_mis_weight(
+                scene,
+                &si,
+                dist,
+                self.prev_pdf,
+                self.prev_delta || !self.use_nee,
+            )
+        };
+        Arrival::Hit(Hit {
+            vertex: Vertex::new(scene, &si, si.wo),
+            le,
+            mis,
+            dist,
+            prev_pdf: (!self.prev_delta).then_some(self.prev_pdf),
+        })
+    }
+
+    /// Whether a further segment would exceed the maximum depth.
+    pub fn at_depth_limit(&self) -> bool {
+        self.segments >= self.limit
+    }
+
+    /// Next-event estimation at `v` (zero at delta vertices or with NEE off): the direct light
+    /// leaving `v` toward its `wo`, not yet multiplied by the throughput. Draws three numbers
+    /// always.
+    pub fn next_event(
+        &self,
+        scene: &Scene,
+        v: &Vertex,
+        sampler: &mut PixelSampler,
+        stats: &mut PathStats,
+    ) -> Vec3 {
+        if self.use_nee && !v.bsdf.is_delta() {
+            let mis = self.tracer.strategy == LightStrategy::Mis;
+            next_event(scene, &v.si, &v.bsdf, &v.frame, v.wo, mis, sampler, stats)
+        } else {
+            // Keep the random stream aligned whatever the strategy.
+            sampler.next_1d();
+            sampler.next_2d();
+            Vec3::ZERO
+        }
+    }
+
+    /// Samples the BSDF at `v` for the next segment, updates the throughput and applies
+    /// Russian roulette (Mitsuba's rule: from `rr_depth` scattering events on, continue with
+    /// probability min(max throughput, 0.95) and divide by it, which keeps the estimate
+    /// unbiased). `None`: the path ends here (no sample, zero throughput, or roulette).
+    pub fn scatter(&mut self, v: &Vertex, sampler: &mut PixelSampler) -> Option<Scatter> {
+        let u_lobe = sampler.next_1d();
+        let u_dir = sampler.next_2d();
+        let bs = v.bsdf.sample(v.wo, u_dir, u_lobe)?;
+        self.throughput *= bs.weight;
+        self.ray = spawn_ray(v.si.p, v.si.ng, v.frame.to_world(bs.wi));
+        self.segments += 1;
+        if self.throughput == Vec3::ZERO {
+            return None;
+        }
+        let mut weight = bs.weight;
+        // Scattering events so far.
+        if self.segments - 1 >= self.tracer.rr_depth {
+            let q = self.throughput.max_element().min(0.95);
+            if q.is_nan() || q <= 0.0 || sampler.next_1d() >= q {
+                return None;
+            }
+            self.throughput /= q;
+            weight /= q;
+        }
+        self.prev_pdf = bs.pdf;
+        self.prev_delta = bs.delta;
+        Some(Scatter {
+            weight,
+            pdf: bs.pdf,
+            delta: bs.delta,
+        })
+    }
+}
