@@ -1,6 +1,69 @@
 //! Command-line value parsers shared by the subcommands.
 
 use glam::Vec3;
+use nrc_render::{LightStrategy, PathTracer};
+
+/// Path depth options: every command that traces paths, so that methods and their reference
+/// estimate the same image.
+#[derive(clap::Args, Debug, Clone)]
+pub struct DepthArgs {
+    /// Maximum number of path segments, as Mitsuba counts them: 1 shows emitters seen
+    /// directly, 2 adds direct illumination, 3 one indirect bounce, ...; 0 or -1: unlimited
+    /// (Russian roulette ends paths).
+    #[arg(long, default_value_t = -1, allow_negative_numbers = true)]
+    pub max_depth: i32,
+
+    /// Number of scattering events after which Russian roulette may end a path
+    /// (Mitsuba's rr_depth), at most 1000.
+    #[arg(long, default_value_t = 5, value_parser = clap::value_parser!(u32).range(0..=1000))]
+    pub rr_depth: u32,
+}
+
+impl DepthArgs {
+    /// The reference path tracer (NEE and BSDF sampling by MIS) at these depths.
+    pub fn tracer(&self) -> PathTracer {
+        PathTracer {
+            max_depth: self.max_depth,
+            rr_depth: self.rr_depth,
+            ..PathTracer::default()
+        }
+    }
+}
+
+/// Direct-illumination estimators, as named on the command line.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Strategy {
+    /// Next-event estimation and BSDF sampling combined by MIS (power heuristic).
+    Mis,
+    /// BSDF sampling only (next-event estimation off).
+    Bsdf,
+    /// Next-event estimation only.
+    Light,
+}
+
+/// The path depth and the direct-illumination estimators (`render`, `train`, `bench trace`).
+#[derive(clap::Args, Debug, Clone)]
+pub struct TracerArgs {
+    #[command(flatten)]
+    pub depth: DepthArgs,
+
+    /// Estimators of direct illumination.
+    #[arg(long, value_enum, default_value_t = Strategy::Mis)]
+    pub strategy: Strategy,
+}
+
+impl TracerArgs {
+    pub fn tracer(&self) -> PathTracer {
+        PathTracer {
+            strategy: match self.strategy {
+                Strategy::Mis => LightStrategy::Mis,
+                Strategy::Bsdf => LightStrategy::BsdfOnly,
+                Strategy::Light => LightStrategy::LightOnly,
+            },
+            ..self.depth.tracer()
+        }
+    }
+}
 
 /// Parses `x,y,z` into a vector of three finite numbers.
 pub fn parse_vec3(s: &str) -> Result<Vec3, String> {

@@ -3,7 +3,8 @@
 
 use anyhow::{Result, bail};
 
-use crate::render::{TracerArgs, thread_pool};
+use crate::args::TracerArgs;
+use crate::render::thread_pool;
 use crate::scene_args::SceneArgs;
 
 #[derive(clap::Subcommand, Debug)]
@@ -143,8 +144,8 @@ fn trace(args: &TraceArgs) -> Result<()> {
         "scene {}: {} triangles; {w}x{h}, {spp} spp; max_depth {}, rr_depth {}",
         args.scene.scene.display(),
         scene.triangle_count(),
-        args.tracer.max_depth,
-        args.tracer.rr_depth,
+        args.tracer.depth.max_depth,
+        args.tracer.depth.rr_depth,
     );
     println!(
         "wall-clock figures: best of {}; per CPU-second: {threads}-thread runs, CPU time of all threads",

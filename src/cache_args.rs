@@ -54,8 +54,9 @@ pub struct RadianceCacheArgs {
     #[arg(long, default_value_t = 512)]
     pub resolution: u32,
 
-    /// Training records produced per frame.
-    #[arg(long, default_value_t = 1 << 16)]
+    /// Training records produced per frame (the default is chosen by measurement:
+    /// scripts/records-budget.sh, RESULTS.md).
+    #[arg(long, default_value_t = nrc_train::online::DEFAULT_RECORDS_PER_FRAME)]
     pub records: usize,
 
     /// Records per optimisation step (a frame trains records/batch steps).
@@ -102,6 +103,10 @@ pub fn named_config(name: &str) -> Result<CacheConfig> {
     Ok(match name {
         "hashgrid" => CacheConfig::hash_grid_preset(),
         "trianglewave" => CacheConfig::triangle_wave_preset(),
+        // An inline configuration (a run file's `config` object).
+        json if json.trim_start().starts_with('{') => {
+            CacheConfig::from_json_str(json).context("the inline cache configuration")?
+        }
         path => CacheConfig::from_file(&PathBuf::from(path))
             .with_context(|| format!("--config {path}"))?,
     })

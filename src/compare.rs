@@ -3,9 +3,8 @@
 //! and the `runs.json` schema are in `nrc_harness::compare`.
 
 use std::path::PathBuf;
-use std::time::Duration;
 
-use anyhow::{Context, Result, bail, ensure};
+use anyhow::{Context, Result, ensure};
 use indicatif::{ProgressBar, ProgressStyle};
 use nrc_harness::MethodSpec;
 use nrc_harness::budget::Budget;
@@ -13,13 +12,19 @@ use nrc_harness::compare::{Comparison, Progress, compare, total_frames};
 use nrc_harness::reference::{self, ReferenceRequest};
 use nrc_scene::Scene;
 
-use crate::reference::{CacheArgs, DepthArgs};
+use crate::args::DepthArgs;
+use crate::reference::CacheArgs;
 use crate::scene_args::SceneArgs;
 
 /// Arguments of `nrc compare`.
 #[derive(clap::Args, Debug)]
 #[command(group = clap::ArgGroup::new("budget").required(true).args(["equal_time", "equal_spp"]))]
 pub struct CompareArgs {
+    /// Read the run's settings from this JSON file: its fields are these flags (`snake_case`
+    /// or `kebab-case`), and flags given on the command line override it.
+    #[arg(long, value_name = "FILE")]
+    pub run: Option<PathBuf>,
+
     #[command(flatten)]
     pub scene: SceneArgs,
 
@@ -137,20 +142,7 @@ fn validate(args: &CompareArgs) -> Result<Budget> {
     for m in &args.methods {
         ensure!(seen.insert(m.to_string()), "method {m} is listed twice");
     }
-    Ok(match (args.equal_time, args.equal_spp) {
-        (Some(ms), None) => {
-            ensure!(
-                ms.is_finite() && ms > 0.0 && ms <= 3.6e6,
-                "--equal-time must be between 0 and one hour in milliseconds, got {ms}"
-            );
-            Budget::Time(Duration::from_secs_f64(ms * 1e-3))
-        }
-        (None, Some(n)) => {
-            ensure!(n >= 1, "--equal-spp must be at least 1");
-            Budget::Passes(n)
-        }
-        _ => bail!("give exactly one of --equal-time MS and --equal-spp N"),
-    })
+    Budget::from_limits(args.equal_time, args.equal_spp).map_err(anyhow::Error::msg)
 }
 
 /// Runs `nrc compare`.

@@ -12,6 +12,7 @@ mod compare;
 mod info;
 mod reference;
 mod render;
+mod run_file;
 mod scene_args;
 mod train;
 
@@ -19,7 +20,7 @@ use clap::{Parser, Subcommand};
 
 /// Neural radiance cache trainer and reference renderer.
 #[derive(Parser, Debug)]
-#[command(name = "nrc", version, about, long_about = None)]
+#[command(name = "nrc", version, about, long_about = None, args_override_self = true)]
 struct Cli {
     #[command(subcommand)]
     command: Command,
@@ -45,7 +46,14 @@ enum Command {
 }
 
 fn main() -> std::process::ExitCode {
-    let cli = Cli::parse();
+    let args = match run_file::expand(std::env::args_os().collect()) {
+        Ok(a) => a,
+        Err(e) => {
+            eprintln!("error: {}", one_line(&e));
+            return std::process::ExitCode::FAILURE;
+        }
+    };
+    let cli = Cli::parse_from(args);
     let result = match cli.command {
         Command::Render(a) => render::run(&a),
         Command::Info(a) => info::run(&a),

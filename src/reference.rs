@@ -9,35 +9,10 @@ use std::time::Instant;
 use anyhow::Result;
 use indicatif::{ProgressBar, ProgressStyle};
 use nrc_harness::reference::{ReferenceRequest, obtain};
-use nrc_render::PathTracer;
 
 use crate::scene_args::SceneArgs;
 
-/// Path depth options shared by `reference` and `compare` (the methods and their reference
-/// must estimate the same image).
-#[derive(clap::Args, Debug, Clone)]
-pub struct DepthArgs {
-    /// Maximum number of path segments, as Mitsuba counts them: 1 shows emitters seen
-    /// directly, 2 adds direct illumination, 3 one indirect bounce, ...; 0 or -1: unlimited
-    /// (Russian roulette ends paths).
-    #[arg(long, default_value_t = -1, allow_negative_numbers = true)]
-    pub max_depth: i32,
-
-    /// Number of scattering events after which Russian roulette may end a path.
-    #[arg(long, default_value_t = 5)]
-    pub rr_depth: u32,
-}
-
-impl DepthArgs {
-    /// The reference path tracer (NEE and BSDF sampling by MIS) at these depths.
-    pub fn tracer(&self) -> PathTracer {
-        PathTracer {
-            max_depth: self.max_depth,
-            rr_depth: self.rr_depth,
-            ..PathTracer::default()
-        }
-    }
-}
+use crate::args::DepthArgs;
 
 /// Where references are cached.
 #[derive(clap::Args, Debug, Clone)]

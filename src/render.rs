@@ -7,61 +7,17 @@ use anyhow::{Context, Result, bail};
 use indicatif::{ProgressBar, ProgressStyle};
 use nrc_render::{LightStrategy, PathTracer, RenderSettings, render};
 
+use crate::args::TracerArgs;
+
 use crate::scene_args::SceneArgs;
 
-/// Direct-illumination estimators, as named on the command line.
-#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Strategy {
-    /// Next-event estimation and BSDF sampling combined by MIS (power heuristic).
-    Mis,
-    /// BSDF sampling only (next-event estimation off).
-    Bsdf,
-    /// Next-event estimation only.
-    Light,
-}
-
-impl From<Strategy> for LightStrategy {
-    fn from(s: Strategy) -> Self {
-        match s {
-            Strategy::Mis => LightStrategy::Mis,
-            Strategy::Bsdf => LightStrategy::BsdfOnly,
-            Strategy::Light => LightStrategy::LightOnly,
-        }
-    }
-}
-
-/// Path-tracer options shared by `render` and `bench trace`.
-#[derive(clap::Args, Debug, Clone)]
-pub struct TracerArgs {
-    /// Maximum number of path segments, as Mitsuba counts them: 1 shows emitters seen
-    /// directly, 2 adds direct illumination, 3 one indirect bounce, ...; 0 or -1: unlimited
-    /// (Russian roulette ends paths).
-    #[arg(long, default_value_t = -1, allow_negative_numbers = true)]
-    pub max_depth: i32,
-
-    /// Number of scattering events after which Russian roulette may end a path
-    /// (Mitsuba's rr_depth), at most 1000.
-    #[arg(long, default_value_t = 5, value_parser = clap::value_parser!(u32).range(0..=1000))]
-    pub rr_depth: u32,
-
-    /// Estimators of direct illumination.
-    #[arg(long, value_enum, default_value_t = Strategy::Mis)]
-    pub strategy: Strategy,
-}
-
-impl TracerArgs {
-    pub fn tracer(&self) -> PathTracer {
-        PathTracer {
-            max_depth: self.max_depth,
-            rr_depth: self.rr_depth,
-            strategy: self.strategy.into(),
-        }
-    }
-}
-
-/// Arguments of `nrc render`.
 #[derive(clap::Args, Debug)]
 pub struct RenderArgs {
+    /// Read the run's settings from this JSON file: its fields are these flags (`snake_case`
+    /// or `kebab-case`), and flags given on the command line override it.
+    #[arg(long, value_name = "FILE")]
+    pub run: Option<PathBuf>,
+
     #[command(flatten)]
     pub scene: SceneArgs,
 
@@ -140,14 +96,7 @@ fn render_cached(
 ) -> Result<nrc_scene::Image> {
     let cache = nrc_cache::RadianceCache::load(snapshot, args.device.resolve_and_print())
         .with_context(|| format!("cannot load the cache snapshot {}", snapshot.display()))?;
-    let content = nrc_harness::reference::scene_content_hash(&args.scene.scene)?;
-    let scene_box = nrc_train::QueryMaker::new(&scene.bounds()).scene_box;
-    if let Err(e) = nrc_cache::check_scene(
-        cache.scene_content(),
-        cache.scene_box(),
-        &content,
-        scene_box,
-    ) {
+    if let Err(e) = nrc_harness::run::check_snapshot_scene(&cache, scene, &args.scene.scene)? {
         if !args.allow_other_scene {
             bail!("{}: {e}", snapshot.display());
         }

@@ -2,23 +2,27 @@
 //! training steps and the cache-terminated inference pass; per-frame statistics, optional
 //! EXR frames, a snapshot at the end.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use anyhow::{Context, Result, bail};
-use glam::Vec3;
 use indicatif::{ProgressBar, ProgressStyle};
 use nrc_render::PassSpec;
 use nrc_render::Termination;
-use nrc_scene::{Camera, Scene};
+use nrc_scene::Scene;
 use nrc_train::{FrameStats, ProducerSpec};
 
+use crate::args::TracerArgs;
 use crate::cache_args::{RadianceCacheArgs, parse_termination};
-use crate::render::TracerArgs;
 use crate::scene_args::SceneArgs;
 
 /// Arguments of `nrc train`.
 #[derive(clap::Args, Debug)]
 pub struct TrainArgs {
+    /// Read the run's settings from this JSON file: its fields are these flags (`snake_case`
+    /// or `kebab-case`), and flags given on the command line override it.
+    #[arg(long, value_name = "FILE")]
+    pub run: Option<PathBuf>,
+
     #[command(flatten)]
     pub scene: SceneArgs,
 
@@ -100,88 +104,6 @@ pub struct TrainArgs {
     pub tracer: TracerArgs,
 }
 
-/// One keyframe of a camera path.
-#[derive(serde::Deserialize, Debug, Clone)]
-#[serde(deny_unknown_fields)]
-struct Keyframe {
-    position: [f32; 3],
-    target: [f32; 3],
-    up: Option<[f32; 3]>,
-    fov_y: Option<f32>,
-}
-
-/// The camera of each frame.
-fn camera_path(path: Option<&Path>, base: &Camera, frames: u32) -> Result<Vec<Camera>> {
-    let Some(path) = path else {
-        return Ok(vec![*base; frames as usize]);
-    };
-    let text = std::fs::read_to_string(path)
-        .with_context(|| format!("cannot read camera path {}", path.display()))?;
-    let keys: Vec<Keyframe> =
-        serde_json::from_str(&text).with_context(|| format!("camera path {}", path.display()))?;
-    if keys.is_empty() {
-        bail!("camera path {}: no keyframes", path.display());
-    }
-    let v = |a: [f32; 3]| Vec3::from_array(a);
-    (0..frames)
-        .map(|f| {
-            let t = if frames > 1 {
-                f as f32 / (frames - 1) as f32
-            } else {
-                0.0
-            } * (keys.len() - 1) as f32;
-            let i = (t.floor() as usize).min(keys.len() - 1);
-            let j = (i + 1).min(keys.len() - 1);
-            let s = t - i as f32;
-            let (a, b) = (&keys[i], &keys[j]);
-            let up = v(a.up.unwrap_or([0.0, 1.0, 0.0])).lerp(v(b.up.unwrap_or([0.0, 1.0, 0.0])), s);
-            let fov = a.fov_y.unwrap_or(base.fov_y.to_degrees()) * (1.0 - s)
-                + b.fov_y.unwrap_or(base.fov_y.to_degrees()) * s;
-            Camera::look_at(
-                v(a.position).lerp(v(b.position), s),
-                v(a.target).lerp(v(b.target), s),
-                up,
-                fov,
-            )
-            .map_err(|e| anyhow::anyhow!("camera path {}, frame {f}: {e}", path.display()))
-        })
-        .collect()
-}
-
-/// Writes the statistics as CSV or JSON (atomically).
-pub fn write_stats(path: &Path, stats: &[FrameStats]) -> Result<()> {
-    let bytes = if path.extension().is_some_and(|e| e == "json") {
-        serde_json::to_vec_pretty(stats)?
-    } else {
-        let mut s = String::from(
-            "frame,produce_ms,train_ms,infer_ms,records,used,dropped_nonfinite,dropped_absurd,steps,loss,paths,rays,cache_queries,invalid_samples,producer_dropped\n",
-        );
-        for f in stats {
-            s.push_str(&format!(
-                "{},{:.3},{:.3},{:.3},{},{},{},{},{},{},{},{},{},{},{}\n",
-                f.frame,
-                f.produce_ms,
-                f.train_ms,
-                f.infer_ms,
-                f.records,
-                f.used,
-                f.dropped_nonfinite,
-                f.dropped_absurd,
-                f.steps,
-                f.loss,
-                f.producer.paths,
-                f.producer.rays + f.inference.rays,
-                f.inference.queries,
-                f.inference.invalid_samples,
-                f.producer.dropped
-            ));
-        }
-        s.into_bytes()
-    };
-    nrc_eval::atomic::atomic_write(path, &bytes)
-        .with_context(|| format!("cannot write statistics {}", path.display()))
-}
-
 /// Runs `nrc train`.
 pub fn run(args: &TrainArgs) -> Result<()> {
     if args.width == 0 || args.height == 0 {
@@ -206,7 +128,8 @@ pub fn run(args: &TrainArgs) -> Result<()> {
     for w in scene.warnings() {
         eprintln!("warning: {w}");
     }
-    let cameras = camera_path(args.camera_path.as_deref(), &scene.camera, args.frames)?;
+    let cameras =
+        nrc_harness::run::camera_path(args.camera_path.as_deref(), &scene.camera, args.frames)?;
     if let Some(dir) = &args.frames_out {
         std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
     }
@@ -235,30 +158,33 @@ pub fn run(args: &TrainArgs) -> Result<()> {
             .expect("valid progress template")
             .progress_chars("=> "),
     );
-    let mut all = Vec::with_capacity(args.frames as usize);
-    pool.install(|| -> Result<()> {
-        for (f, camera) in cameras.iter().enumerate() {
-            let (stats, out) = trainer.frame(&scene, camera, args.width, args.height, true)?;
-            let last = f + 1 == cameras.len();
-            if let (Some(dir), Some(out)) = (&args.frames_out, &out)
-                && ((f as u32).is_multiple_of(args.every) || last)
-            {
-                out.image
-                    .write_exr(&dir.join(format!("frame-{f:05}.exr")))?;
-            }
-            bar.set_message(format!(
-                "loss {:.4}, {:.0} ms/frame",
-                stats.loss,
-                stats.produce_ms + stats.train_ms + stats.infer_ms
-            ));
-            bar.inc(1);
-            all.push(stats);
-        }
-        Ok(())
+    let frames = args
+        .frames_out
+        .clone()
+        .map(|dir| nrc_harness::run::FrameOutput {
+            dir,
+            every: args.every,
+        });
+    let all = pool.install(|| {
+        nrc_harness::run::train(
+            &mut trainer,
+            &scene,
+            &cameras,
+            (args.width, args.height),
+            frames.as_ref(),
+            &|stats| {
+                bar.set_message(format!(
+                    "loss {:.4}, {:.0} ms/frame",
+                    stats.loss,
+                    stats.produce_ms + stats.train_ms + stats.infer_ms
+                ));
+                bar.inc(1);
+            },
+        )
     })?;
     bar.finish_and_clear();
     if let Some(path) = &args.stats {
-        write_stats(path, &all)?;
+        nrc_harness::run::write_stats(path, &all)?;
     }
     if let Some(path) = &args.snapshot {
         // The snapshot names its scene, so that rendering another one with it is refused.

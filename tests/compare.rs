@@ -7,6 +7,8 @@
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
+// `runs.json` is read with the schema the harness writes it with.
+use nrc_harness::compare::RunsFile;
 use nrc_scene::Image;
 
 fn nrc(args: &[&str]) -> Output {
@@ -76,25 +78,6 @@ fn is_png(path: &Path) -> bool {
     std::fs::read(path)
         .map(|b| b.len() > 8 && &b[1..4] == b"PNG")
         .unwrap_or(false)
-}
-
-#[derive(serde::Deserialize)]
-struct RunsFile {
-    mode: String,
-    runs: Vec<Run>,
-}
-
-#[derive(serde::Deserialize)]
-struct Run {
-    method: String,
-    run: Option<u32>,
-    sweep_step: Option<u32>,
-    budget_ms: Option<f64>,
-    passes: u32,
-    samples_per_pixel: u64,
-    time_ms: f64,
-    longest_pass_ms: f64,
-    metrics: nrc_eval::ErrorMetrics,
 }
 
 fn read_runs(dir: &Path) -> RunsFile {

@@ -215,3 +215,58 @@ fn passes_are_chosen_by_name() {
     let o = nrc(&a);
     assert!(o.status.success(), "{}", text(&o.stderr));
 }
+
+/// A run file describes the whole run (its fields are the flags); flags override it; a field
+/// that is no flag, or a file that is not JSON, is one clear error.
+#[test]
+fn run_files_describe_a_run_and_flags_override_them() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = |n: &str| dir.path().join(n).to_str().unwrap().to_string();
+    let config: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(
+            Path::new(env!("CARGO_MANIFEST_DIR")).join("models/nrc-hashgrid.json"),
+        )
+        .unwrap(),
+    )
+    .unwrap();
+    let run = serde_json::json!({
+        "scene": cornell(),
+        "frames": 3,
+        "width": 8,
+        "height": 8,
+        "records": 512,
+        "pass": "cache-first",
+        "config": config,
+        "stats": p("stats.json"),
+    });
+    std::fs::write(p("run.json"), run.to_string()).unwrap();
+    let frames = |extra: &[&str]| {
+        let mut a = vec!["train", "--run", &p("run.json")]
+            .into_iter()
+            .map(String::from)
+            .collect::<Vec<_>>();
+        a.extend(extra.iter().map(|s| s.to_string()));
+        let o = Command::new(env!("CARGO_BIN_EXE_nrc"))
+            .args(&a)
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", text(&o.stderr));
+        let stats: Vec<serde_json::Value> =
+            serde_json::from_str(&std::fs::read_to_string(p("stats.json")).unwrap()).unwrap();
+        (stats.len(), text(&o.stdout))
+    };
+    let (n, out) = frames(&[]);
+    assert_eq!(n, 3);
+    assert!(out.contains("512 records/frame"), "{out}");
+    let (n, out) = frames(&["--frames", "2", "--records", "256"]);
+    assert_eq!(n, 2);
+    assert!(out.contains("256 records/frame"), "{out}");
+
+    std::fs::write(p("bad.json"), r#"{"frame": 3}"#).unwrap();
+    assert_error(
+        &nrc(&["train", "--run", &p("bad.json")]),
+        "unknown field `frame`",
+    );
+    std::fs::write(p("bad.json"), r#"{"frames": 3"#).unwrap();
+    assert_error(&nrc(&["train", "--run", &p("bad.json")]), "not JSON");
+}

@@ -72,6 +72,26 @@ pub enum Budget {
     Time(Duration),
 }
 
+impl Budget {
+    /// Equal time (`equal_time_ms`) or equal samples (`equal_passes`): exactly one, checked.
+    pub fn from_limits(
+        equal_time_ms: Option<f64>,
+        equal_passes: Option<u32>,
+    ) -> Result<Self, String> {
+        match (equal_time_ms, equal_passes) {
+            (Some(ms), None) if ms.is_finite() && ms > 0.0 && ms <= 3.6e6 => {
+                Ok(Budget::Time(Duration::from_secs_f64(ms * 1e-3)))
+            }
+            (Some(ms), None) => Err(format!(
+                "--equal-time must be between 0 and one hour in milliseconds, got {ms}"
+            )),
+            (None, Some(0)) => Err("--equal-spp must be at least 1".into()),
+            (None, Some(n)) => Ok(Budget::Passes(n)),
+            _ => Err("give exactly one of --equal-time MS and --equal-spp N".into()),
+        }
+    }
+}
+
 /// What to render.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct FrameRequest {

@@ -13,6 +13,9 @@
 //! - [`reference`]: the reference store (references cached by the content of their scene and
 //!   settings, with their variance);
 //!
+//! - [`run`]: a run of the online loop (camera paths, the frame loop and its outputs, the
+//!   statistics file, the snapshot's scene check).
+//!
 //! The CLI (`src/` of the workspace root) parses arguments into these types and prints.
 
 pub mod bench;
@@ -21,6 +24,7 @@ pub mod compare;
 pub mod emitters;
 pub mod methods;
 pub mod reference;
+pub mod run;
 
 pub use budget::{Budget, Estimate, Frame, FrameRequest, Method, render_frame};
 pub use methods::{CacheMethodSettings, MethodSpec};

@@ -62,6 +62,16 @@ impl PixelSampler {
     }
 }
 
+/// The seed of pass (or frame) `pass` of a run seeded `seed`: a bijective mix (SplitMix64's
+/// finaliser) of both, so passes of a frame, and frames of nearby seeds, get unrelated random
+/// streams.
+pub fn pass_seed(seed: u64, pass: u32) -> u64 {
+    let mut z = seed ^ (pass as u64 + 1).wrapping_mul(0x9E37_79B9_7F4A_7C15);
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    z ^ (z >> 31)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -108,14 +118,4 @@ mod tests {
         assert!(c1 < 115.6, "1-D chi2 {c1}");
         assert!(c2 < 346.0, "2-D chi2 {c2}");
     }
-}
-
-/// The seed of pass (or frame) `pass` of a run seeded `seed`: a bijective mix (SplitMix64's
-/// finaliser) of both, so passes of a frame, and frames of nearby seeds, get unrelated random
-/// streams.
-pub fn pass_seed(seed: u64, pass: u32) -> u64 {
-    let mut z = seed ^ (pass as u64 + 1).wrapping_mul(0x9E37_79B9_7F4A_7C15);
-    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-    z ^ (z >> 31)
 }

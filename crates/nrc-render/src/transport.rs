@@ -230,8 +230,8 @@ impl PathWalk {
             return None;
         }
         let mut weight = bs.weight;
-        // Scattering events so far.
-        if self.segments - 1 >= self.tracer.rr_depth {
+        // Scattering events so far (segments − 1) at least rr_depth.
+        if self.segments > self.tracer.rr_depth {
             let q = self.throughput.max_element().min(0.95);
             if q.is_nan() || q <= 0.0 || sampler.next_1d() >= q {
                 return None;

@@ -14,7 +14,7 @@ use crate::source::CacheSource;
 use crate::starts::{self, TerminationPoint};
 
 /// Training records produced per frame by default.
-pub const DEFAULT_RECORDS_PER_FRAME: usize = 1 << 16;
+pub const DEFAULT_RECORDS_PER_FRAME: usize = 1 << 12;
 
 /// Settings of the online loop.
 #[derive(Clone, Debug, PartialEq)]

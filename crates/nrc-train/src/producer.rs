@@ -338,10 +338,11 @@ mod tests {
             "weighted"
         }
         fn produce(&mut self, _: &ProducerContext, budget: usize, _: u64) -> Produced {
-            let mut batch = TrainingBatch::default();
-            batch.queries = vec![Default::default(); budget];
-            batch.targets = vec![[1.0; 3]; budget];
-            batch.weights = self.0.map(|w| vec![w; budget]);
+            let batch = TrainingBatch {
+                queries: vec![Default::default(); budget],
+                targets: vec![[1.0; 3]; budget],
+                weights: self.0.map(|w| vec![w; budget]),
+            };
             Produced {
                 batch,
                 stats: Default::default(),

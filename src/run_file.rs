@@ -1,0 +1,96 @@
+//! Run files: a whole run described by one JSON document, as tiny-cuda-nn describes a model.
+//! `nrc train --run run.json [flags]` (and `render`, `compare`): every field of the object is
+//! the subcommand's flag of the same name (`snake_case` or `kebab-case`), so the run file's
+//! schema is the command's help; flags given on the command line override the file's.
+//!
+//! ```json
+//! { "scene": "scenes/cornell-box.gltf", "camera_path": "scenes/orbit.json",
+//!   "producer": "mix:pt-sl=0.5,sppc=0.5", "pass": "cache-first", "frames": 200,
+//!   "records": 16384, "config": { "encoding": { "otype": "HashGrid", ... }, ... } }
+//! ```
+//!
+//! Values: strings and numbers as on the command line, `true` for a switch (`false` or `null`:
+//! left out), three numbers `[x, y, z]` for a vector, a list for a comma-separated list, and
+//! for `config` an inline cache configuration object as well as a preset name or file. Paths
+//! are relative to the working directory, as on the command line.
+
+use std::ffi::OsString;
+use std::path::Path;
+
+use anyhow::{Context, Result, bail};
+use clap::CommandFactory;
+
+/// The command line with the run file named by `--run FILE` (after the subcommand) expanded
+/// into flags placed before the command line's own, which therefore override them.
+pub fn expand(args: Vec<OsString>) -> Result<Vec<OsString>> {
+    let Some(i) = args.iter().position(|a| a == "--run") else {
+        return Ok(args);
+    };
+    let Some(file) = args.get(i + 1) else {
+        bail!("--run needs a run file");
+    };
+    let Some(sub) = args.get(1).and_then(|s| s.to_str()) else {
+        bail!("--run needs a subcommand before it");
+    };
+    let flags = flags_of(Path::new(file), sub)?;
+    let mut out = args[..2].to_vec();
+    out.extend(flags);
+    out.extend(args[2..].iter().cloned());
+    Ok(out)
+}
+
+/// The run file's fields as flags of subcommand `sub`.
+fn flags_of(path: &Path, sub: &str) -> Result<Vec<OsString>> {
+    let what = || format!("run file {}", path.display());
+    let text = std::fs::read_to_string(path).with_context(|| format!("cannot read {}", what()))?;
+    let value: serde_json::Value =
+        serde_json::from_str(&text).with_context(|| format!("{} is not JSON", what()))?;
+    let Some(fields) = value.as_object() else {
+        bail!("{}: expected an object of flags", what());
+    };
+    let command = crate::Cli::command();
+    let Some(sub_cmd) = command.find_subcommand(sub) else {
+        bail!("{}: unknown subcommand `{sub}`", what());
+    };
+    let known: Vec<String> = sub_cmd
+        .get_arguments()
+        .filter_map(|a| a.get_long().map(str::to_string))
+        .collect();
+    let mut flags = Vec::new();
+    for (key, v) in fields {
+        let flag = key.replace('_', "-");
+        if flag == "run" || !known.contains(&flag) {
+            bail!(
+                "{}: unknown field `{key}` (the fields are the flags of `nrc {sub}`: see `nrc {sub} --help`)",
+                what()
+            );
+        }
+        let text = match v {
+            serde_json::Value::Null | serde_json::Value::Bool(false) => continue,
+            serde_json::Value::Bool(true) => None,
+            serde_json::Value::String(s) => Some(s.clone()),
+            serde_json::Value::Number(n) => Some(n.to_string()),
+            serde_json::Value::Array(items) => {
+                let parts: Option<Vec<String>> = items
+                    .iter()
+                    .map(|x| match x {
+                        serde_json::Value::String(s) => Some(s.clone()),
+                        serde_json::Value::Number(n) => Some(n.to_string()),
+                        _ => None,
+                    })
+                    .collect();
+                let Some(parts) = parts else {
+                    bail!("{}: field `{key}`: a list holds strings or numbers", what());
+                };
+                Some(parts.join(","))
+            }
+            serde_json::Value::Object(_) if flag == "config" => Some(v.to_string()),
+            serde_json::Value::Object(_) => {
+                bail!("{}: field `{key}` cannot be an object", what())
+            }
+        };
+        flags.push(OsString::from(format!("--{flag}")));
+        flags.extend(text.map(OsString::from));
+    }
+    Ok(flags)
+}
