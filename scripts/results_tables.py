@@ -28,14 +28,14 @@ for scene in sorted(os.listdir(out)):
     for n in spp.get("notes", []):
         if "emitter" in n:
             print(n + "\n")
-    print("| method | budget | ms/frame | spp | MSE | relMSE | FLIP | bias² | variance |")
-    print("|---|---|---:|---:|---:|---:|---:|---:|---:|")
+    print("| method | budget | ms/frame | spp | MSE | relMSE | MAPE | FLIP | bias² | variance |")
+    print("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|")
 
     def row(r, budget):
         bv = r.get("bias_variance") or {}
         print(
             f"| {r['method']} | {budget} | {r['time_per_frame_ms']:.1f} | {r['samples_per_pixel']:.2f} | "
-            f"{fmt(r['mse'])} | {fmt(r['rel_mse'])} | {fmt(r['flip'])} | {fmt(bv.get('bias_sq'))} | {fmt(bv.get('variance'))} |"
+            f"{fmt(r['mse'])} | {fmt(r['rel_mse'])} | {fmt(r['mape'])} | {fmt(r['flip'])} | {fmt(bv.get('bias_sq'))} | {fmt(bv.get('variance'))} |"
         )
 
     for r in spp["rows"]:

@@ -17,7 +17,7 @@ pub fn prefetch<T>(p: *const T) {
 
 /// Hints the cache to fetch the line holding `p` into L2 (and the levels above it), not L1
 /// (a no-op off x86-64). The encoding's table lines are requested this way: on the Zen 3
-/// machine of `BENCHMARKS.md` it cut the one-thread encode with random positions by 30–45 %
+/// machine of `docs/benchmarks-log.md` it cut the one-thread encode with random positions by 30–45 %
 /// against [`prefetch`] (L1), presumably because a request into L2 does not hold one of the
 /// few L1 miss buffers while it waits on memory, so more of them are in flight.
 #[inline(always)]
@@ -735,7 +735,7 @@ impl<const F: usize> LevelInput<'_, F> {
                     assert!(p < ends[bin], "bin {bin} overflows its counted size");
                     // The bin's write position 16 contributions (three lines) on: with 64 bins
                     // written at once the hardware does not fetch ahead of every stream, and the
-                    // stores waited on their lines (scatter 15–30 % faster, BENCHMARKS.md).
+                    // stores waited on their lines (scatter 15–30 % faster, docs/benchmarks-log.md).
                     prefetch(sorted.as_ptr().wrapping_add(p + 16));
                     // SAFETY: p < ends[bin] ≤ sorted.len() (checked above).
                     unsafe {

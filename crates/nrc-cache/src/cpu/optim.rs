@@ -378,7 +378,7 @@ unsafe fn sparse_step_f2_avx2(
     // The touched entries in increasing order, each group's records requested 64 entries
     // (about 9 KiB of records) before they are updated: with the hardware prefetchers alone the
     // loads of the records waited on memory (most of this loop's time, by `perf`); the software
-    // requests cut the update's time by 10–25 % (BENCHMARKS.md). The order, and so every bit of
+    // requests cut the update's time by 10–25 % (docs/benchmarks-log.md). The order, and so every bit of
     // the result, is unchanged.
     const AHEAD_ENTRIES: usize = 64;
     ORDER.with_borrow_mut(|order| {
