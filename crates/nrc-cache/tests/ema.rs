@@ -395,3 +395,51 @@ fn half_table_is_the_f32_table_rounded_to_nearest() {
         );
     }
 }
+
+/// The fused step gives the same bits whatever the thread count and however rayon splits the
+/// work: three steps of 8 192 samples on one thread and on three, then every weight and every
+/// EMA weight compared bit for bit. (Phase A once summed the MLP gradients per work split, so
+/// two runs of one seed trained slightly different networks.)
+#[test]
+fn fused_training_is_the_same_whatever_the_thread_count() {
+    let run = |threads: usize| {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
+        pool.install(|| {
+            let mut config = CacheConfig::hash_grid_preset();
+            if let Some(NestedEncoding::HashGrid {
+                log2_hashmap_size, ..
+            }) = config.encoding.nested.first_mut()
+            {
+                *log2_hashmap_size = 14;
+            }
+            let mut cache = RadianceCache::with_path(
+                config,
+                SceneBox::default(),
+                CacheDevice::Cpu,
+                ComputePath::Fused,
+            )
+            .unwrap();
+            let mut losses = Vec::new();
+            for step in 0..3 {
+                losses.push(cache.train(&batch(8192, 40 + step), 1).unwrap().loss);
+            }
+            let (g, m) = cache.weights();
+            let (eg, em) = cache.inference_weights();
+            let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            (
+                losses,
+                bits(&g),
+                bits(&m),
+                bits(&tensor_vec(eg)),
+                bits(&tensor_vec(em)),
+            )
+        })
+    };
+    let one = run(1);
+    for threads in [2, 3] {
+        assert!(run(threads) == one, "{threads} threads differ from one");
+    }
+}

@@ -30,7 +30,8 @@ pub fn method_names() -> String {
     format!(
         "pt-<N>spp (reference path tracer, N samples per pixel per estimate, NEE and BSDF sampling combined by MIS), \
          pt-<N>spp-nonee (the same with next-event estimation off: BSDF sampling only), \
-         nrc-<producer>[-<termination>] (a cache trained online, 1 spp; producers: {PRODUCER_NAMES}; terminations: {TERMINATION_NAMES})"
+         nrc-<producer>[-<termination>] (a cache trained online, 1 spp; producers: {PRODUCER_NAMES}; terminations: {TERMINATION_NAMES}), \
+         or in general <pass>@<N>spp[+<producer>] (any pass of `--pass`, e.g. pt-light@4spp, cache-first-nonee@2spp+pt-sl)"
     )
 }
 
@@ -73,6 +74,31 @@ impl FromStr for MethodSpec {
             name: s.to_string(),
             reason: reason.to_string(),
         };
+        // The general form: <pass>@<N>spp[+<producer>].
+        if let Some((pass, rest)) = s.split_once('@') {
+            let pass: PassSpec = pass.parse().map_err(|e: String| err(&e))?;
+            let (spp, producer) = match rest.split_once('+') {
+                Some((spp, p)) => (spp, Some(p.parse::<ProducerSpec>().map_err(|e| err(&e))?)),
+                None => (rest, None),
+            };
+            let spp: u32 = spp
+                .strip_suffix("spp")
+                .and_then(|n| n.parse().ok())
+                .filter(|n| *n >= 1)
+                .ok_or_else(|| err("after `@`: samples per pixel, e.g. @4spp"))?;
+            if pass.uses_source() != producer.is_some() {
+                return Err(err(if producer.is_some() {
+                    "this pass reads no cache: leave out +<producer>"
+                } else {
+                    "this pass reads a cache: name its producer, e.g. +pt-sl"
+                }));
+            }
+            return Ok(Self {
+                pass,
+                spp,
+                producer,
+            });
+        }
         if let Some(rest) = s.strip_prefix("nrc-") {
             if rest.starts_with("mix:") {
                 return Err(err(
@@ -135,29 +161,44 @@ impl FromStr for MethodSpec {
 }
 
 impl fmt::Display for MethodSpec {
-    /// The canonical name (parses back to the same spec).
+    /// The canonical name (parses back to the same spec): the short names where they exist,
+    /// else the general form.
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        match (&self.pass, &self.producer) {
-            (PassSpec::CacheTerminated { termination, .. }, Some(p)) => {
+        match (&self.pass, &self.producer, self.spp) {
+            (
+                PassSpec::CacheTerminated {
+                    termination,
+                    nee: true,
+                },
+                Some(p),
+                1,
+            ) => {
                 if *termination == Termination::default() {
                     write!(f, "nrc-{p}")
                 } else {
                     write!(f, "nrc-{p}-{termination}")
                 }
             }
-            (PassSpec::PathTraced { strategy }, _) => {
-                write!(f, "pt-{}spp", self.spp)?;
-                if *strategy == LightStrategy::BsdfOnly {
-                    f.write_str("-nonee")?;
-                }
-                Ok(())
+            (
+                PassSpec::PathTraced {
+                    strategy: LightStrategy::Mis,
+                },
+                None,
+                spp,
+            ) => {
+                write!(f, "pt-{spp}spp")
             }
-            (pass, p) => write!(
-                f,
-                "{pass}@{}spp{}",
-                self.spp,
-                p.as_ref().map(|p| format!("+{p}")).unwrap_or_default()
-            ),
+            (
+                PassSpec::PathTraced {
+                    strategy: LightStrategy::BsdfOnly,
+                },
+                None,
+                spp,
+            ) => {
+                write!(f, "pt-{spp}spp-nonee")
+            }
+            (pass, None, spp) => write!(f, "{pass}@{spp}spp"),
+            (pass, Some(p), spp) => write!(f, "{pass}@{spp}spp+{p}"),
         }
     }
 }
@@ -414,9 +455,21 @@ mod tests {
             "nrc-pt-first",
             "nrc-pt-sl-bth:8",
             "nrc-sppc-diffuse",
+            "pt-light@4spp",
+            "cache-first-nonee@1spp+pt-sl",
+            "cache-bth:8@2spp+bt",
         ] {
             let spec: MethodSpec = name.parse().unwrap();
             assert_eq!(spec.to_string(), name);
+        }
+        // The general form of the short names prints as the short name.
+        for (general, short) in [
+            ("pt@4spp", "pt-4spp"),
+            ("pt-nonee@2spp", "pt-2spp-nonee"),
+            ("cache@1spp+pt-sl", "nrc-pt-sl"),
+            ("cache-first@1spp+bt", "nrc-bt-first"),
+        ] {
+            assert_eq!(general.parse::<MethodSpec>().unwrap().to_string(), short);
         }
         assert_eq!(
             "pt-4spp-nonee".parse::<MethodSpec>().unwrap(),
@@ -446,6 +499,11 @@ mod tests {
             "nrc-mix:pt=1",
             "px-1spp",
             "nrc-pt-sl-spread:0",
+            "pt@0spp",
+            "pt@4",
+            "pt@4spp+pt-sl",
+            "cache@1spp",
+            "cache-nope@1spp+pt",
         ] {
             let e = bad.parse::<MethodSpec>().unwrap_err().to_string();
             assert!(

@@ -105,6 +105,9 @@ pub struct PathWalk {
     /// Segments used, including the one in flight.
     segments: u32,
     limit: u32,
+    /// End the path when its throughput from the start is zero (rendering); training-record
+    /// producers keep going, since a later vertex's own record does not depend on it.
+    zero_throughput_ends: bool,
 }
 
 impl PathWalk {
@@ -120,6 +123,17 @@ impl PathWalk {
             prev_delta: true,
             segments: 1,
             limit: tracer.segment_limit(),
+            zero_throughput_ends: true,
+        }
+    }
+
+    /// The same walk for a producer of per-vertex training records: a zero throughput from the
+    /// path's start does not end it (each vertex's record needs only its own continuation);
+    /// Russian roulette, relative to that throughput, still ends it from `rr_depth` on.
+    pub fn for_records(self) -> Self {
+        Self {
+            zero_throughput_ends: false,
+            ..self
         }
     }
 
@@ -226,7 +240,7 @@ impl PathWalk {
         self.throughput *= bs.weight;
         self.ray = spawn_ray(v.si.p, v.si.ng, v.frame.to_world(bs.wi));
         self.segments += 1;
-        if self.throughput == Vec3::ZERO {
+        if self.zero_throughput_ends && self.throughput == Vec3::ZERO {
             return None;
         }
         let mut weight = bs.weight;

@@ -43,8 +43,9 @@ pub struct OnlineSettings {
 }
 
 impl OnlineSettings {
-    /// NRC's defaults for `scene`: 2^16 records a frame in steps of 2^14, camera-tile queries,
-    /// spread-heuristic termination with NEE, 1 sample per pixel.
+    /// The defaults for `scene`: [`DEFAULT_RECORDS_PER_FRAME`] records a frame (NRC trains 2^16
+    /// on a GPU) in steps of at most 2^14, camera-tile queries, spread-heuristic termination with
+    /// NEE, 1 sample per pixel.
     pub fn new(producer: ProducerSpec, scene: &Scene, tracer: PathTracer) -> Self {
         Self {
             producer,

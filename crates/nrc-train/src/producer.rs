@@ -78,7 +78,7 @@ pub(crate) fn check_light_paths(name: &str, scene: &Scene) -> Result<(), String>
     let bg = scene.background;
     if bg.max_element() > 0.0 {
         return Err(format!(
-            "producer {name} cannot serve this scene: it is lit by the background ({}, {}, {}), and {name}'s light paths start only at emissive triangles, so its targets would leave that light out; use pt or pt-sl (or mix them in)",
+            "producer {name} cannot serve this scene: it is lit by the background ({}, {}, {}), and {name}'s light paths start only at emissive triangles, so its targets would leave that light out; use pt or pt-sl instead",
             bg.x, bg.y, bg.z
         ));
     }

@@ -60,6 +60,10 @@ pub struct GridState<'a> {
     pub half: Option<&'a mut [f16]>,
 }
 
+/// Groups of tiles whose losses and gradients phase A sums separately (then in order): a fixed
+/// number, so the sums do not depend on the thread count.
+const REDUCTION_GROUPS: usize = 16;
+
 /// Loss settings of a step.
 #[derive(Clone, Copy, Debug)]
 pub struct LossSettings {
@@ -106,65 +110,76 @@ fn forward_backward(
             }
         }
     }
-    let (loss_sum, mgrad) = rows
-        .par_chunks(TILE * TRAIN_ROW)
-        .zip(tile_outs.into_par_iter())
-        .fold(
-            || {
-                (
-                    0f64,
-                    MlpGrad::zeros(&prepared),
-                    TileScratch::new(k_in, hidden),
-                )
-            },
-            |(mut loss_acc, mut grad, mut s), (rows_t, mut outs)| {
-                let m = rows_t.len() / TRAIN_ROW;
-                let t_encode = Instant::now();
-                super::encode_rows(layout, &fast, table, rows_t, TRAIN_ROW, &mut s.x, k_in);
-                add_phase(0, t_encode);
-                let t_mlp = Instant::now();
-                forward_tile(&prepared, m, &mut s);
-                for i in 0..m {
-                    let row = &rows_t[i * TRAIN_ROW..(i + 1) * TRAIN_ROW];
-                    let o = &s.out[i * OUT_PAD..i * OUT_PAD + 3];
-                    let (l, g) = sample_loss(
-                        loss.activation,
-                        [o[0], o[1], o[2]],
-                        [row[FACTOR_AT], row[FACTOR_AT + 1], row[FACTOR_AT + 2]],
-                        [row[TARGET_AT], row[TARGET_AT + 1], row[TARGET_AT + 2]],
-                        row[WEIGHT_AT],
-                        loss.epsilon,
-                        scale,
-                    );
-                    loss_acc += l;
-                    let d = &mut s.dout[i * OUT_PAD..(i + 1) * OUT_PAD];
-                    d[..3].copy_from_slice(&g);
-                    d[3..].fill(0.0);
-                }
-                // Each row's gradient columns straight into their levels (a pass over the
-                // whole batch in phase C cost 40–70 ns a sample more).
-                let mut to_levels = |i: usize, row: &[f32]| {
-                    // (Element by element: `copy_from_slice` of two floats calls `memmove`.)
-                    for (out, g) in outs.iter_mut().zip(row.chunks_exact(features)) {
-                        for (o, v) in out[i * features..(i + 1) * features].iter_mut().zip(g) {
-                            *o = *v;
-                        }
+    // Tiles are summed in a fixed number of groups of consecutive tiles, each group in tile
+    // order and the groups in group order, so the loss and the MLP gradients are the same bits
+    // whatever the thread count. (A rayon fold summed one accumulator per work split, and the
+    // splits follow work stealing: two runs of one seed trained slightly different networks.)
+    let tiles_in: Vec<(&[f32], Vec<&mut [f32]>)> =
+        rows.chunks(TILE * TRAIN_ROW).zip(tile_outs).collect();
+    let per_group = tiles.div_ceil(REDUCTION_GROUPS).max(1);
+    let mut groups: Vec<Vec<(&[f32], Vec<&mut [f32]>)>> = Vec::new();
+    let mut tiles_in = tiles_in.into_iter().peekable();
+    while tiles_in.peek().is_some() {
+        groups.push(tiles_in.by_ref().take(per_group).collect());
+    }
+    let partial: Vec<(f64, MlpGrad)> = groups
+        .into_par_iter()
+        .map_init(
+            // Scratch only: every tile overwrites what it reads, so its history is irrelevant.
+            || TileScratch::new(k_in, hidden),
+            |s, group| {
+                let mut loss_acc = 0f64;
+                let mut grad = MlpGrad::zeros(&prepared);
+                for (rows_t, mut outs) in group {
+                    let m = rows_t.len() / TRAIN_ROW;
+                    let t_encode = Instant::now();
+                    super::encode_rows(layout, &fast, table, rows_t, TRAIN_ROW, &mut s.x, k_in);
+                    add_phase(0, t_encode);
+                    let t_mlp = Instant::now();
+                    forward_tile(&prepared, m, s);
+                    for i in 0..m {
+                        let row = &rows_t[i * TRAIN_ROW..(i + 1) * TRAIN_ROW];
+                        let o = &s.out[i * OUT_PAD..i * OUT_PAD + 3];
+                        let (l, g) = sample_loss(
+                            loss.activation,
+                            [o[0], o[1], o[2]],
+                            [row[FACTOR_AT], row[FACTOR_AT + 1], row[FACTOR_AT + 2]],
+                            [row[TARGET_AT], row[TARGET_AT + 1], row[TARGET_AT + 2]],
+                            row[WEIGHT_AT],
+                            loss.epsilon,
+                            scale,
+                        );
+                        loss_acc += l;
+                        let d = &mut s.dout[i * OUT_PAD..(i + 1) * OUT_PAD];
+                        d[..3].copy_from_slice(&g);
+                        d[3..].fill(0.0);
                     }
-                };
-                let dx = (grid_dims > 0).then_some((grid_col, grid_dims, &mut to_levels as _));
-                backward_tile(&prepared, m, &mut s, &mut grad, dx);
-                add_phase(1, t_mlp);
-                (loss_acc, grad, s)
+                    // Each row's gradient columns straight into their levels (a pass over the
+                    // whole batch in phase C cost 40–70 ns a sample more).
+                    let mut to_levels = |i: usize, row: &[f32]| {
+                        // (Element by element: `copy_from_slice` of two floats calls `memmove`.)
+                        for (out, g) in outs.iter_mut().zip(row.chunks_exact(features)) {
+                            for (o, v) in out[i * features..(i + 1) * features].iter_mut().zip(g) {
+                                *o = *v;
+                            }
+                        }
+                    };
+                    let dx = (grid_dims > 0).then_some((grid_col, grid_dims, &mut to_levels as _));
+                    backward_tile(&prepared, m, s, &mut grad, dx);
+                    add_phase(1, t_mlp);
+                }
+                (loss_acc, grad)
             },
         )
-        .map(|(l, g, _)| (l, g))
-        .reduce(
-            || (0.0, MlpGrad::zeros(&prepared)),
-            |(la, mut ga), (lb, gb)| {
-                ga.add(&gb);
-                (la + lb, ga)
-            },
-        );
+        .collect();
+    let mut partial = partial.into_iter();
+    let (mut loss_sum, mut mgrad) = partial
+        .next()
+        .unwrap_or_else(|| (0.0, MlpGrad::zeros(&prepared)));
+    for (l, g) in partial {
+        loss_sum += l;
+        mgrad.add(&g);
+    }
     (loss_sum, mgrad, dxg)
 }
 

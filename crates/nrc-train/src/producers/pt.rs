@@ -87,7 +87,7 @@ impl PathProducer {
         let heuristic = self.self_learning && !unbiased;
         let mut out = TracedPath::default();
         let mut stats = PathStats::default();
-        let mut walk = PathWalk::from_ray(scene, &tracer, start.ray);
+        let mut walk = PathWalk::from_ray(scene, &tracer, start.ray).for_records();
         let mut spread = Spread::new(self.spread_c);
         let mut in_suffix = false;
         let mut fired = false;
@@ -143,6 +143,9 @@ impl PathProducer {
                 break;
             };
             out.vertices.last_mut().expect("just pushed").weight = s.weight;
+            if s.weight == Vec3::ZERO {
+                break;
+            }
         }
         out.rays = stats.rays();
         out
