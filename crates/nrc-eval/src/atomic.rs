@@ -1,33 +1,21 @@
 //! Atomic file output: every file is written to a temporary name in its target directory and
 //! renamed over the target, so readers never see a half-written report, plot or image.
 
-use std::io::Write;
 use std::path::Path;
 
 use crate::error::{EvalError, Result};
 
-/// Writes `bytes` to `path` atomically (temporary file in the same directory, then rename).
+/// Writes `bytes` to `path` atomically (the project's one way,
+/// [`nrc_scene::image::write_atomic`]: a temporary file in the same directory, then renamed).
 pub fn atomic_write(path: &Path, bytes: &[u8]) -> Result<()> {
-    let io = |action: &'static str| {
-        move |source: std::io::Error| EvalError::Io {
-            action,
-            path: path.to_path_buf(),
-            source,
-        }
-    };
-    let dir = match path.parent() {
-        Some(d) if !d.as_os_str().is_empty() => d,
-        _ => Path::new("."),
-    };
-    let mut tmp = tempfile::Builder::new()
-        .prefix(".nrc-eval-")
-        .tempfile_in(dir)
-        .map_err(io("creating a temporary file for"))?;
-    tmp.write_all(bytes).map_err(io("writing"))?;
-    tmp.as_file().sync_all().map_err(io("syncing"))?;
-    tmp.persist(path)
-        .map_err(|e| io("renaming the temporary file onto")(e.error))?;
-    Ok(())
+    nrc_scene::image::write_atomic(path, bytes).map_err(|e| EvalError::Io {
+        action: "writing",
+        path: path.to_path_buf(),
+        source: match e {
+            nrc_scene::SceneError::Io { source, .. } => source,
+            other => std::io::Error::other(other.to_string()),
+        },
+    })
 }
 
 /// Encodes 8-bit RGB pixels (row-major, top row first) as PNG bytes.

@@ -168,6 +168,9 @@ pub fn aces_filmic(x: f32) -> f32 {
 
 /// Writes `bytes` to `path` atomically: a temporary file in the same folder (the `tempfile`
 /// crate, as everywhere in the project), flushed to disk, then renamed over the destination.
+/// The file gets the permissions `File::create` would give (0o666 less the umask), not
+/// tempfile's private 0o600. The one atomic write of the scene, render and evaluation outputs
+/// (the cache's snapshots, which know nothing of scenes, do the same in `nrc-cache`).
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
     let io = |source: std::io::Error| SceneError::Io {
         path: path.to_path_buf(),
@@ -177,10 +180,14 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
         Some(d) if !d.as_os_str().is_empty() => d,
         _ => Path::new("."),
     };
-    let mut tmp = tempfile::Builder::new()
-        .prefix(".nrc-")
-        .tempfile_in(dir)
-        .map_err(io)?;
+    let mut builder = tempfile::Builder::new();
+    builder.prefix(".nrc-").suffix(".tmp");
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        builder.permissions(std::fs::Permissions::from_mode(0o666));
+    }
+    let mut tmp = builder.tempfile_in(dir).map_err(io)?;
     tmp.write_all(bytes).map_err(io)?;
     tmp.as_file().sync_all().map_err(io)?;
     tmp.persist(path).map_err(|e| io(e.error))?;

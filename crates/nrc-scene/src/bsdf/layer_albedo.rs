@@ -103,7 +103,7 @@ mod tests {
     /// The interpolated table stays within `TABLE_ERROR / 1.5` of a fresh 384² quadrature
     /// (the rest of the margin covers that reference's own error), on a deterministic
     /// low-discrepancy set of (α, cos θ) off the grid, including both ends of each range.
-    /// Writes `layer_albedo_table.in` (atomically: temporary file, then rename).
+    /// Writes `layer_albedo_table.in` (atomically, through [`crate::image::write_atomic`]).
     #[test]
     #[ignore = "generator: run explicitly to rebuild the baked table"]
     fn regenerate_layer_albedo_table() {
@@ -118,9 +118,7 @@ mod tests {
         }
         out.push_str("]\n");
         let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("src/bsdf");
-        let tmp = dir.join(".layer_albedo_table.in.tmp");
-        std::fs::write(&tmp, out).unwrap();
-        std::fs::rename(&tmp, dir.join("layer_albedo_table.in")).unwrap();
+        crate::image::write_atomic(&dir.join("layer_albedo_table.in"), out.as_bytes()).unwrap();
     }
 
     #[test]
