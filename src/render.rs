@@ -5,7 +5,8 @@ use std::sync::atomic::{AtomicU64, Ordering};
 
 use anyhow::{Context, Result, bail};
 use indicatif::{ProgressBar, ProgressStyle};
-use nrc_render::{LightStrategy, PathTracer, RenderSettings, render};
+use nrc_render::passes::{self, FrameInput, PassSpec, PathTracedPass, RenderPass};
+use nrc_render::{LightStrategy, PathTracer, ZeroSource};
 
 use crate::args::TracerArgs;
 
@@ -78,65 +79,12 @@ pub struct RenderArgs {
     /// cache[-TERMINATION][-nonee] (paths ending in the --cache snapshot, instead of
     /// --termination).
     #[arg(long)]
-    pub pass: Option<nrc_render::PassSpec>,
+    pub pass: Option<PassSpec>,
 
     /// Render with a --cache snapshot trained on another scene (or another version of this
     /// one) instead of refusing it.
     #[arg(long)]
     pub allow_other_scene: bool,
-}
-
-/// Renders from a cache snapshot: cache-terminated paths at `spp`, NEE per --strategy
-/// (MIS unless `bsdf`).
-fn render_cached(
-    args: &RenderArgs,
-    pass: nrc_render::PassSpec,
-    snapshot: &std::path::Path,
-    scene: &nrc_scene::Scene,
-) -> Result<nrc_scene::Image> {
-    let cache = nrc_cache::RadianceCache::load(snapshot, args.device.resolve_and_print())
-        .with_context(|| format!("cannot load the cache snapshot {}", snapshot.display()))?;
-    if let Err(e) = nrc_harness::run::check_snapshot_scene(&cache, scene, &args.scene.scene)? {
-        if !args.allow_other_scene {
-            bail!("{}: {e}", snapshot.display());
-        }
-        eprintln!(
-            "warning: {}: {e} (allowed by --allow-other-scene)",
-            snapshot.display()
-        );
-    }
-    let mut pass = pass.build(&args.tracer.tracer());
-    let pool = thread_pool(args.threads)?;
-    let start = std::time::Instant::now();
-    let input = nrc_render::FrameInput {
-        scene,
-        camera: &scene.camera,
-        width: args.width,
-        height: args.height,
-        spp: args.spp,
-        seed: args.seed,
-    };
-    let out = pool.install(|| {
-        nrc_render::passes::run(pass.as_mut(), &input, &nrc_train::CacheSource::new(&cache))
-    });
-    if out.stats.invalid_samples > 0 {
-        eprintln!(
-            "warning: {} samples were NaN or infinite and counted as black",
-            out.stats.invalid_samples
-        );
-    }
-    println!(
-        "rendered {}x{} at {} spp with {} from the cache {} in {:.3} s ({} cache queries, {:.1} ms in the cache)",
-        args.width,
-        args.height,
-        args.spp,
-        pass.name(),
-        snapshot.display(),
-        start.elapsed().as_secs_f64(),
-        out.stats.queries,
-        out.stats.cache_ms
-    );
-    Ok(out.image)
 }
 
 pub fn thread_pool(threads: Option<usize>) -> Result<rayon::ThreadPool> {
@@ -182,68 +130,83 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         eprintln!("warning: {w}");
     }
     let tracer = args.tracer.tracer();
-    let pass = args.pass.unwrap_or(if args.cache.is_some() {
-        nrc_render::PassSpec::CacheTerminated {
+    let spec = args.pass.unwrap_or(if args.cache.is_some() {
+        PassSpec::CacheTerminated {
             termination: args.termination,
             nee: tracer.strategy != LightStrategy::BsdfOnly,
         }
     } else {
-        nrc_render::PassSpec::PathTraced {
+        PassSpec::PathTraced {
             strategy: tracer.strategy,
         }
     });
-    if pass.uses_source() {
-        let Some(snapshot) = &args.cache else {
-            bail!("the pass {pass} ends paths in a cache: give it one with --cache snapshot.nrc");
-        };
-        if args.variance.is_some() {
-            bail!("--variance is not available with --cache");
-        }
-        let image = render_cached(args, pass, snapshot, &scene)?;
-        image.write_exr(&args.out)?;
-        if let Some(png) = &args.png {
-            image.write_png_preview(png, args.exposure)?;
-        }
-        return Ok(());
+    if args.variance.is_some() && !matches!(spec, PassSpec::PathTraced { .. }) {
+        bail!("--variance is only available with the pt passes");
     }
-    let settings = RenderSettings {
-        width: args.width,
-        height: args.height,
-        spp: args.spp,
-        seed: args.seed,
-        variance: args.variance.is_some(),
+    // The radiance source: the --cache snapshot, checked against the scene, for the passes
+    // that read one.
+    let cache = match (spec.uses_source(), &args.cache) {
+        (false, _) => None,
+        (true, None) => {
+            bail!("the pass {spec} ends paths in a cache: give it one with --cache snapshot.nrc")
+        }
+        (true, Some(snapshot)) => {
+            let cache = nrc_cache::RadianceCache::load(snapshot, args.device.resolve_and_print())
+                .with_context(|| {
+                format!("cannot load the cache snapshot {}", snapshot.display())
+            })?;
+            if let Err(e) =
+                nrc_harness::run::check_snapshot_scene(&cache, &scene, &args.scene.scene)?
+            {
+                if !args.allow_other_scene {
+                    bail!("{}: {e}", snapshot.display());
+                }
+                eprintln!(
+                    "warning: {}: {e} (allowed by --allow-other-scene)",
+                    snapshot.display()
+                );
+            }
+            Some((cache, snapshot))
+        }
     };
-    let pool = thread_pool(args.threads)?;
-
-    let total = args.width as u64 * args.height as u64;
-    let bar = ProgressBar::new(total).with_style(
+    let bar = ProgressBar::new(args.width as u64 * args.height as u64).with_style(
         ProgressStyle::with_template("{elapsed_precise} [{bar:40}] {percent:>3}% ETA {eta}")
             .expect("valid progress template")
             .progress_chars("=> "),
     );
-    // Updating the bar from every tile would contend on its lock; batch the counts.
-    let done = AtomicU64::new(0);
-    let strategy = match pass {
-        nrc_render::PassSpec::PathTraced { strategy } => strategy,
-        _ => tracer.strategy,
+    let mut pass = match spec {
+        PassSpec::PathTraced { strategy } => {
+            let mut p = PathTracedPass::new(PathTracer { strategy, ..tracer });
+            p.variance = args.variance.is_some();
+            let (bar, done) = (bar.clone(), AtomicU64::new(0));
+            // Batched counts: updating the bar from every tile would contend on its lock.
+            p.progress = Some(Box::new(move |n| {
+                bar.set_position(done.fetch_add(n, Ordering::Relaxed) + n);
+            }));
+            Box::new(p) as Box<dyn RenderPass>
+        }
+        _ => spec.build(&tracer),
     };
-    let out = pool.install(|| {
-        render(
-            &scene,
-            &scene.camera,
-            &PathTracer { strategy, ..tracer },
-            &settings,
-            &|n| {
-                let d = done.fetch_add(n, Ordering::Relaxed) + n;
-                bar.set_position(d);
-            },
-        )
+    let input = FrameInput {
+        scene: &scene,
+        camera: &scene.camera,
+        width: args.width,
+        height: args.height,
+        spp: args.spp,
+        seed: args.seed,
+    };
+    let pool = thread_pool(args.threads)?;
+    let start = std::time::Instant::now();
+    let out = pool.install(|| match &cache {
+        Some((c, _)) => passes::run(pass.as_mut(), &input, &nrc_train::CacheSource::new(c)),
+        None => passes::run(pass.as_mut(), &input, &ZeroSource),
     });
+    let seconds = start.elapsed().as_secs_f64();
     bar.finish_and_clear();
 
-    out.mean.write_exr(&args.out)?;
+    out.image.write_exr(&args.out)?;
     if let Some(png) = &args.png {
-        out.mean.write_png_preview(png, args.exposure)?;
+        out.image.write_png_preview(png, args.exposure)?;
     }
     if let Some(path) = &args.variance {
         match &out.variance {
@@ -258,15 +221,26 @@ pub fn run(args: &RenderArgs) -> Result<()> {
             s.invalid_samples
         );
     }
+    let from = cache
+        .as_ref()
+        .map(|(_, p)| {
+            format!(
+                " from the cache {} ({} cache queries, {:.1} ms in the cache)",
+                p.display(),
+                s.queries,
+                s.cache_ms
+            )
+        })
+        .unwrap_or_default();
     println!(
-        "rendered {}x{} at {} spp in {:.3} s on {} threads: {:.3} M samples/s, {:.2} M rays/s",
+        "rendered {}x{} at {} spp with {}{from} in {seconds:.3} s on {} threads: {:.3} M samples/s, {:.2} M rays/s",
         args.width,
         args.height,
         args.spp,
-        s.elapsed.as_secs_f64(),
+        pass.name(),
         pool.current_num_threads(),
-        s.samples_per_second() * 1e-6,
-        s.rays_per_second() * 1e-6
+        s.paths as f64 / seconds * 1e-6,
+        s.rays as f64 / seconds * 1e-6
     );
     Ok(())
 }

@@ -9,13 +9,26 @@ use crate::path_tracer::PathTracer;
 use crate::render::{RenderOutput, RenderSettings, render};
 use crate::source::RadianceQuery;
 
+/// Called with the number of pixels just finished, as tiles finish (progress bars).
+pub type Progress = Box<dyn Fn(u64) + Send + Sync>;
+
 /// The reference path tracer's pass state: its settings and the frame traced last.
-#[derive(Clone, Debug)]
 pub struct PathTracedPass {
     pub tracer: PathTracer,
     /// Also compute the per-pixel sample variance (needs at least 2 samples per pixel).
     pub variance: bool,
+    /// Told of the pixels done as the trace phase goes.
+    pub progress: Option<Progress>,
     traced: Option<RenderOutput>,
+}
+
+impl std::fmt::Debug for PathTracedPass {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("PathTracedPass")
+            .field("tracer", &self.tracer)
+            .field("variance", &self.variance)
+            .finish_non_exhaustive()
+    }
 }
 
 impl PathTracedPass {
@@ -23,6 +36,7 @@ impl PathTracedPass {
         Self {
             tracer,
             variance: false,
+            progress: None,
             traced: None,
         }
     }
@@ -48,12 +62,17 @@ impl RenderPass for PathTracedPass {
             seed: input.seed,
             variance: self.variance,
         };
+        let progress = |n: u64| {
+            if let Some(p) = &self.progress {
+                p(n);
+            }
+        };
         self.traced = Some(render(
             input.scene,
             input.camera,
             &self.tracer,
             &settings,
-            &|_| {},
+            &progress,
         ));
         Vec::new()
     }
