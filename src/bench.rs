@@ -3,9 +3,9 @@
 
 use anyhow::{Result, bail};
 
-use crate::args::TracerArgs;
-use crate::render::thread_pool;
-use crate::scene_args::SceneArgs;
+use nrc_harness::options::SceneArgs;
+use nrc_harness::options::TracerArgs;
+use nrc_harness::options::thread_pool;
 
 #[derive(clap::Subcommand, Debug)]
 pub enum BenchCommand {
@@ -68,7 +68,7 @@ fn cache(a: &CacheBenchArgs) -> Result<()> {
         configs: a
             .configs
             .iter()
-            .map(|c| Ok((c.clone(), crate::cache_args::named_config(c)?)))
+            .map(|c| Ok((c.clone(), nrc_harness::options::named_config(c)?)))
             .collect::<Result<_>>()?,
         ..Default::default()
     };

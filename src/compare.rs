@@ -12,9 +12,9 @@ use nrc_harness::compare::{Comparison, Progress, compare, total_frames};
 use nrc_harness::reference::{self, ReferenceRequest};
 use nrc_scene::Scene;
 
-use crate::args::DepthArgs;
-use crate::reference::CacheArgs;
-use crate::scene_args::SceneArgs;
+use nrc_harness::options::CacheArgs;
+use nrc_harness::options::DepthArgs;
+use nrc_harness::options::SceneArgs;
 
 /// Arguments of `nrc compare`.
 #[derive(clap::Args, Debug)]
@@ -113,7 +113,7 @@ pub struct CompareArgs {
     pub frozen: bool,
 
     #[command(flatten)]
-    pub model: crate::cache_args::RadianceCacheArgs,
+    pub model: nrc_harness::options::RadianceCacheArgs,
 
     /// Worker threads (default: all cores).
     #[arg(long)]
@@ -152,7 +152,7 @@ pub fn run(args: &CompareArgs) -> Result<()> {
     for w in scene.warnings() {
         eprintln!("warning: {w}");
     }
-    let pool = crate::render::thread_pool(args.threads)?;
+    let pool = nrc_harness::options::thread_pool(args.threads)?;
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create output folder {}", args.out.display()))?;
     pool.install(|| run_comparison(args, budget, &scene))

@@ -2,7 +2,7 @@
 
 use anyhow::Result;
 
-use crate::scene_args::SceneArgs;
+use nrc_harness::options::SceneArgs;
 
 /// Arguments of `nrc info`.
 #[derive(clap::Args, Debug)]

@@ -5,15 +5,12 @@
 //! and `bench` (measured throughput). Every failure is reported as one `error: ...` line and a
 //! non-zero exit status.
 
-mod args;
 mod bench;
-mod cache_args;
 mod compare;
 mod info;
 mod reference;
 mod render;
 mod run_file;
-mod scene_args;
 mod train;
 
 use clap::{Parser, Subcommand};

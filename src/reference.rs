@@ -10,28 +10,9 @@ use anyhow::Result;
 use indicatif::{ProgressBar, ProgressStyle};
 use nrc_harness::reference::{ReferenceRequest, obtain};
 
-use crate::scene_args::SceneArgs;
+use nrc_harness::options::SceneArgs;
 
-use crate::args::DepthArgs;
-
-/// Where references are cached.
-#[derive(clap::Args, Debug, Clone)]
-pub struct CacheArgs {
-    /// Folder of cached references (default: $NRC_CACHE_DIR/references if NRC_CACHE_DIR is
-    /// set, else out/references).
-    #[arg(long)]
-    pub cache_dir: Option<PathBuf>,
-}
-
-impl CacheArgs {
-    pub fn dir(&self) -> PathBuf {
-        match (&self.cache_dir, std::env::var_os("NRC_CACHE_DIR")) {
-            (Some(d), _) => d.clone(),
-            (None, Some(root)) if !root.is_empty() => PathBuf::from(root).join("references"),
-            _ => PathBuf::from("out/references"),
-        }
-    }
-}
+use nrc_harness::options::{CacheArgs, DepthArgs};
 
 /// Arguments of `nrc reference`.
 #[derive(clap::Args, Debug)]
@@ -106,7 +87,7 @@ pub fn run(args: &ReferenceArgs) -> Result<()> {
     for w in scene.warnings() {
         eprintln!("warning: {w}");
     }
-    let pool = crate::render::thread_pool(args.threads)?;
+    let pool = nrc_harness::options::thread_pool(args.threads)?;
     let req = ReferenceRequest {
         scene_path: &args.scene.scene,
         scene: &scene,

@@ -8,9 +8,9 @@ use indicatif::{ProgressBar, ProgressStyle};
 use nrc_render::passes::{self, FrameInput, PassSpec, PathTracedPass, RenderPass};
 use nrc_render::{LightStrategy, PathTracer, ZeroSource};
 
-use crate::args::TracerArgs;
+use nrc_harness::options::TracerArgs;
 
-use crate::scene_args::SceneArgs;
+use nrc_harness::options::SceneArgs;
 
 #[derive(clap::Args, Debug)]
 pub struct RenderArgs {
@@ -68,12 +68,12 @@ pub struct RenderArgs {
     pub cache: Option<PathBuf>,
 
     /// With --cache: where paths end in it (first, diffuse[:R], spread[:C], bth[:K]).
-    #[arg(long, default_value = "spread", value_parser = crate::cache_args::parse_termination)]
+    #[arg(long, default_value = "spread", value_parser = nrc_harness::options::parse_termination)]
     pub termination: nrc_render::Termination,
 
     /// With --cache: where the cache computes.
-    #[arg(long, value_enum, default_value_t = crate::cache_args::DeviceArg::Cpu)]
-    pub device: crate::cache_args::DeviceArg,
+    #[arg(long, value_enum, default_value_t = nrc_harness::options::DeviceArg::Cpu)]
+    pub device: nrc_harness::options::DeviceArg,
 
     /// The pass: pt, pt-nonee, pt-light (the reference path tracer, instead of --strategy), or
     /// cache[-TERMINATION][-nonee] (paths ending in the --cache snapshot, instead of
@@ -85,16 +85,6 @@ pub struct RenderArgs {
     /// one) instead of refusing it.
     #[arg(long)]
     pub allow_other_scene: bool,
-}
-
-pub fn thread_pool(threads: Option<usize>) -> Result<rayon::ThreadPool> {
-    if threads == Some(0) {
-        bail!("--threads must be at least 1");
-    }
-    rayon::ThreadPoolBuilder::new()
-        .num_threads(threads.unwrap_or(0))
-        .build()
-        .context("cannot start worker threads")
 }
 
 /// Renders and writes the image(s), with a progress bar and a closing line.
@@ -195,7 +185,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         spp: args.spp,
         seed: args.seed,
     };
-    let pool = thread_pool(args.threads)?;
+    let pool = nrc_harness::options::thread_pool(args.threads)?;
     let start = std::time::Instant::now();
     let out = pool.install(|| match &cache {
         Some((c, _)) => passes::run(pass.as_mut(), &input, &nrc_train::CacheSource::new(c)),

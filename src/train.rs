@@ -11,9 +11,9 @@ use nrc_render::Termination;
 use nrc_scene::Scene;
 use nrc_train::{FrameStats, ProducerSpec};
 
-use crate::args::TracerArgs;
-use crate::cache_args::{RadianceCacheArgs, parse_termination};
-use crate::scene_args::SceneArgs;
+use nrc_harness::options::SceneArgs;
+use nrc_harness::options::TracerArgs;
+use nrc_harness::options::{RadianceCacheArgs, parse_termination};
 
 /// Arguments of `nrc train`.
 #[derive(clap::Args, Debug)]
@@ -152,7 +152,7 @@ pub fn run(args: &TrainArgs) -> Result<()> {
     trainer.settings.spp = args.spp;
     trainer.settings.from_terminations = args.from_terminations;
     eprintln!("{}", trainer.cache.describe());
-    let pool = crate::render::thread_pool(args.threads)?;
+    let pool = nrc_harness::options::thread_pool(args.threads)?;
     let bar = ProgressBar::new(args.frames as u64).with_style(
         ProgressStyle::with_template("{elapsed_precise} [{bar:30}] {pos}/{len} frames {msg}")
             .expect("valid progress template")

@@ -10,6 +10,8 @@
 //! - [`compare`]: the comparison loop (errors, bias and variance, sweeps, the report, the
 //!   images) and the `runs.json` schema ([`compare::RunsFile`]);
 //! - [`emitters`]: the emitter-excluded image;
+//! - [`options`]: the option groups every command shares (scene and camera, depth, the cache
+//!   model and its training), deriving clap's `Args`;
 //! - [`reference`]: the reference store (references cached by the content of their scene and
 //!   settings, with their variance);
 //!
@@ -23,6 +25,7 @@ pub mod budget;
 pub mod compare;
 pub mod emitters;
 pub mod methods;
+pub mod options;
 pub mod reference;
 pub mod run;
 

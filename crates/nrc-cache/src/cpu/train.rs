@@ -64,6 +64,9 @@ pub struct GridState<'a> {
 /// number, so the sums do not depend on the thread count.
 const REDUCTION_GROUPS: usize = 16;
 
+/// One tile of phase A: its packed rows, and its slice of each level's gradient columns.
+type TileIo<'a, 'b> = (&'a [f32], Vec<&'b mut [f32]>);
+
 /// Loss settings of a step.
 #[derive(Clone, Copy, Debug)]
 pub struct LossSettings {
@@ -114,10 +117,9 @@ fn forward_backward(
     // order and the groups in group order, so the loss and the MLP gradients are the same bits
     // whatever the thread count. (A rayon fold summed one accumulator per work split, and the
     // splits follow work stealing: two runs of one seed trained slightly different networks.)
-    let tiles_in: Vec<(&[f32], Vec<&mut [f32]>)> =
-        rows.chunks(TILE * TRAIN_ROW).zip(tile_outs).collect();
+    let tiles_in: Vec<TileIo> = rows.chunks(TILE * TRAIN_ROW).zip(tile_outs).collect();
     let per_group = tiles.div_ceil(REDUCTION_GROUPS).max(1);
-    let mut groups: Vec<Vec<(&[f32], Vec<&mut [f32]>)>> = Vec::new();
+    let mut groups: Vec<Vec<TileIo>> = Vec::new();
     let mut tiles_in = tiles_in.into_iter().peekable();
     while tiles_in.peek().is_some() {
         groups.push(tiles_in.by_ref().take(per_group).collect());

@@ -1,0 +1,375 @@
+//! Options shared by the commands that load a scene, trace paths or train a cache: the scene
+//! and its camera, path depth and light strategy, the cache model and its training, their value
+//! parsers. They derive clap's `Args`, so their doc comments are the command line's help (as
+//! brush's config structs do), and a run file's fields are their flags (`src/run_file.rs`).
+
+use std::path::PathBuf;
+
+use anyhow::{Context, Result, bail};
+use glam::Vec3;
+use nrc_cache::{CacheConfig, CacheDevice};
+use nrc_render::{LightStrategy, PathTracer, Termination};
+use nrc_scene::{Camera, Scene};
+use nrc_train::producer::ProducerOptions;
+
+use crate::methods::CacheMethodSettings;
+
+/// Path depth options: every command that traces paths, so that methods and their reference
+/// estimate the same image.
+#[derive(clap::Args, Debug, Clone)]
+pub struct DepthArgs {
+    /// Maximum number of path segments, as Mitsuba counts them: 1 shows emitters seen
+    /// directly, 2 adds direct illumination, 3 one indirect bounce, ...; 0 or -1: unlimited
+    /// (Russian roulette ends paths).
+    #[arg(long, default_value_t = -1, allow_negative_numbers = true)]
+    pub max_depth: i32,
+
+    /// Number of scattering events after which Russian roulette may end a path
+    /// (Mitsuba's rr_depth), at most 1000.
+    #[arg(long, default_value_t = 5, value_parser = clap::value_parser!(u32).range(0..=1000))]
+    pub rr_depth: u32,
+}
+
+impl DepthArgs {
+    /// The reference path tracer (NEE and BSDF sampling by MIS) at these depths.
+    pub fn tracer(&self) -> PathTracer {
+        PathTracer {
+            max_depth: self.max_depth,
+            rr_depth: self.rr_depth,
+            ..PathTracer::default()
+        }
+    }
+}
+
+/// Direct-illumination estimators, as named on the command line.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Strategy {
+    /// Next-event estimation and BSDF sampling combined by MIS (power heuristic).
+    Mis,
+    /// BSDF sampling only (next-event estimation off).
+    Bsdf,
+    /// Next-event estimation only.
+    Light,
+}
+
+/// The path depth and the direct-illumination estimators (`render`, `train`, `bench trace`).
+#[derive(clap::Args, Debug, Clone)]
+pub struct TracerArgs {
+    #[command(flatten)]
+    pub depth: DepthArgs,
+
+    /// Estimators of direct illumination.
+    #[arg(long, value_enum, default_value_t = Strategy::Mis)]
+    pub strategy: Strategy,
+}
+
+impl TracerArgs {
+    pub fn tracer(&self) -> PathTracer {
+        PathTracer {
+            strategy: match self.strategy {
+                Strategy::Mis => LightStrategy::Mis,
+                Strategy::Bsdf => LightStrategy::BsdfOnly,
+                Strategy::Light => LightStrategy::LightOnly,
+            },
+            ..self.depth.tracer()
+        }
+    }
+}
+
+/// Parses `x,y,z` into a vector of three finite numbers.
+pub fn parse_vec3(s: &str) -> Result<Vec3, String> {
+    let parts: Vec<&str> = s.split(',').map(str::trim).collect();
+    if parts.len() != 3 {
+        return Err(format!(
+            "expected three comma-separated numbers x,y,z, got `{s}`"
+        ));
+    }
+    let mut v = [0.0f32; 3];
+    for (slot, p) in v.iter_mut().zip(&parts) {
+        let x: f32 = p
+            .parse()
+            .map_err(|_| format!("`{p}` is not a number (in `{s}`)"))?;
+        if !x.is_finite() {
+            return Err(format!("`{p}` is not a finite number (in `{s}`)"));
+        }
+        *slot = x;
+    }
+    Ok(Vec3::from_array(v))
+}
+
+/// Parses a non-negative RGB radiance `r,g,b` (or a single number for grey).
+pub fn parse_rgb(s: &str) -> Result<Vec3, String> {
+    let v = if s.contains(',') {
+        parse_vec3(s)?
+    } else {
+        let x: f32 = s
+            .trim()
+            .parse()
+            .map_err(|_| format!("`{s}` is not a number"))?;
+        Vec3::splat(x)
+    };
+    if !v.is_finite() || v.min_element() < 0.0 {
+        return Err(format!(
+            "radiance must be finite and non-negative, got `{s}`"
+        ));
+    }
+    Ok(v)
+}
+
+/// The scene and how to look at it.
+#[derive(clap::Args, Debug, Clone)]
+pub struct SceneArgs {
+    /// Scene file: glTF 2.0 (`.gltf` with its buffers, or `.glb`).
+    #[arg(long)]
+    pub scene: PathBuf,
+
+    /// Camera position `x,y,z` (overrides the scene's camera; unset parts keep it).
+    #[arg(long, value_parser = parse_vec3, allow_hyphen_values = true)]
+    pub camera_pos: Option<Vec3>,
+
+    /// Point the camera looks at, `x,y,z`.
+    #[arg(long, value_parser = parse_vec3, allow_hyphen_values = true)]
+    pub camera_target: Option<Vec3>,
+
+    /// Camera up direction `x,y,z`.
+    #[arg(long, value_parser = parse_vec3, allow_hyphen_values = true)]
+    pub camera_up: Option<Vec3>,
+
+    /// Vertical field of view in degrees.
+    #[arg(long)]
+    pub fov_y: Option<f32>,
+
+    /// Constant background radiance `r,g,b` (or one number for grey) for rays leaving the
+    /// scene. Default: the scene's (black for glTF files).
+    #[arg(long, value_parser = parse_rgb)]
+    pub background: Option<Vec3>,
+}
+
+impl SceneArgs {
+    /// Loads the scene and applies the camera and background overrides.
+    pub fn load(&self) -> Result<Scene> {
+        let mut scene = Scene::load(&self.scene)?;
+        scene.camera = self
+            .camera(&scene.camera)
+            .with_context(|| "invalid camera")?;
+        if let Some(b) = self.background {
+            scene.background = b;
+        }
+        Ok(scene)
+    }
+
+    /// The scene's camera with the command-line overrides applied.
+    fn camera(&self, base: &Camera) -> Result<Camera, nrc_scene::CameraError> {
+        if self.camera_pos.is_none()
+            && self.camera_target.is_none()
+            && self.camera_up.is_none()
+            && self.fov_y.is_none()
+        {
+            return Ok(*base);
+        }
+        let pos = self.camera_pos.unwrap_or(base.position);
+        let target = self.camera_target.unwrap_or(pos + base.forward);
+        let up = self.camera_up.unwrap_or(base.up);
+        let fov = self.fov_y.unwrap_or(base.fov_y.to_degrees());
+        Camera::look_at(pos, target, up, fov)
+    }
+}
+
+/// Where the cache computes.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum DeviceArg {
+    /// wgpu when a hardware GPU adapter exists, else the CPU.
+    Auto,
+    /// burn's Flex CPU backend (fused training step).
+    Cpu,
+    /// burn's wgpu backend.
+    Wgpu,
+}
+
+impl DeviceArg {
+    /// The device and the reason it was chosen.
+    pub fn resolve(self) -> (CacheDevice, String) {
+        match self {
+            Self::Auto => CacheDevice::auto(),
+            Self::Cpu => (CacheDevice::Cpu, "--device cpu".to_string()),
+            Self::Wgpu => (CacheDevice::Wgpu, "--device wgpu".to_string()),
+        }
+    }
+
+    /// The device, printed with the reason it was chosen.
+    pub fn resolve_and_print(self) -> CacheDevice {
+        let (device, reason) = self.resolve();
+        eprintln!("cache device: {device} ({reason})");
+        device
+    }
+}
+
+/// The cache model and how it is trained.
+#[derive(clap::Args, Debug, Clone)]
+pub struct RadianceCacheArgs {
+    /// Cache configuration: a tiny-cuda-nn-style JSON file, or a preset name: `hashgrid`
+    /// (models/nrc-hashgrid.json) or `trianglewave` (models/nrc-trianglewave.json).
+    #[arg(long, default_value = "hashgrid")]
+    pub config: String,
+
+    /// Where the cache computes.
+    #[arg(long, value_enum, default_value_t = DeviceArg::Cpu)]
+    pub device: DeviceArg,
+
+    /// Finest resolution of the encoding along the scene's longest axis (the grid is sized
+    /// from it: the smallest resolved feature is the longest extent divided by it).
+    #[arg(long, default_value_t = 512)]
+    pub resolution: u32,
+
+    /// Training records produced per frame (the default is chosen by measurement:
+    /// scripts/records-budget.sh, RESULTS.md).
+    #[arg(long, default_value_t = nrc_train::online::DEFAULT_RECORDS_PER_FRAME)]
+    pub records: usize,
+
+    /// Records per optimisation step (a frame trains records/batch steps).
+    #[arg(long, default_value_t = 1 << 14)]
+    pub batch: usize,
+
+    /// Light training: fraction of its records at uniformly chosen surface points.
+    #[arg(long, default_value_t = 0.0)]
+    pub lt_surface_balance: f32,
+
+    /// Light training: fraction of its records at camera primary hits.
+    #[arg(long, default_value_t = 0.0)]
+    pub lt_camera_balance: f32,
+
+    /// SPPC: persistent query balls kept (ring buffer).
+    #[arg(long, default_value_t = 16384)]
+    pub sppc_capacity: usize,
+
+    /// SPPC: fraction of the balls replaced each frame, oldest first.
+    #[arg(long, default_value_t = 0.25)]
+    pub sppc_replace: f32,
+
+    /// SPPC: initial ball radius as a fraction of the scene bounds' diagonal.
+    #[arg(long, default_value_t = 0.01)]
+    pub sppc_radius: f32,
+
+    /// SPPC: photon paths traced per training record.
+    #[arg(long, default_value_t = 4.0)]
+    pub sppc_photons: f32,
+
+    /// SPPC: progressive radius reduction α in (0, 1].
+    #[arg(long, default_value_t = 0.7)]
+    pub sppc_alpha: f32,
+
+    /// SPPC: gather photons whatever their normal (default: reject those whose normal differs
+    /// from the ball's, n·n < 0.9).
+    #[arg(long)]
+    pub sppc_no_normal_reject: bool,
+}
+
+/// A cache configuration named on the command line: a preset (`hashgrid`, `trianglewave`) or a
+/// JSON file.
+pub fn named_config(name: &str) -> Result<CacheConfig> {
+    Ok(match name {
+        "hashgrid" => CacheConfig::hash_grid_preset(),
+        "trianglewave" => CacheConfig::triangle_wave_preset(),
+        // An inline configuration (a run file's `config` object).
+        json if json.trim_start().starts_with('{') => {
+            CacheConfig::from_json_str(json).context("the inline cache configuration")?
+        }
+        path => CacheConfig::from_file(&PathBuf::from(path))
+            .with_context(|| format!("--config {path}"))?,
+    })
+}
+
+impl RadianceCacheArgs {
+    /// The configuration named by `--config`.
+    pub fn config(&self) -> Result<CacheConfig> {
+        named_config(&self.config)
+    }
+
+    /// The settings of cache methods, checked; `print` reports the device chosen.
+    pub fn method_settings(
+        &self,
+        train_frames: u32,
+        seed: u64,
+        print: bool,
+    ) -> Result<CacheMethodSettings> {
+        if self.resolution == 0 || self.resolution > 1 << 16 {
+            bail!("--resolution must be in 1..=65536, got {}", self.resolution);
+        }
+        if self.records == 0 || self.batch == 0 {
+            bail!("--records and --batch must be at least 1");
+        }
+        let device = if print {
+            self.device.resolve_and_print()
+        } else {
+            self.device.resolve().0
+        };
+        let mut s = CacheMethodSettings::new(self.config()?, device);
+        s.resolution = self.resolution;
+        s.records_per_frame = self.records;
+        s.batch_size = self.batch;
+        s.train_frames = train_frames;
+        s.seed = seed;
+        s.producer_options = ProducerOptions {
+            lt_surface_balance: self.lt_surface_balance,
+            lt_camera_balance: self.lt_camera_balance,
+            sppc_capacity: self.sppc_capacity,
+            sppc_replace_fraction: self.sppc_replace,
+            sppc_initial_radius: self.sppc_radius,
+            sppc_photons_per_record: self.sppc_photons,
+            sppc_alpha: self.sppc_alpha,
+            sppc_normal_reject: !self.sppc_no_normal_reject,
+        };
+        s.producer_options.validate().map_err(anyhow::Error::msg)?;
+        Ok(s)
+    }
+}
+
+/// Parses a termination strategy for clap.
+pub fn parse_termination(s: &str) -> Result<Termination, String> {
+    s.parse()
+}
+
+/// Where references are cached.
+#[derive(clap::Args, Debug, Clone)]
+pub struct CacheArgs {
+    /// Folder of cached references (default: $NRC_CACHE_DIR/references if NRC_CACHE_DIR is
+    /// set, else out/references).
+    #[arg(long)]
+    pub cache_dir: Option<PathBuf>,
+}
+
+impl CacheArgs {
+    pub fn dir(&self) -> PathBuf {
+        match (&self.cache_dir, std::env::var_os("NRC_CACHE_DIR")) {
+            (Some(d), _) => d.clone(),
+            (None, Some(root)) if !root.is_empty() => PathBuf::from(root).join("references"),
+            _ => PathBuf::from("out/references"),
+        }
+    }
+}
+
+/// The worker threads of `--threads` (all cores when not given).
+pub fn thread_pool(threads: Option<usize>) -> Result<rayon::ThreadPool> {
+    if threads == Some(0) {
+        bail!("--threads must be at least 1");
+    }
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(threads.unwrap_or(0))
+        .build()
+        .context("cannot start worker threads")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn vec3_parsing() {
+        assert_eq!(parse_vec3("1, -2.5,3").unwrap(), Vec3::new(1.0, -2.5, 3.0));
+        assert!(parse_vec3("1,2").is_err());
+        assert!(parse_vec3("1,2,x").is_err());
+        assert!(parse_vec3("1,2,NaN").is_err());
+        assert_eq!(parse_rgb("0.5").unwrap(), Vec3::splat(0.5));
+        assert!(parse_rgb("1,-1,0").is_err());
+    }
+}
