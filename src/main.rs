@@ -17,7 +17,7 @@ use clap::{Parser, Subcommand};
 
 /// Neural radiance cache trainer and reference renderer.
 #[derive(Parser, Debug)]
-#[command(name = "nrc", version, about, long_about = None, args_override_self = true)]
+#[command(name = "nrc", version, about, long_about = None)]
 struct Cli {
     #[command(subcommand)]
     command: Command,

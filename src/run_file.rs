@@ -20,27 +20,43 @@ use std::path::Path;
 use anyhow::{Context, Result, bail};
 use clap::CommandFactory;
 
-/// The command line with the run file named by `--run FILE` (after the subcommand) expanded
-/// into flags placed before the command line's own, which therefore override them.
+/// The command line with the run file named by `--run FILE` or `--run=FILE` (after the
+/// subcommand) expanded into flags, placed before the command line's own. A field whose flag
+/// the command line also gives is left out, so the command line overrides it (list flags such
+/// as `--methods` included, which would otherwise add up).
 pub fn expand(args: Vec<OsString>) -> Result<Vec<OsString>> {
-    let Some(i) = args.iter().position(|a| a == "--run") else {
+    let file = args.iter().enumerate().find_map(|(i, a)| {
+        let a = a.to_str()?;
+        if a == "--run" {
+            Some(args.get(i + 1).cloned())
+        } else {
+            a.strip_prefix("--run=").map(|f| Some(OsString::from(f)))
+        }
+    });
+    let Some(file) = file else {
         return Ok(args);
     };
-    let Some(file) = args.get(i + 1) else {
+    let Some(file) = file else {
         bail!("--run needs a run file");
     };
     let Some(sub) = args.get(1).and_then(|s| s.to_str()) else {
         bail!("--run needs a subcommand before it");
     };
-    let flags = flags_of(Path::new(file), sub)?;
+    // Flags the command line gives itself (`--flag` or `--flag=value`).
+    let given: Vec<&str> = args[2..]
+        .iter()
+        .filter_map(|a| a.to_str()?.strip_prefix("--"))
+        .map(|a| a.split_once('=').map_or(a, |(flag, _)| flag))
+        .collect();
+    let flags = flags_of(Path::new(&file), sub, &given)?;
     let mut out = args[..2].to_vec();
     out.extend(flags);
     out.extend(args[2..].iter().cloned());
     Ok(out)
 }
 
-/// The run file's fields as flags of subcommand `sub`.
-fn flags_of(path: &Path, sub: &str) -> Result<Vec<OsString>> {
+/// The run file's fields as flags of subcommand `sub`, but for the flags in `given`.
+fn flags_of(path: &Path, sub: &str, given: &[&str]) -> Result<Vec<OsString>> {
     let what = || format!("run file {}", path.display());
     let text = std::fs::read_to_string(path).with_context(|| format!("cannot read {}", what()))?;
     let value: serde_json::Value =
@@ -64,6 +80,9 @@ fn flags_of(path: &Path, sub: &str) -> Result<Vec<OsString>> {
                 "{}: unknown field `{key}` (the fields are the flags of `nrc {sub}`: see `nrc {sub} --help`)",
                 what()
             );
+        }
+        if given.contains(&flag.as_str()) {
+            continue;
         }
         let text = match v {
             serde_json::Value::Null | serde_json::Value::Bool(false) => continue,

@@ -583,3 +583,39 @@ fn excluding_emitters_removes_their_error() {
     );
     assert!(md.contains("see an emitter"), "{md}");
 }
+
+/// A run file names the comparison; a list flag given on the command line replaces the file's
+/// list (it does not add to it), and `--run=FILE` reads the file as `--run FILE` does.
+#[test]
+fn run_files_describe_a_comparison_and_list_flags_override_them() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = |n: &str| dir.path().join(n).to_str().unwrap().to_string();
+    let run = serde_json::json!({
+        "scene": cornell(),
+        "methods": ["pt-1spp", "pt-1spp-nonee"],
+        "equal_spp": 1,
+        "width": 8,
+        "height": 8,
+        "reference_spp": 4,
+        "no_flip": true,
+        "cache_dir": p("cache"),
+        "out": p("out"),
+    });
+    std::fs::write(p("run.json"), run.to_string()).unwrap();
+    let methods = |args: &[&str]| {
+        assert_ok(&nrc(args));
+        let mut m: Vec<String> = read_runs(&dir.path().join("out"))
+            .runs
+            .into_iter()
+            .map(|r| r.method)
+            .collect();
+        m.sort();
+        m
+    };
+    let file = format!("--run={}", p("run.json"));
+    assert_eq!(methods(&["compare", &file]), ["pt-1spp", "pt-1spp-nonee"]);
+    assert_eq!(
+        methods(&["compare", "--run", &p("run.json"), "--methods", "pt-2spp"]),
+        ["pt-2spp"]
+    );
+}
