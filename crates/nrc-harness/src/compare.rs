@@ -28,7 +28,7 @@ use nrc_render::{PathTracer, pass_seed};
 use nrc_scene::{Image, Scene};
 use serde::{Deserialize, Serialize};
 
-use crate::budget::{Budget, Frame, FrameRequest, render_frame};
+use crate::budget::{Budget, Frame, FrameRequest, Method, render_frame};
 use crate::emitters::{emitter_pixels, exclude};
 use crate::methods::{CacheMethodSettings, MethodSpec};
 use crate::reference::Reference;
@@ -255,15 +255,11 @@ pub fn compare(
         // timed frame is not charged for start-up.
         method.render_estimate(scene, &scene.camera, w.min(16), h.min(16), u64::MAX);
 
-        let base = c.seed ^ name_hash(&name);
-        let mut acc = BiasVarianceAccumulator::new(w as usize, h as usize);
-        let mut metrics = Vec::new();
-        let (mut time_ms, mut spp) = (0.0, 0.0);
-        let mut first: Option<(Frame, ErrorMetrics)> = None;
-        for r in 0..c.runs {
-            let seed = pass_seed(base, r);
+        // One measured frame: rendered within its budget, the excluded pixels set to the
+        // reference, its errors (and HDR-FLIP map) against the reference.
+        let measure = |method: &mut dyn Method, seed: u64, budget: Budget| {
             let mut frame = render_frame(
-                method.as_mut(),
+                method,
                 scene,
                 &scene.camera,
                 &FrameRequest {
@@ -275,6 +271,16 @@ pub fn compare(
             )?;
             exclude(&mut frame.image, emitter_mask.as_deref(), ref_image);
             let (m, flip_map) = errors(&frame.image, &ref_view, c.flip, &name)?;
+            anyhow::Ok((frame, m, flip_map))
+        };
+        let base = c.seed ^ name_hash(&name);
+        let mut acc = BiasVarianceAccumulator::new(w as usize, h as usize);
+        let mut metrics = Vec::new();
+        let (mut time_ms, mut spp) = (0.0, 0.0);
+        let mut first: Option<(Frame, ErrorMetrics)> = None;
+        for r in 0..c.runs {
+            let seed = pass_seed(base, r);
+            let (frame, m, flip_map) = measure(method.as_mut(), seed, budget)?;
             if c.runs >= 2 {
                 acc.add(&ImageView::of_scene_image(&name, &frame.image)?)?;
             }
@@ -325,19 +331,7 @@ pub fn compare(
             for step in 1..steps {
                 let seed = pass_seed(base ^ 0x5EE9_5EE9_5EE9_5EE9, step);
                 let b = scaled_budget(budget, step);
-                let mut frame = render_frame(
-                    method.as_mut(),
-                    scene,
-                    &scene.camera,
-                    &FrameRequest {
-                        width: w,
-                        height: h,
-                        seed,
-                        budget: b,
-                    },
-                )?;
-                exclude(&mut frame.image, emitter_mask.as_deref(), ref_image);
-                let (m, _) = errors(&frame.image, &ref_view, c.flip, &name)?;
+                let (frame, m, _) = measure(method.as_mut(), seed, b)?;
                 runs.push(record(&name, None, Some(step), seed, b, &frame, m));
                 series.points.push(SweepPoint {
                     time_ms: frame.elapsed.as_secs_f64() * 1e3,

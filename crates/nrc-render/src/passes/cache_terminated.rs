@@ -257,10 +257,6 @@ impl RenderPass for CacheTerminatedPass {
         .to_string()
     }
 
-    fn uses_source(&self) -> bool {
-        true
-    }
-
     fn trace(&mut self, input: &FrameInput) -> Vec<RadianceQuery> {
         let (width, spp, seed) = (input.width, input.spp.max(1), input.seed);
         let (scene, camera) = (input.scene, input.camera);

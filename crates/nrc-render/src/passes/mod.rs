@@ -79,9 +79,6 @@ pub trait RenderPass: Send {
     /// The pass's canonical name (parses back to its spec).
     fn name(&self) -> String;
 
-    /// Whether the pass asks a radiance source anything (a pass that does not renders alone).
-    fn uses_source(&self) -> bool;
-
     /// Per-frame upkeep before tracing. Default: nothing.
     fn prepare(&mut self, _input: &FrameInput) {}
 

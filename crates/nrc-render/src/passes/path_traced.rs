@@ -50,10 +50,6 @@ impl RenderPass for PathTracedPass {
         .to_string()
     }
 
-    fn uses_source(&self) -> bool {
-        false
-    }
-
     fn trace(&mut self, input: &FrameInput) -> Vec<RadianceQuery> {
         let settings = RenderSettings {
             width: input.width,
