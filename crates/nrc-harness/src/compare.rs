@@ -24,12 +24,12 @@ use nrc_eval::{
     BiasVarianceAccumulator, ErrorMetrics, HdrFlipParams, ImageView, Report, ReportRow,
     ScalarImage, SweepPoint, SweepSeries, hdr_flip, write_report,
 };
+use nrc_render::emitters::{emitter_pixels, exclude};
 use nrc_render::{PathTracer, pass_seed};
 use nrc_scene::{Image, Scene};
 use serde::{Deserialize, Serialize};
 
 use crate::budget::{Budget, Frame, FrameRequest, Method, render_frame};
-use crate::emitters::{emitter_pixels, exclude};
 use crate::methods::{CacheMethodSettings, MethodSpec};
 use crate::reference::Reference;
 

@@ -9,7 +9,6 @@
 //! - [`budget`]: the [`Method`] trait, budgets (equal samples, equal time) and the frame loop;
 //! - [`compare`]: the comparison loop (errors, bias and variance, sweeps, the report, the
 //!   images) and the `runs.json` schema ([`compare::RunsFile`]);
-//! - [`emitters`]: the emitter-excluded image;
 //! - [`options`]: the option groups every command shares (scene and camera, depth, the cache
 //!   model and its training), deriving clap's `Args`;
 //! - [`reference`]: the reference store (references cached by the content of their scene and
@@ -23,7 +22,6 @@
 pub mod bench;
 pub mod budget;
 pub mod compare;
-pub mod emitters;
 pub mod methods;
 pub mod options;
 pub mod reference;

@@ -115,7 +115,7 @@ fn a_long_run_on_caustics_stays_finite() {
 /// --exclude-emitters` computes it (the masked pixels set to the reference).
 fn rel_mse_excluding(image: &nrc_scene::Image, reference: &nrc_scene::Image, mask: &[bool]) -> f64 {
     let mut image = image.clone();
-    nrc_harness::emitters::exclude(&mut image, Some(mask), reference);
+    nrc_render::emitters::exclude(&mut image, Some(mask), reference);
     let view = |name, i| nrc_eval::ImageView::of_scene_image(name, i).unwrap();
     nrc_eval::metrics::rel_mse(
         &view("cache", &image),
@@ -149,7 +149,7 @@ fn online_training_brings_the_cache_error_down() {
         &|_| {},
     )
     .mean;
-    let mask = nrc_harness::emitters::emitter_pixels(&scene, w, h);
+    let mask = nrc_render::emitters::emitter_pixels(&scene, w, h);
     assert!(mask.iter().any(|m| *m) && mask.iter().any(|m| !*m));
     let mut s = CacheMethodSettings::new(CacheConfig::hash_grid_preset(), CacheDevice::Cpu);
     s.records_per_frame = 4096;

@@ -10,9 +10,12 @@
 //!   radiance out) and exact sources for tests.
 //! - [`passes`]: the inference passes, one file per technique, behind one trait
 //!   ([`RenderPass`]) and one spec enum ([`PassSpec`]).
+//! - [`emitters`]: the emitter-excluded image (pixels that see an emitter, and their
+//!   neighbours), for errors that the emitters' anti-aliasing would dominate;
 //! - [`spread`]: the area-spread heuristic of Müller et al. 2021 (termination of inference
 //!   paths and of training suffixes).
 
+pub mod emitters;
 pub mod light_path;
 pub mod nee;
 pub mod passes;

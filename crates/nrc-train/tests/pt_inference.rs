@@ -177,21 +177,43 @@ fn producing_is_deterministic_whatever_the_thread_count() {
     assert_eq!(run(1), run(2));
 }
 
-/// Image means of `passes` independent renders: (mean of the means, standard error).
-fn pass_means(passes: u32, mut one: impl FnMut(u64) -> nrc_scene::Image) -> (f64, f64) {
-    let means: Vec<f64> = (0..passes)
+/// Image means of `passes` independent renders, over all pixels and over the pixels outside
+/// `mask` (the emitter-excluded image, whose mean the emitters' anti-aliasing noise does not
+/// swamp): ((mean of the means, standard error), the same outside `mask`).
+fn pass_means(
+    passes: u32,
+    mask: &[bool],
+    mut one: impl FnMut(u64) -> nrc_scene::Image,
+) -> ((f64, f64), (f64, f64)) {
+    let means: Vec<(f64, f64)> = (0..passes)
         .map(|p| {
             let img = one(pass_seed(77, p));
-            img.data
-                .iter()
-                .map(|c| (c.x + c.y + c.z) as f64)
-                .sum::<f64>()
-                / img.data.len() as f64
+            let sum = |keep: &dyn Fn(usize) -> bool| {
+                let (s, n) = img
+                    .data
+                    .iter()
+                    .enumerate()
+                    .filter(|(i, _)| keep(*i))
+                    .fold((0.0, 0usize), |(s, n), (_, c)| {
+                        (s + (c.x + c.y + c.z) as f64, n + 1)
+                    });
+                s / n.max(1) as f64
+            };
+            (
+                sum(&|_| true),
+                sum(&|i| !mask.get(i).copied().unwrap_or(false)),
+            )
         })
         .collect();
-    let m = means.iter().sum::<f64>() / passes as f64;
-    let var = means.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (passes - 1) as f64;
-    (m, (var / passes as f64).sqrt())
+    let stats = |v: Vec<f64>| {
+        let m = v.iter().sum::<f64>() / passes as f64;
+        let var = v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (passes - 1) as f64;
+        (m, (var / passes as f64).sqrt())
+    };
+    (
+        stats(means.iter().map(|m| m.0).collect()),
+        stats(means.iter().map(|m| m.1).collect()),
+    )
 }
 
 /// Cache-terminated renders with an exact (path-traced) cache against the reference path
@@ -206,11 +228,29 @@ struct Check {
     cache_seed: u64,
 }
 
+/// A source answering `scale` times another's radiance: a biased cache.
+struct Scaled<'a>(&'a dyn RadianceSource, f32);
+
+impl RadianceSource for Scaled<'_> {
+    fn radiance(&self, q: &[RadianceQuery]) -> Vec<Vec3> {
+        self.0.radiance(q).into_iter().map(|l| l * self.1).collect()
+    }
+}
+
 impl Check {
-    fn run(&self, scene: &Scene, terminations: &[Termination], nees: &[bool]) {
+    /// z-scores of each `(termination, nee)` against the reference, the exact source's answers
+    /// scaled by `scale` (1: exact): (of the image mean, of the emitter-excluded image's mean).
+    fn z_scores(
+        &self,
+        scene: &Scene,
+        cases: &[(Termination, bool)],
+        scale: f32,
+    ) -> Vec<(f64, f64)> {
         let ((w, h), passes) = (self.size, self.passes);
         let tracer = PathTracer::default();
-        let (ref_m, ref_se) = pass_means(passes, |seed| {
+        let mask = nrc_render::emitters::emitter_pixels(scene, w, h);
+        let z = |(m, se): (f64, f64), (r, rse): (f64, f64)| (m - r) / (se * se + rse * rse).sqrt();
+        let (reference, ref_off) = pass_means(passes, &mask, |seed| {
             let s = RenderSettings {
                 width: w,
                 height: h,
@@ -220,24 +260,63 @@ impl Check {
             };
             render(scene, &scene.camera, &tracer, &s, &|_| {}).mean
         });
-        println!("reference: {ref_m:.5} ± {ref_se:.5}");
-        for &termination in terminations {
-            for &nee in nees {
-                let (m, se) = pass_means(passes, |seed| {
+        println!("reference: {reference:.5?}, emitter excluded {ref_off:.5?}");
+        cases
+            .iter()
+            .map(|&(termination, nee)| {
+                let (all, off) = pass_means(passes, &mask, |seed| {
                     let exact = PathTracedSource {
                         scene,
                         tracer,
                         samples: 8,
                         seed: seed ^ self.cache_seed,
                     };
-                    cache_pass(scene, termination, nee, &exact, w, h, self.spp, seed).image
+                    let source = Scaled(&exact, scale);
+                    cache_pass(scene, termination, nee, &source, w, h, self.spp, seed).image
                 });
-                let z = (m - ref_m) / (se * se + ref_se * ref_se).sqrt();
-                println!("{termination} (nee {nee}): {m:.5} ± {se:.5}, z = {z:.2}");
-                assert!(z.abs() < 4.0, "{termination} nee {nee}: z = {z}");
-            }
+                let zs = (z(all, reference), z(off, ref_off));
+                println!(
+                    "{termination} (nee {nee}, source × {scale}): {all:.5?}, z = {:.2}; emitter excluded {off:.5?}, z = {:.2}",
+                    zs.0, zs.1
+                );
+                zs
+            })
+            .collect()
+    }
+
+    /// Every termination and NEE setting with the exact source agrees with the reference.
+    fn run(&self, scene: &Scene, terminations: &[Termination], nees: &[bool]) {
+        let cases: Vec<(Termination, bool)> = terminations
+            .iter()
+            .flat_map(|&t| nees.iter().map(move |&n| (t, n)))
+            .collect();
+        for ((z, z_off), (termination, nee)) in self.z_scores(scene, &cases, 1.0).iter().zip(&cases)
+        {
+            assert!(z.abs() < 4.0, "{termination} nee {nee}: z = {z}");
+            assert!(
+                z_off.abs() < 4.0,
+                "{termination} nee {nee}, emitter excluded: z = {z_off}"
+            );
         }
     }
+}
+
+/// The negative control of the check above: a cache 5 % too dark, which paths ending at their
+/// primary hit read for all of their reflected light, must fail it on the emitter-excluded
+/// mean. (The whole image's mean cannot: the light's pixels dominate both the mean and its
+/// error; at 15 % too dark it gave z = −2.2 where the emitter-excluded mean gave −19.3.)
+#[test]
+fn a_biased_cache_fails_the_reference_check() {
+    let scene = Scene::load(&common::project_scenes().join("cornell-box.gltf")).unwrap();
+    let check = Check {
+        size: (24, 24),
+        ref_spp: 4,
+        spp: 2,
+        passes: 10,
+        cache_seed: 0xABCD,
+    };
+    let (_, z_off) = check.z_scores(&scene, &[(Termination::FirstVertex, true)], 0.95)[0];
+    assert!(z_off < -4.0, "a 5 % darker cache went unseen: z = {z_off}");
 }
 
 #[test]
