@@ -136,7 +136,14 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     // The radiance source: the --cache snapshot, checked against the scene, for the passes
     // that read one.
     let cache = match (spec.uses_source(), &args.cache) {
-        (false, _) => None,
+        (false, Some(snapshot)) => {
+            eprintln!(
+                "warning: the pass {spec} reads no cache; {} is not used",
+                snapshot.display()
+            );
+            None
+        }
+        (false, None) => None,
         (true, None) => {
             bail!("the pass {spec} ends paths in a cache: give it one with --cache snapshot.nrc")
         }

@@ -151,16 +151,6 @@ impl PathWalk {
         self.throughput
     }
 
-    /// Segments used so far.
-    pub fn segments(&self) -> u32 {
-        self.segments
-    }
-
-    /// Whether NEE runs at this path's non-delta vertices.
-    pub fn uses_nee(&self) -> bool {
-        self.use_nee
-    }
-
     /// Traces the segment in flight.
     pub fn arrive(&mut self, scene: &Scene, stats: &mut PathStats) -> Arrival {
         stats.closest_rays += 1;

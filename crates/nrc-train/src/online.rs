@@ -139,11 +139,6 @@ impl OnlineTrainer {
         })
     }
 
-    /// The inference pass with its state.
-    pub fn pass(&mut self) -> &mut dyn RenderPass {
-        self.pass.as_mut()
-    }
-
     /// Renders a frame with the inference pass and the cache as it is (no training).
     pub fn render(&mut self, input: &FrameInput) -> PassOutput {
         let source = CacheSource {
