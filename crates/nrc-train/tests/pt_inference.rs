@@ -301,34 +301,33 @@ impl Check {
     }
 }
 
+/// The Cornell box and the check run on it: 24×24, 10 independent renders of 2 spp.
+fn cornell_check() -> (Scene, Check) {
+    let scene = Scene::load(&common::project_scenes().join("cornell-box.gltf")).unwrap();
+    let check = Check {
+        size: (24, 24),
+        ref_spp: 4,
+        spp: 2,
+        passes: 10,
+        cache_seed: 0xABCD,
+    };
+    (scene, check)
+}
+
 /// The negative control of the check above: a cache 5 % too dark, which paths ending at their
 /// primary hit read for all of their reflected light, must fail it on the emitter-excluded
 /// mean. (The whole image's mean cannot: the light's pixels dominate both the mean and its
 /// error; at 15 % too dark it gave z = −2.2 where the emitter-excluded mean gave −19.3.)
 #[test]
 fn a_biased_cache_fails_the_reference_check() {
-    let scene = Scene::load(&common::project_scenes().join("cornell-box.gltf")).unwrap();
-    let check = Check {
-        size: (24, 24),
-        ref_spp: 4,
-        spp: 2,
-        passes: 10,
-        cache_seed: 0xABCD,
-    };
+    let (scene, check) = cornell_check();
     let (_, z_off) = check.z_scores(&scene, &[(Termination::FirstVertex, true)], 0.95)[0];
     assert!(z_off < -4.0, "a 5 % darker cache went unseen: z = {z_off}");
 }
 
 #[test]
 fn every_termination_with_an_exact_cache_reproduces_the_reference() {
-    let scene = Scene::load(&common::project_scenes().join("cornell-box.gltf")).unwrap();
-    let check = Check {
-        size: (24, 24),
-        ref_spp: 4,
-        spp: 2,
-        passes: 10,
-        cache_seed: 0xABCD,
-    };
+    let (scene, check) = cornell_check();
     check.run(
         &scene,
         &[
