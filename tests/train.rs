@@ -177,12 +177,9 @@ fn bad_training_options_are_clear_errors() {
         ),
         (vec!["--pass", "cache-last"], "unknown termination"),
         (vec!["--pass", "nope"], "unknown pass"),
-        // Light paths cannot carry the background's light: refused, naming why.
-        (vec!["--producer", "bt", "--background", "1"], "background"),
-        (
-            vec!["--producer", "mix:pt-sl=0.5,sppc=0.5", "--background", "1"],
-            "sppc",
-        ),
+        (vec!["--env", "/nonexistent/sky.hdr"], "nonexistent"),
+        (vec!["--env", "/nonexistent/sky.png"], "nonexistent"),
+        (vec!["--background=-1"], "--background"),
     ] {
         let mut all = vec!["train", "--scene", s, "--width", "8", "--height", "8"];
         all.extend(args.iter());
@@ -271,45 +268,45 @@ fn run_files_describe_a_run_and_flags_override_them() {
     assert_error(&nrc(&["train", "--run", &p("bad.json")]), "not JSON");
 }
 
-/// The defect as found: on `../shared/scenes/kajiya-roughness-scale` lit by `--background 1`,
-/// BT, LT and SPPC once trained on all-zero targets without a word; they refuse it now, naming
-/// the background, and path tracing with self-learning trains on it. Skipped (with a message)
-/// where `../shared` is absent.
+/// The kajiya scene has no emitter: lit only by the background (the trivial environment),
+/// every producer trains on it, light-path ones included (their paths start at the
+/// environment), with non-zero targets; with nothing lighting it, light-path producers refuse.
 #[test]
-fn light_path_producers_refuse_the_background_lit_kajiya_scene() {
+fn every_producer_trains_on_the_environment_lit_kajiya_scene() {
     let scene = Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("../shared/scenes/kajiya-roughness-scale/scene.gltf");
     if !scene.exists() {
         eprintln!("skipped: {} is absent", scene.display());
         return;
     }
+    let dir = tempfile::tempdir().unwrap();
+    let stats = dir.path().join("stats.json");
     let s = scene.to_str().unwrap();
-    let small = [
-        "--width",
-        "8",
-        "--height",
-        "8",
-        "--frames",
-        "1",
-        "--records",
-        "256",
-    ];
-    let train = |producer: &str| {
-        let mut a = vec![
-            "train",
-            "--scene",
-            s,
-            "--background",
-            "1",
-            "--producer",
-            producer,
-        ];
-        a.extend(small);
+    let train = |producer: &str, lit: bool| {
+        let mut a = vec!["train", "--scene", s, "--producer", producer];
+        if lit {
+            a.extend(["--background", "1"]);
+        }
+        a.extend([
+            "--width", "8", "--height", "8", "--frames", "2", "--records", "512", "--stats",
+            stats.to_str().unwrap(),
+        ]);
         nrc(&a)
     };
     for producer in ["bt", "lt", "sppc"] {
-        assert_error(&train(producer), "background");
+        assert_error(&train(producer, false), "nothing lights it");
     }
-    let o = train("pt-sl");
-    assert!(o.status.success(), "{}", text(&o.stderr));
+    for producer in ["pt-sl", "bt", "lt", "sppc"] {
+        let o = train(producer, true);
+        assert!(o.status.success(), "{producer}: {}", text(&o.stderr));
+        let json: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&stats).unwrap()).unwrap();
+        let frames = json.as_array().expect("per-frame statistics");
+        let mean = frames.last().unwrap()["target_mean"].as_f64();
+        assert!(
+            mean.is_some_and(|m| m > 0.0),
+            "{producer}: targets {mean:?} in {}",
+            frames.last().unwrap()
+        );
+    }
 }

@@ -140,20 +140,45 @@ pub struct SceneArgs {
     pub fov_y: Option<f32>,
 
     /// Constant background radiance `r,g,b` (or one number for grey) for rays leaving the
-    /// scene. Default: the scene's (black for glTF files).
-    #[arg(long, value_parser = parse_rgb)]
+    /// scene: the trivial environment, sampled by next-event estimation like any light.
+    /// Default: the scene's (black for glTF files).
+    #[arg(long, value_parser = parse_rgb, conflicts_with = "env")]
     pub background: Option<Vec3>,
+
+    /// Environment map: an equirectangular HDR image (`.exr` or `.hdr`, row 0 the zenith,
+    /// Mitsuba's orientation), importance-sampled by luminance.
+    #[arg(long)]
+    pub env: Option<PathBuf>,
+
+    /// Scale of the environment map's radiance.
+    #[arg(long, default_value_t = 1.0, requires = "env")]
+    pub env_intensity: f32,
+
+    /// Rotation of the environment map about the up axis (+y), degrees.
+    #[arg(long, default_value_t = 0.0, requires = "env", allow_hyphen_values = true)]
+    pub env_rotate: f32,
 }
 
 impl SceneArgs {
-    /// Loads the scene and applies the camera and background overrides.
+    /// Loads the scene and applies the camera, background and environment overrides.
     pub fn load(&self) -> Result<Scene> {
         let mut scene = Scene::load(&self.scene)?;
         scene.camera = self
             .camera(&scene.camera)
             .with_context(|| "invalid camera")?;
         if let Some(b) = self.background {
-            scene.background = b;
+            if !(b.is_finite() && b.min_element() >= 0.0) {
+                anyhow::bail!("--background must be finite and non-negative, got {b}");
+            }
+            scene.set_environment(nrc_scene::Environment::constant(b));
+        }
+        if let Some(path) = &self.env {
+            let (env, warning) =
+                nrc_scene::Environment::load(path, self.env_intensity, self.env_rotate)?;
+            if let Some(w) = warning {
+                eprintln!("warning: {w}");
+            }
+            scene.set_environment(env);
         }
         Ok(scene)
     }

@@ -32,7 +32,7 @@ use sha2::{Digest, Sha256};
 
 /// Format tag of reference entries and of the key; bump when the path tracer's expected
 /// value changes (a fix to an estimator), so that stale references are not reused.
-pub const FORMAT: &str = "nrc-reference/1";
+pub const FORMAT: &str = "nrc-reference/2";
 
 /// The settings a reference is rendered with: everything its key covers.
 #[derive(Clone, Debug)]
@@ -83,7 +83,8 @@ pub struct ReferenceMeta {
     pub seed: u64,
     pub max_depth: i32,
     pub rr_depth: u32,
-    pub background: [f32; 3],
+    /// The environment, described (a constant or a map with its intensity and rotation).
+    pub environment: String,
     pub camera: CameraRecord,
     /// Wall time of the render, seconds.
     pub render_seconds: f64,
@@ -209,7 +210,7 @@ fn request_key(req: &ReferenceRequest<'_>, scene_content: &str) -> String {
         )
     };
     let text = format!(
-        "{FORMAT}\nscene {scene_content}\ncamera {} {} {} {:08x}\nsize {}x{}\nspp {}\nseed {}\nmax_depth {}\nrr_depth {}\nbackground {}\n",
+        "{FORMAT}\nscene {scene_content}\ncamera {} {} {} {:08x}\nsize {}x{}\nspp {}\nseed {}\nmax_depth {}\nrr_depth {}\nenvironment {}\n",
         bits(c.position),
         bits(c.forward),
         bits(c.up),
@@ -220,7 +221,7 @@ fn request_key(req: &ReferenceRequest<'_>, scene_content: &str) -> String {
         req.seed,
         req.tracer.max_depth,
         req.tracer.rr_depth,
-        bits(req.scene.background),
+        req.scene.environment().content_key(),
     );
     hex(&Sha256::digest(text.as_bytes()))
 }
@@ -325,7 +326,7 @@ pub fn obtain(
         seed: req.seed,
         max_depth: req.tracer.max_depth,
         rr_depth: req.tracer.rr_depth,
-        background: req.scene.background.to_array(),
+        environment: req.scene.environment().describe(),
         camera: (&req.scene.camera).into(),
         render_seconds,
         invalid_samples: out.stats.invalid_samples,

@@ -64,11 +64,11 @@ pub fn write_stats(path: &Path, stats: &[FrameStats]) -> Result<()> {
         serde_json::to_vec_pretty(stats)?
     } else {
         let mut s = String::from(
-            "frame,produce_ms,train_ms,infer_ms,records,used,dropped_nonfinite,dropped_absurd,steps,loss,paths,rays,cache_queries,invalid_samples,producer_dropped\n",
+            "frame,produce_ms,train_ms,infer_ms,records,used,dropped_nonfinite,dropped_absurd,steps,loss,target_mean,paths,rays,cache_queries,invalid_samples,producer_dropped\n",
         );
         for f in stats {
             s.push_str(&format!(
-                "{},{:.3},{:.3},{:.3},{},{},{},{},{},{},{},{},{},{},{}\n",
+                "{},{:.3},{:.3},{:.3},{},{},{},{},{},{},{},{},{},{},{},{}\n",
                 f.frame,
                 f.produce_ms,
                 f.train_ms,
@@ -79,6 +79,7 @@ pub fn write_stats(path: &Path, stats: &[FrameStats]) -> Result<()> {
                 f.dropped_absurd,
                 f.steps,
                 f.loss,
+                f.target_mean,
                 f.producer.paths,
                 f.producer.rays + f.inference.rays,
                 f.inference.queries,

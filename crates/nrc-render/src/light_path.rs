@@ -14,12 +14,7 @@
 //! flux arriving per unit *geometric* area while the BSDF integrals use shading cosines.
 
 use glam::Vec3;
-use nrc_scene::{
-    LightSample, Scene, SurfaceInteraction,
-    bsdf::Bsdf,
-    sampling::{Frame, sample_cosine_hemisphere},
-    spawn_ray,
-};
+use nrc_scene::{LightSample, Ray, Scene, SurfaceInteraction, bsdf::Bsdf, sampling::Frame, spawn_ray};
 
 use crate::path_tracer::{PathStats, PathTracer};
 use crate::sampler::PixelSampler;
@@ -54,7 +49,8 @@ pub struct LightVertex {
     pub next: Option<Vec3>,
 }
 
-/// A light path: the point on the light it started from and its surface vertices `y_1, y_2, ...`.
+/// A light path: the light sample it started from (a point on an emissive triangle, a punctual
+/// light, or an environment direction) and its surface vertices `y_1, y_2, ...`.
 #[derive(Clone, Debug, Default)]
 pub struct LightPath {
     pub origin: Option<LightSample>,
@@ -79,11 +75,14 @@ pub fn adjoint_scale(bsdf: &Bsdf, w_prev: Vec3, w_next: Vec3) -> f32 {
     etap * etap
 }
 
-/// Traces one light path with at most `max_vertices` surface vertices: a light point chosen by
-/// power, a cosine-distributed emission direction (on a uniformly chosen side of a two-sided
-/// emitter), then BSDF sampling with Russian roulette from `tracer.rr_depth` scattering events
-/// on, relative to the emitted weight. The first vertex's weight is
-/// `β₁ = Le cos θ / (p_A(y₀) p_ω(ω₀))`; each scattering multiplies by
+/// Traces one light path with at most `max_vertices` surface vertices: a light chosen by power
+/// and its first segment ([`LightSample::emit`]: a cosine-distributed direction from a point on
+/// an emissive triangle, on a uniformly chosen side of a two-sided one; a direction from a
+/// point or spot light's emission distribution; for the environment and directional lights a
+/// direction from their distribution and an origin on a disc covering the scene's bounding
+/// sphere), then BSDF sampling with Russian roulette from `tracer.rr_depth` scattering events
+/// on, relative to the emitted weight. The first vertex's weight is the emission's flux weight
+/// (`β₁ = Le cos θ / (p_A(y₀) p_ω(ω₀))` for a triangle); each scattering multiplies by
 /// `f(w_next, w_prev) |w_next·n_g| / p(w_next)` times the shading-normal factor described in
 /// the module documentation.
 pub fn trace_light_path(
@@ -105,22 +104,18 @@ pub fn trace_light_path(
     if max_vertices == 0 {
         return path;
     }
-    let (n, side_pdf) = if ls.two_sided {
-        (if u_side < 0.5 { ls.n } else { -ls.n }, 0.5)
-    } else {
-        (ls.n, 1.0)
-    };
-    let local = sample_cosine_hemisphere(u_dir);
-    let dir = Frame::from_normal(n).to_world(local);
-    let le = ls.le_toward(dir);
-    if local.z <= 0.0 || ls.pdf_area <= 0.0 || le == Vec3::ZERO {
+    let (center, radius) = scene.bounding_sphere();
+    let Some(e) = ls.emit(u_side, u_dir, center, radius) else {
         return path;
-    }
-    // β = Le cos / (p_A · cos/π · side_pdf).
-    let beta0 = le * (std::f32::consts::PI / (ls.pdf_area * side_pdf));
+    };
+    let beta0 = e.beta;
     let beta0_max = beta0.max_element();
     let mut beta = beta0;
-    let mut ray = spawn_ray(ls.p, ls.n, dir);
+    let mut ray = if e.normal == glam::Vec3::ZERO {
+        Ray::new(e.origin, e.dir)
+    } else {
+        spawn_ray(e.origin, e.normal, e.dir)
+    };
     let mut events: u32 = 0;
     while (path.vertices.len() as u32) < max_vertices {
         stats.closest_rays += 1;

@@ -7,7 +7,6 @@ use nrc_scene::{
     Scene, SurfaceInteraction,
     bsdf::Bsdf,
     sampling::{Frame, power_heuristic},
-    spawn_ray_between,
 };
 
 use crate::path_tracer::PathStats;
@@ -37,9 +36,23 @@ pub fn emission_mis_weight(
     power_heuristic(1.0, prev_pdf, 1.0, pdf_light)
 }
 
-/// Next-event estimation at a non-delta vertex: one point on an emitter chosen by power,
-/// its unoccluded contribution `f · Le · |cos| / pdf`, weighted against BSDF sampling by the
-/// power heuristic when `mis` (else weight 1). Draws three numbers from `sampler` always.
+/// The MIS weight (power heuristic) of environment radiance reached by a ray leaving in unit
+/// direction `d` that BSDF sampling chose with solid-angle density `prev_pdf`, against NEE
+/// choosing the same direction. `force_one` as for [`emission_mis_weight`].
+#[inline]
+pub fn environment_mis_weight(scene: &Scene, d: Vec3, prev_pdf: f32, force_one: bool) -> f32 {
+    let pdf_light = scene.environment_light_pdf(d);
+    if force_one || pdf_light == 0.0 {
+        return 1.0;
+    }
+    power_heuristic(1.0, prev_pdf, 1.0, pdf_light)
+}
+
+/// Next-event estimation at a non-delta vertex: one light sample chosen by power (a point on
+/// an emissive triangle, a punctual light, or an environment direction), its unoccluded
+/// contribution `f · L_i · |cos| / pdf`, weighted against BSDF sampling by the power heuristic
+/// when `mis` (else weight 1; delta lights always have weight 1, BSDF sampling cannot find
+/// them). Draws three numbers from `sampler` always.
 #[inline]
 pub fn next_event(
     scene: &Scene,
@@ -56,29 +69,23 @@ pub fn next_event(
     let Some(ls) = scene.sample_light(u_light, u_point) else {
         return Vec3::ZERO;
     };
-    let to_light = ls.p - si.p;
-    let dist2 = to_light.length_squared();
-    let wi = to_light / dist2.sqrt();
-    // Cosine at the light, and its radiance toward the shading point (zero behind a
-    // single-sided emitter).
-    let cos_light = ls.n.dot(-wi).abs();
-    let le = ls.le_toward(-wi);
-    let wi_local = frame.to_local(wi);
+    let Some(inc) = ls.incident(si.p) else {
+        return Vec3::ZERO;
+    };
+    let wi_local = frame.to_local(inc.wi);
     let f = bsdf.eval(wo, wi_local) * wi_local.z.abs();
     // Test visibility only for samples that can contribute.
-    if ls.pdf_area <= 0.0 || cos_light <= 0.0 || le == Vec3::ZERO || f == Vec3::ZERO {
+    if f == Vec3::ZERO {
         return Vec3::ZERO;
     }
     stats.shadow_rays += 1;
-    if scene.occluded(&spawn_ray_between(si.p, si.ng, ls.p, ls.n)) {
+    if scene.occluded(&ls.shadow_ray(si.p, si.ng, &inc)) {
         return Vec3::ZERO;
     }
-    // Area density to solid angle at the shading point.
-    let pdf_light = ls.pdf_area * dist2 / cos_light;
-    let weight = if mis {
-        power_heuristic(1.0, pdf_light, 1.0, bsdf.pdf(wo, wi_local))
+    let weight = if mis && !inc.delta {
+        power_heuristic(1.0, inc.pdf, 1.0, bsdf.pdf(wo, wi_local))
     } else {
         1.0
     };
-    f * le * (weight / pdf_light)
+    f * inc.li * (weight / inc.pdf)
 }

@@ -5,7 +5,7 @@
 //! BSDF importance sampling, and multiple importance sampling of the two with the power
 //! heuristic (Veach 1997, ch. 9). Specular (delta) scattering skips NEE, and emission
 //! found after it counts fully. Paths end by Russian roulette on the throughput, at the
-//! maximum depth, or when they escape to the constant background.
+//! maximum depth, or when they escape to the environment.
 //!
 //! Depth counts path *segments* as Mitsuba 3's `path` integrator does, so that a render
 //! agrees with Mitsuba's at the same `max_depth`: 1 shows emitters seen directly, 2 adds
@@ -105,7 +105,7 @@ impl PathTracer {
     ) -> Vec3 {
         let mut walk = PathWalk::from_ray(scene, self, ray);
         match walk.arrive(scene, stats) {
-            Arrival::Escaped { background } => background,
+            Arrival::Escaped { le, mis } => le * mis,
             // Emission seen by the camera ray counts fully (no light sample could produce
             // it); accumulated first, so sums come out in the same order as along any path.
             Arrival::Hit(h) => continue_path(scene, walk, h.vertex, h.le, sampler, stats),
@@ -151,8 +151,8 @@ fn continue_path(
             break;
         }
         match walk.arrive(scene, stats) {
-            Arrival::Escaped { background } => {
-                radiance += walk.throughput() * background;
+            Arrival::Escaped { le, mis } => {
+                radiance += walk.throughput() * le * mis;
                 break;
             }
             Arrival::Hit(h) => {

@@ -18,7 +18,7 @@
 use glam::Vec3;
 use nrc_scene::{Ray, Scene, SurfaceInteraction, bsdf::Bsdf, sampling::Frame, spawn_ray};
 
-use crate::nee::{emission_mis_weight, next_event};
+use crate::nee::{emission_mis_weight, environment_mis_weight, next_event};
 use crate::path_tracer::{LightStrategy, PathStats, PathTracer};
 use crate::sampler::PixelSampler;
 use crate::source::RadianceQuery;
@@ -61,8 +61,10 @@ impl Vertex {
 pub enum Arrival {
     /// A surface.
     Hit(Hit),
-    /// Nothing: the path left the scene; the radiance it brings back is `background`.
-    Escaped { background: Vec3 },
+    /// Nothing: the path left the scene and sees the environment's radiance `le`, with its
+    /// MIS weight against NEE at the previous vertex; the path's radiance gains
+    /// `throughput · le · mis`.
+    Escaped { le: Vec3, mis: f32 },
 }
 
 /// A surface reached by a segment.
@@ -156,10 +158,20 @@ impl PathWalk {
         stats.closest_rays += 1;
         let ray = self.ray;
         let Some(hit) = scene.intersect(&ray) else {
-            // Constant background radiance: not light-sampled, so weight 1.
-            return Arrival::Escaped {
-                background: scene.background,
+            let d = ray.d.normalize();
+            let le = scene.environment().radiance(d);
+            let mis = if le == Vec3::ZERO {
+                0.0
+            } else if self.tracer.strategy == LightStrategy::LightOnly
+                && self.use_nee
+                && !self.prev_delta
+                && scene.environment_light_pdf(d) > 0.0
+            {
+                0.0
+            } else {
+                environment_mis_weight(scene, d, self.prev_pdf, self.prev_delta || !self.use_nee)
             };
+            return Arrival::Escaped { le, mis };
         };
         let si = scene.interaction(&ray, &hit);
         let dist = hit.t * ray.d.length();

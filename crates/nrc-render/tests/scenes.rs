@@ -28,8 +28,8 @@ fn gltf_files(dir: &Path, recursive: bool) -> Vec<PathBuf> {
 
 fn check(path: &Path) {
     let mut scene = Scene::load(path).unwrap_or_else(|e| panic!("{e}"));
-    if scene.light_count() == 0 && scene.background == Vec3::ZERO {
-        scene.background = Vec3::ONE;
+    if scene.light_count() == 0 {
+        scene.set_environment(nrc_scene::Environment::constant(Vec3::ONE));
     }
     let out = render_scene(&scene, &PathTracer::default(), 32, 24, 4, 1);
     for (i, p) in out.mean.data.iter().enumerate() {

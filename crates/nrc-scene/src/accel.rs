@@ -212,9 +212,10 @@ impl Accel {
         move |t: f32| t + (SLACK_ULPS * t + abs)
     }
 
-    /// The closest hit along the ray with `0 ≤ t < ray.t_max`.
+    /// The closest hit along the ray with `0 ≤ t < ray.t_max` among the hits `accept(triangle,
+    /// b1, b2)` lets through (alpha cut-outs; `|_, _, _| true` for all).
     #[inline]
-    pub fn intersect(&self, ray: &Ray) -> Option<Hit> {
+    pub fn intersect(&self, ray: &Ray, accept: impl Fn(u32, f32, f32) -> bool) -> Option<Hit> {
         let mut r = Self::to_obvhs(ray);
         let slack = self.slack(&r);
         let mut best = r.tmax;
@@ -226,7 +227,7 @@ impl Accel {
         // enlarged distance to cull boxes with (see `slack`).
         self.bvh.ray_traverse(r, &mut hit, |r, id| {
             match tris[id].intersect(r.origin, r.direction, best) {
-                Some((t, u, v)) if t < best => {
+                Some((t, u, v)) if t < best && accept(id as u32, u, v) => {
                     best = t;
                     tri = id as u32;
                     b1 = u;
@@ -245,16 +246,16 @@ impl Accel {
     }
 
     /// Whether any triangle lies along the ray with `0 ≤ t < ray.t_max` (any-hit traversal
-    /// that stops at the first intersection found).
+    /// that stops at the first intersection `accept` lets through).
     #[inline]
-    pub fn occluded(&self, ray: &Ray) -> bool {
+    pub fn occluded(&self, ray: &Ray, accept: impl Fn(u32, f32, f32) -> bool) -> bool {
         let mut r = Self::to_obvhs(ray);
         let t_max = r.tmax;
         r.tmax = self.slack(&r)(t_max);
         let tris = &self.tris;
         !self.bvh.ray_traverse_miss(r, |r, id| {
             match tris[id].intersect(r.origin, r.direction, t_max) {
-                Some((t, _, _)) if t < t_max => t,
+                Some((t, u, v)) if t < t_max && accept(id as u32, u, v) => t,
                 _ => f32::INFINITY,
             }
         })

@@ -1,6 +1,7 @@
 //! glTF 2.0 loading (`.gltf` + external or embedded buffers, `.glb`) into a
 //! [`SceneDescription`]: meshes flattened to world space through the node hierarchy,
-//! materials with their textures, and the first perspective camera.
+//! materials with their textures (normal maps, alpha modes, both texture coordinate sets),
+//! `KHR_lights_punctual` lights, and the first perspective camera.
 //!
 //! Every problem in the input is reported as a [`SceneError`] naming the file, buffer,
 //! image or mesh at fault; nothing in the input can make the loader panic (accessor types
@@ -15,12 +16,14 @@ use gltf::mesh::Mode;
 
 use crate::camera::Camera;
 use crate::error::{Result, SceneError};
-use crate::material::Material;
+use crate::light::{PunctualKind, PunctualLight};
+use crate::material::{AlphaMode, Material};
 use crate::scene::{Scene, SceneDescription};
 use crate::texture::{Texture, TextureRef, UvTransform, WrapMode, srgb_to_linear};
 
 /// Extensions this loader implements; a file may require them.
-pub const SUPPORTED_EXTENSIONS: [&str; 5] = [
+pub const SUPPORTED_EXTENSIONS: [&str; 6] = [
+    "KHR_lights_punctual",
     "KHR_materials_emissive_strength",
     "KHR_materials_transmission",
     "KHR_materials_ior",
@@ -148,6 +151,15 @@ pub fn percent_decode(uri: &str) -> String {
         i += 1;
     }
     String::from_utf8_lossy(&out).into_owned()
+}
+
+/// Per-vertex attributes gathered over all primitives (`None` where a primitive lacks one).
+#[derive(Default)]
+struct VertexAttributes {
+    normals: Vec<Option<Vec3>>,
+    uvs: Vec<Option<Vec2>>,
+    uvs1: Vec<Option<Vec2>>,
+    tangents: Vec<Option<Vec4>>,
 }
 
 struct Loader<'a> {
@@ -285,10 +297,7 @@ impl Loader<'_> {
             .rev()
             .map(|n| (n, Mat4::IDENTITY, 0))
             .collect();
-        let mut has_normals = false;
-        let mut has_uvs = false;
-        let mut vertex_normals: Vec<Option<Vec3>> = Vec::new();
-        let mut vertex_uvs: Vec<Option<Vec2>> = Vec::new();
+        let mut attrs = VertexAttributes::default();
         while let Some((node, parent, depth)) = stack.pop() {
             if depth > 256 {
                 return Err(self.invalid("node hierarchy deeper than 256 levels (a cycle?)".into()));
@@ -318,34 +327,36 @@ impl Loader<'_> {
                     }
                 }
             }
+            if let Some(light) = node.light() {
+                let l = self.light(&light, &world)?;
+                desc.lights.push(l);
+            }
             if let Some(mesh) = node.mesh() {
                 for prim in mesh.primitives() {
-                    self.primitive(
-                        &mesh,
-                        &prim,
-                        &world,
-                        default_material,
-                        &mut desc,
-                        &mut vertex_normals,
-                        &mut vertex_uvs,
-                        &mut has_normals,
-                        &mut has_uvs,
-                    )?;
+                    self.primitive(&mesh, &prim, &world, default_material, &mut desc, &mut attrs)?;
                 }
             }
             for child in node.children() {
                 stack.push((child, world, depth + 1));
             }
         }
-        if has_normals {
-            desc.normals = vertex_normals
-                .iter()
-                .map(|n| n.unwrap_or(Vec3::ZERO))
-                .collect();
+        let VertexAttributes {
+            normals,
+            uvs,
+            uvs1,
+            tangents,
+        } = attrs;
+        fn fill<T: Copy>(v: Vec<Option<T>>, zero: T) -> Vec<T> {
+            if v.iter().any(Option::is_some) {
+                v.into_iter().map(|x| x.unwrap_or(zero)).collect()
+            } else {
+                Vec::new()
+            }
         }
-        if has_uvs {
-            desc.uvs = vertex_uvs.iter().map(|t| t.unwrap_or(Vec2::ZERO)).collect();
-        }
+        desc.normals = fill(normals, Vec3::ZERO);
+        desc.uvs = fill(uvs, Vec2::ZERO);
+        desc.uvs1 = fill(uvs1, Vec2::ZERO);
+        desc.tangents = fill(tangents, Vec4::ZERO);
         desc.textures = std::mem::take(&mut self.textures);
         desc.warnings = std::mem::take(&mut self.warnings);
         Ok(desc)
@@ -359,10 +370,7 @@ impl Loader<'_> {
         world: &Mat4,
         default_material: u32,
         desc: &mut SceneDescription,
-        vertex_normals: &mut Vec<Option<Vec3>>,
-        vertex_uvs: &mut Vec<Option<Vec2>>,
-        has_normals: &mut bool,
-        has_uvs: &mut bool,
+        attrs: &mut VertexAttributes,
     ) -> Result<()> {
         let mode = prim.mode();
         if !matches!(
@@ -394,15 +402,21 @@ impl Loader<'_> {
         if let Some(a) = &normal_acc {
             self.check_accessor(mesh, a, "NORMAL", &[DataType::F32], &[Dimensions::Vec3])?;
         }
-        let uv_acc = prim.get(&gltf::Semantic::TexCoords(0));
-        if let Some(a) = &uv_acc {
-            self.check_accessor(
-                mesh,
-                a,
-                "TEXCOORD_0",
-                &[DataType::F32, DataType::U8, DataType::U16],
-                &[Dimensions::Vec2],
-            )?;
+        let uv_accs = [0, 1].map(|set| prim.get(&gltf::Semantic::TexCoords(set)));
+        for (set, a) in uv_accs.iter().enumerate() {
+            if let Some(a) = a {
+                self.check_accessor(
+                    mesh,
+                    a,
+                    &format!("TEXCOORD_{set}"),
+                    &[DataType::F32, DataType::U8, DataType::U16],
+                    &[Dimensions::Vec2],
+                )?;
+            }
+        }
+        let tangent_acc = prim.get(&gltf::Semantic::Tangents);
+        if let Some(a) = &tangent_acc {
+            self.check_accessor(mesh, a, "TANGENT", &[DataType::F32], &[Dimensions::Vec4])?;
         }
         if let Some(a) = prim.indices() {
             self.check_accessor(
@@ -444,18 +458,31 @@ impl Loader<'_> {
             }
             None => None,
         };
-        let uvs: Option<Vec<Vec2>> = match uv_acc {
-            Some(a) => {
+        let mut uvs: [Option<Vec<Vec2>>; 2] = [None, None];
+        for (set, a) in uv_accs.iter().enumerate() {
+            if let Some(a) = a {
+                let name = format!("TEXCOORD_{set}");
                 let t: Vec<Vec2> = reader
-                    .read_tex_coords(0)
-                    .ok_or_else(|| out_of_range("TEXCOORD_0"))?
+                    .read_tex_coords(set as u32)
+                    .ok_or_else(|| out_of_range(&name))?
                     .into_f32()
                     .map(Vec2::from)
                     .collect();
                 if t.len() != n_vertices || a.count() != n_vertices {
-                    return Err(
-                        self.mesh_error(mesh, "TEXCOORD_0 and POSITION counts differ".into())
-                    );
+                    return Err(self.mesh_error(mesh, format!("{name} and POSITION counts differ")));
+                }
+                uvs[set] = Some(t);
+            }
+        }
+        let tangents: Option<Vec<Vec4>> = match tangent_acc {
+            Some(a) => {
+                let t: Vec<Vec4> = reader
+                    .read_tangents()
+                    .ok_or_else(|| out_of_range("TANGENT"))?
+                    .map(Vec4::from)
+                    .collect();
+                if t.len() != n_vertices || a.count() != n_vertices {
+                    return Err(self.mesh_error(mesh, "TANGENT and POSITION counts differ".into()));
                 }
                 Some(t)
             }
@@ -524,23 +551,31 @@ impl Loader<'_> {
             }
             desc.positions.push(q);
         }
-        match &normals {
-            Some(n) => {
-                *has_normals = true;
-                vertex_normals.extend(n.iter().map(|&n| {
-                    let w = (normal_matrix * n).normalize_or_zero();
-                    (w.is_finite() && w != Vec3::ZERO).then_some(w)
-                }))
+        fn extend<T: Clone>(
+            out: &mut Vec<Option<T>>,
+            values: Option<Vec<T>>,
+            n: usize,
+            f: impl Fn(T) -> Option<T>,
+        ) {
+            match values {
+                Some(v) => out.extend(v.into_iter().map(f)),
+                None => out.extend(std::iter::repeat_n(None, n)),
             }
-            None => vertex_normals.extend(std::iter::repeat_n(None, n_vertices)),
         }
-        match &uvs {
-            Some(t) => {
-                *has_uvs = true;
-                vertex_uvs.extend(t.iter().map(|&t| t.is_finite().then_some(t)))
-            }
-            None => vertex_uvs.extend(std::iter::repeat_n(None, n_vertices)),
-        }
+        extend(&mut attrs.normals, normals, n_vertices, |n: Vec3| {
+            let w = (normal_matrix * n).normalize_or_zero();
+            (w.is_finite() && w != Vec3::ZERO).then_some(w)
+        });
+        let [uvs0, uvs1] = uvs;
+        extend(&mut attrs.uvs, uvs0, n_vertices, |t: Vec2| t.is_finite().then_some(t));
+        extend(&mut attrs.uvs1, uvs1, n_vertices, |t: Vec2| t.is_finite().then_some(t));
+        // Tangents transform as directions; a mirroring transform flips the handedness.
+        let flip = if det < 0.0 { -1.0 } else { 1.0 };
+        extend(&mut attrs.tangents, tangents, n_vertices, |t: Vec4| {
+            let d = (m3 * t.truncate()).normalize_or_zero();
+            (d.is_finite() && d != Vec3::ZERO && t.w.is_finite())
+                .then(|| d.extend(if t.w < 0.0 { -flip } else { flip }))
+        });
         let material = prim
             .material()
             .index()
@@ -558,6 +593,72 @@ impl Loader<'_> {
             desc.triangle_meshes.push(mesh_id);
         }
         Ok(())
+    }
+
+    /// A `KHR_lights_punctual` light under the node transform `world` (position from the
+    /// translation, direction the node's −z). Validated here: a negative or non-finite
+    /// intensity or colour, a range that is not positive, and a spot whose outer cone angle is
+    /// below its inner one or beyond π/2 are errors naming the light.
+    fn light(&self, light: &gltf::khr_lights_punctual::Light, world: &Mat4) -> Result<PunctualLight> {
+        let name = light
+            .name()
+            .map(|n| format!("`{n}`"))
+            .unwrap_or_else(|| format!("#{}", light.index()));
+        let bad = |field: &str, why: String| {
+            self.invalid(format!("KHR_lights_punctual light {name}: {field} {why}"))
+        };
+        let color = Vec3::from(light.color());
+        if !color.is_finite() || color.min_element() < 0.0 {
+            return Err(bad("color", format!("must be finite and non-negative, got {color}")));
+        }
+        let intensity = light.intensity();
+        if !intensity.is_finite() || intensity < 0.0 {
+            return Err(bad("intensity", format!("must be finite and non-negative, got {intensity}")));
+        }
+        let range = light.range();
+        if let Some(r) = range
+            && !(r.is_finite() && r > 0.0)
+        {
+            return Err(bad("range", format!("must be positive, got {r}")));
+        }
+        let kind = match light.kind() {
+            gltf::khr_lights_punctual::Kind::Point => PunctualKind::Point,
+            gltf::khr_lights_punctual::Kind::Directional => PunctualKind::Directional,
+            gltf::khr_lights_punctual::Kind::Spot {
+                inner_cone_angle,
+                outer_cone_angle,
+            } => {
+                let ok = inner_cone_angle.is_finite()
+                    && outer_cone_angle.is_finite()
+                    && inner_cone_angle >= 0.0
+                    && inner_cone_angle <= outer_cone_angle
+                    && outer_cone_angle > 0.0
+                    && outer_cone_angle <= std::f32::consts::FRAC_PI_2;
+                if !ok {
+                    return Err(bad(
+                        "spot",
+                        format!(
+                            "cone angles must satisfy 0 ≤ innerConeAngle ≤ outerConeAngle ≤ π/2 with outerConeAngle > 0, got inner {inner_cone_angle}, outer {outer_cone_angle}"
+                        ),
+                    ));
+                }
+                PunctualKind::Spot {
+                    cos_inner: inner_cone_angle.cos(),
+                    cos_outer: outer_cone_angle.cos(),
+                }
+            }
+        };
+        let direction = world.transform_vector3(Vec3::NEG_Z).normalize_or_zero();
+        if direction == Vec3::ZERO || !direction.is_finite() {
+            return Err(bad("node", "has a degenerate transform (no direction)".into()));
+        }
+        Ok(PunctualLight {
+            kind,
+            position: world.transform_point3(Vec3::ZERO),
+            direction,
+            intensity: color * intensity,
+            range: if kind == PunctualKind::Directional { None } else { range },
+        })
     }
 
     /// Checks an accessor's component type, dimensions and non-zero count.
@@ -594,7 +695,7 @@ impl Loader<'_> {
             .map(str::to_string)
             .unwrap_or_else(|| format!("#{}", m.index().unwrap_or(usize::MAX)));
         let pbr = m.pbr_metallic_roughness();
-        let [r, g, b, _a] = pbr.base_color_factor();
+        let [r, g, b, a] = pbr.base_color_factor();
         let mut out = Material {
             name: name.clone(),
             base_color: Vec3::new(r, g, b),
@@ -606,8 +707,26 @@ impl Loader<'_> {
             emissive: Vec3::from(m.emissive_factor()) * m.emissive_strength().unwrap_or(1.0),
             emissive_texture: self.texture_ref(m.emissive_texture(), true)?,
             double_sided: m.double_sided(),
+            alpha: a,
+            alpha_mode: match m.alpha_mode() {
+                gltf::material::AlphaMode::Opaque => AlphaMode::Opaque,
+                gltf::material::AlphaMode::Mask => AlphaMode::Mask,
+                gltf::material::AlphaMode::Blend => AlphaMode::Blend,
+            },
+            alpha_cutoff: m.alpha_cutoff().unwrap_or(0.5),
             ..Material::default()
         };
+        if let Some(n) = m.normal_texture() {
+            let tex = n.texture();
+            out.normal_texture = self.texture_ref_of(&tex, n.tex_coord(), None, false)?;
+            out.normal_scale = n.scale();
+        }
+        if out.alpha_mode == AlphaMode::Blend {
+            self.warn(format!(
+                "material `{name}`: alphaMode BLEND is rendered as coverage (MASK with alphaCutoff {}): a path tracer has no draw order to blend in",
+                out.alpha_cutoff
+            ));
+        }
         if let Some(t) = m.transmission() {
             out.transmission = t.transmission_factor();
             out.transmission_texture = self.texture_ref(t.transmission_texture(), false)?;
@@ -630,6 +749,9 @@ impl Loader<'_> {
                 out.transmission,
                 out.specular,
                 out.ior,
+                out.normal_scale,
+                out.alpha,
+                out.alpha_cutoff,
             ]
             .iter()
             .all(|v| v.is_finite());
@@ -669,18 +791,30 @@ impl Loader<'_> {
                 scale: Vec2::from(t.scale()),
             }
         });
-        if tex_coord != 0 {
+        self.texture_ref_of(&info.texture(), tex_coord, transform, srgb)
+    }
+
+    /// The reference to `tex` read through coordinate set `tex_coord` (0 or 1: sets beyond
+    /// `TEXCOORD_1` fall back to 0 with a warning).
+    fn texture_ref_of(
+        &mut self,
+        tex: &gltf::Texture,
+        mut tex_coord: u32,
+        transform: Option<UvTransform>,
+        srgb: bool,
+    ) -> Result<Option<TextureRef>> {
+        if tex_coord > 1 {
             self.warn(format!(
-                "texture {} uses TEXCOORD_{tex_coord}; only TEXCOORD_0 is loaded, using it instead",
-                info.texture().index()
+                "texture {} uses TEXCOORD_{tex_coord}; only TEXCOORD_0 and TEXCOORD_1 are loaded, using TEXCOORD_0 instead",
+                tex.index()
             ));
+            tex_coord = 0;
         }
-        let tex = info.texture();
         let key = (tex.index(), srgb);
         let index = match self.texture_keys.get(&key) {
             Some(&i) => i,
             None => {
-                let texture = self.decode_texture(&tex, srgb)?;
+                let texture = self.decode_texture(tex, srgb)?;
                 let i = self.textures.len() as u32;
                 self.textures.push(texture);
                 self.texture_keys.insert(key, i);
@@ -690,6 +824,7 @@ impl Loader<'_> {
         Ok(Some(TextureRef {
             texture: index,
             transform,
+            tex_coord,
         }))
     }
 

@@ -15,8 +15,8 @@ pub struct SurfaceInteraction {
     /// Unit shading normal: interpolated vertex normal (or `ng` when the mesh has none),
     /// flipped into the hemisphere of `ng`.
     pub ns: Vec3,
-    /// Texture coordinates (TEXCOORD_0; zero when absent).
-    pub uv: Vec2,
+    /// Texture coordinates `TEXCOORD_0` and `TEXCOORD_1` (zero when absent).
+    pub uv: [Vec2; 2],
     /// Unit direction back along the incoming ray (toward its origin).
     pub wo: Vec3,
     /// Material index into the scene's materials.

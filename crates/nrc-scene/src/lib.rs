@@ -3,8 +3,9 @@
 //!
 //! The entry point is [`Scene::load`]; a scene answers closest-hit and occlusion queries
 //! ([`Scene::intersect`], [`Scene::occluded`]), describes hit points
-//! ([`Scene::interaction`], [`Scene::pbr`], [`Scene::emission`]) and samples its area
-//! lights ([`Scene::sample_light`], [`Scene::light_pdf_area`]).
+//! ([`Scene::interaction`], [`Scene::pbr`], [`Scene::emission`]) and samples its lights:
+//! emissive triangles, punctual lights and the environment ([`Scene::sample_light`],
+//! [`Scene::light_pdf_area`], [`Scene::environment_light_pdf`]).
 //!
 //! ```
 //! use glam::Vec3;
@@ -33,6 +34,7 @@
 pub mod accel;
 pub mod bsdf;
 pub mod camera;
+pub mod environment;
 pub mod error;
 pub mod geometry;
 pub mod gltf_load;
@@ -42,6 +44,7 @@ pub mod light;
 pub mod material;
 pub mod sampling;
 pub mod scene;
+pub mod tangents;
 pub mod texture;
 
 pub use accel::Hit;
@@ -51,7 +54,11 @@ pub use error::SceneError;
 pub use geometry::{Aabb, Ray, offset_ray_origin, spawn_ray, spawn_ray_between, spawn_ray_to};
 pub use image::Image;
 pub use interaction::SurfaceInteraction;
-pub use light::{LightSample, LightSampler};
-pub use material::Material;
+pub use environment::Environment;
+pub use light::{
+    Incident, LightSample, LightSampler, LightSource, PunctualKind, PunctualLight,
+    SurfaceLightSample,
+};
+pub use material::{AlphaMode, Material};
 pub use scene::{Scene, SceneDescription, SceneSummary};
 pub use texture::{Texture, TextureRef, WrapMode};

@@ -34,6 +34,15 @@ pub struct Material {
     pub specular_color: Vec3,
     /// sRGB-decoded RGB multiplies `specular_color`.
     pub specular_color_texture: Option<TextureRef>,
+    /// Tangent-space normal map (linear RGB), and its `scale` (glTF's `normalTexture.scale`).
+    pub normal_texture: Option<TextureRef>,
+    pub normal_scale: f32,
+    /// How the base colour's alpha (factor × texture) cuts the surface.
+    pub alpha_mode: AlphaMode,
+    /// Base colour factor's alpha.
+    pub alpha: f32,
+    /// glTF `alphaCutoff` (MASK, and BLEND as this renderer treats it).
+    pub alpha_cutoff: f32,
     /// glTF `doubleSided`. Geometry is always intersected from both sides; the flag only
     /// decides whether the back face emits (see [`Material::emits_toward`]).
     pub double_sided: bool,
@@ -59,13 +68,30 @@ impl Default for Material {
             specular_texture: None,
             specular_color: p.specular_color,
             specular_color_texture: None,
+            normal_texture: None,
+            normal_scale: 1.0,
+            alpha_mode: AlphaMode::Opaque,
+            alpha: 1.0,
+            alpha_cutoff: 0.5,
             double_sided: false,
         }
     }
 }
 
+/// glTF `alphaMode`. A path tracer has no draw order to blend in, so `Blend` is rendered as
+/// coverage: the surface exists where alpha ≥ `alphaCutoff` (0.5 unless the file sets one),
+/// exactly like `Mask`; the loader says so in a warning. Cut-away points are skipped by every
+/// ray, shadow rays included.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum AlphaMode {
+    #[default]
+    Opaque,
+    Mask,
+    Blend,
+}
+
 #[inline]
-fn lookup(textures: &[Texture], r: &Option<TextureRef>, uv: Vec2) -> Vec4 {
+fn lookup(textures: &[Texture], r: &Option<TextureRef>, uv: &[Vec2; 2]) -> Vec4 {
     match r {
         Some(r) => textures[r.texture as usize].sample(r.uv(uv)),
         None => Vec4::ONE,
@@ -78,10 +104,10 @@ impl Material {
         self.emissive.max_element() > 0.0
     }
 
-    /// Material parameters at texture coordinates `uv`, textures applied and every value
-    /// clamped to its valid range.
+    /// Material parameters at texture coordinate sets `uv` (`TEXCOORD_0`, `TEXCOORD_1`),
+    /// textures applied and every value clamped to its valid range.
     #[inline]
-    pub fn pbr(&self, textures: &[Texture], uv: Vec2) -> PbrParams {
+    pub fn pbr(&self, textures: &[Texture], uv: &[Vec2; 2]) -> PbrParams {
         let base = lookup(textures, &self.base_color_texture, uv);
         let mr = lookup(textures, &self.metallic_roughness_texture, uv);
         let transmission = lookup(textures, &self.transmission_texture, uv).x;
@@ -98,9 +124,9 @@ impl Material {
         }
     }
 
-    /// Emitted radiance of the front face at texture coordinates `uv` (no side test).
+    /// Emitted radiance of the front face at texture coordinate sets `uv` (no side test).
     #[inline]
-    pub fn emission(&self, textures: &[Texture], uv: Vec2) -> Vec3 {
+    pub fn emission(&self, textures: &[Texture], uv: &[Vec2; 2]) -> Vec3 {
         if !self.is_emissive() {
             return Vec3::ZERO;
         }
@@ -108,6 +134,31 @@ impl Material {
             * lookup(textures, &self.emissive_texture, uv)
                 .truncate()
                 .max(Vec3::ZERO)
+    }
+
+    /// Whether the material can cut surfaces away (MASK or BLEND).
+    #[inline]
+    pub fn has_cutout(&self) -> bool {
+        self.alpha_mode != AlphaMode::Opaque
+    }
+
+    /// Whether the surface exists at texture coordinate sets `uv`: always for OPAQUE, else
+    /// where alpha (factor × base colour texture's A) reaches the cutoff.
+    #[inline]
+    pub fn is_solid(&self, textures: &[Texture], uv: &[Vec2; 2]) -> bool {
+        !self.has_cutout()
+            || self.alpha * lookup(textures, &self.base_color_texture, uv).w >= self.alpha_cutoff
+    }
+
+    /// The tangent-space normal at `uv`: the texture's RGB mapped to `[−1, 1]`, x and y scaled
+    /// by `normal_scale` (glTF's rule), normalised; `None` without a normal map.
+    #[inline]
+    pub fn mapped_normal(&self, textures: &[Texture], uv: &[Vec2; 2]) -> Option<Vec3> {
+        let t = self.normal_texture.as_ref()?;
+        let c = textures[t.texture as usize].sample(t.uv(uv)).truncate() * 2.0 - Vec3::ONE;
+        let n = Vec3::new(c.x * self.normal_scale, c.y * self.normal_scale, c.z);
+        let n = n.normalize_or_zero();
+        (n != Vec3::ZERO && n.is_finite()).then_some(n)
     }
 
     /// Whether a surface with geometric normal `ng` emits toward direction `w` (pointing

@@ -139,6 +139,138 @@ pub fn power_heuristic(nf: f32, f_pdf: f32, ng: f32, g_pdf: f32) -> f32 {
     }
 }
 
+/// A piecewise-constant density on `[0, 1)` with `n` equal cells, proportional to the
+/// non-negative weights it was built from (uniform when they sum to zero or are not finite).
+/// Sampling inverts the cumulative distribution exactly within a cell, so the sample's
+/// density is `weight(cell) · n / Σ weights`.
+#[derive(Clone, Debug)]
+pub struct Distribution1D {
+    /// Density of each cell (integrates to 1 over `[0, 1)`).
+    density: Vec<f32>,
+    /// Cumulative probability at each cell's end (the last is 1).
+    cdf: Vec<f32>,
+    /// Sum of the weights (`0` when the distribution fell back to uniform).
+    total: f64,
+}
+
+impl Distribution1D {
+    /// The distribution of `weights` (at least one). Negative and non-finite weights count as 0.
+    pub fn new(weights: &[f32]) -> Self {
+        assert!(!weights.is_empty(), "a distribution needs at least one cell");
+        let clean = |w: f32| if w.is_finite() && w > 0.0 { w as f64 } else { 0.0 };
+        let mut total: f64 = weights.iter().map(|&w| clean(w)).sum();
+        let n = weights.len();
+        let uniform = !(total > 0.0 && total.is_finite());
+        let weight = |w: f32| if uniform { 1.0 } else { clean(w) };
+        let sum = if uniform { n as f64 } else { total };
+        if uniform {
+            total = 0.0;
+        }
+        let mut cdf = Vec::with_capacity(n);
+        let mut acc = 0.0f64;
+        let density = weights
+            .iter()
+            .map(|&w| {
+                acc += weight(w);
+                cdf.push((acc / sum) as f32);
+                (weight(w) * n as f64 / sum) as f32
+            })
+            .collect();
+        *cdf.last_mut().expect("non-empty") = 1.0;
+        Self {
+            density,
+            cdf,
+            total,
+        }
+    }
+
+    /// Number of cells.
+    pub fn len(&self) -> usize {
+        self.density.len()
+    }
+
+    /// Always false (a distribution has at least one cell).
+    pub fn is_empty(&self) -> bool {
+        false
+    }
+
+    /// Sum of the weights it was built from (0 for the uniform fallback).
+    pub fn total(&self) -> f64 {
+        self.total
+    }
+
+    /// A point `x` in `[0, 1)` for `u` uniform in `[0, 1)`: `(x, density at x, cell)`.
+    #[inline]
+    pub fn sample(&self, u: f32) -> (f32, f32, usize) {
+        let n = self.density.len();
+        // First cell whose end lies above u, skipping zero-probability cells.
+        let i = self.cdf.partition_point(|&c| c <= u).min(n - 1);
+        let start = if i == 0 { 0.0 } else { self.cdf[i - 1] };
+        let p = self.cdf[i] - start;
+        let t = if p > 0.0 { ((u - start) / p).clamp(0.0, 1.0) } else { 0.5 };
+        let x = ((i as f32 + t) / n as f32).min(1.0 - f32::EPSILON / 2.0);
+        (x, self.density[i], i)
+    }
+
+    /// Density at `x` in `[0, 1)` (clamped into the range).
+    #[inline]
+    pub fn pdf(&self, x: f32) -> f32 {
+        self.density[self.cell(x)]
+    }
+
+    /// The cell holding `x`.
+    #[inline]
+    pub fn cell(&self, x: f32) -> usize {
+        let n = self.density.len();
+        ((x * n as f32) as isize).clamp(0, n as isize - 1) as usize
+    }
+}
+
+/// A piecewise-constant density on `[0, 1)²` over a `width × height` grid of cells (row `y`,
+/// column `x`), sampled as a marginal over rows and a conditional within the row (PBRT's
+/// construction).
+#[derive(Clone, Debug)]
+pub struct Distribution2D {
+    rows: Vec<Distribution1D>,
+    marginal: Distribution1D,
+}
+
+impl Distribution2D {
+    /// The distribution of row-major `weights` (`width × height` of them, both at least 1).
+    pub fn new(weights: &[f32], width: usize, height: usize) -> Self {
+        assert!(width > 0 && height > 0 && weights.len() == width * height);
+        let rows: Vec<Distribution1D> = weights
+            .chunks_exact(width)
+            .map(Distribution1D::new)
+            .collect();
+        let row_weights: Vec<f32> = rows.iter().map(|r| r.total() as f32).collect();
+        Self {
+            marginal: Distribution1D::new(&row_weights),
+            rows,
+        }
+    }
+
+    /// Sum of the weights.
+    pub fn total(&self) -> f64 {
+        self.marginal.total()
+    }
+
+    /// A point of `[0, 1)²` (`x` along a row, `y` across rows) and its density.
+    #[inline]
+    pub fn sample(&self, u: Vec2) -> (Vec2, f32) {
+        let (y, py, row) = self.marginal.sample(u.y);
+        let (x, px, _) = self.rows[row].sample(u.x);
+        (Vec2::new(x, y), px * py)
+    }
+
+    /// Density at `p` in `[0, 1)²`.
+    #[inline]
+    pub fn pdf(&self, p: Vec2) -> f32 {
+        let row = self.marginal.cell(p.y);
+        self.marginal.pdf(p.y) * self.rows[row].pdf(p.x)
+    }
+}
+
 /// Luminance of a linear RGB colour with the Rec. 709 / sRGB primaries' Y weights.
 #[inline]
 pub fn luminance(c: Vec3) -> f32 {

@@ -4,7 +4,7 @@
 use std::fmt;
 use std::path::{Path, PathBuf};
 
-use glam::{Vec2, Vec3};
+use glam::{Vec2, Vec3, Vec4};
 
 use crate::accel::{Accel, Hit};
 use crate::bsdf::PbrParams;
@@ -12,7 +12,8 @@ use crate::camera::Camera;
 use crate::error::{Result, SceneError};
 use crate::geometry::{Aabb, Ray};
 use crate::interaction::SurfaceInteraction;
-use crate::light::{LightSample, LightSampler};
+use crate::environment::Environment;
+use crate::light::{LightSample, LightSampler, LightSource, PunctualLight, SurfaceLightSample};
 use crate::material::Material;
 use crate::sampling::{luminance, sample_uniform_triangle};
 use crate::texture::Texture;
@@ -29,6 +30,11 @@ pub struct SceneDescription {
     pub normals: Vec<Vec3>,
     /// Per-vertex texture coordinates (same length as `positions`) or empty.
     pub uvs: Vec<Vec2>,
+    /// Per-vertex second texture coordinate set (`TEXCOORD_1`), same length or empty.
+    pub uvs1: Vec<Vec2>,
+    /// Per-vertex tangents (xyz, w = ±1 the bitangent's sign, glTF's `TANGENT`), same length
+    /// or empty; where normal-mapped triangles have none, MikkTSpace tangents are generated.
+    pub tangents: Vec<Vec4>,
     /// Vertex indices of each triangle; the front face is the counter-clockwise side.
     pub triangles: Vec<[u32; 3]>,
     /// Material index of each triangle.
@@ -40,8 +46,10 @@ pub struct SceneDescription {
     pub textures: Vec<Texture>,
     /// The camera; `None` gives a camera framing the scene bounds.
     pub camera: Option<Camera>,
-    /// Constant radiance seen by rays that leave the scene.
-    pub background: Vec3,
+    /// Radiance seen by rays that leave the scene (a constant is the former background).
+    pub environment: Environment,
+    /// Punctual lights (`KHR_lights_punctual`), in world space.
+    pub lights: Vec<PunctualLight>,
     /// Messages about ignored or repaired input, reported by [`Scene::summary`].
     pub warnings: Vec<String>,
 }
@@ -69,15 +77,22 @@ pub struct Scene {
     positions: Vec<Vec3>,
     normals: Vec<Vec3>,
     uvs: Vec<Vec2>,
+    uvs1: Vec<Vec2>,
+    /// Per triangle (BVH order), the tangents of its three corners; empty without normal maps.
+    corner_tangents: Vec<[Vec4; 3]>,
     materials: Vec<Material>,
     textures: Vec<Texture>,
     lights: LightSampler,
+    punctual: Vec<PunctualLight>,
+    environment: Environment,
+    /// Whether some material cuts surfaces away (rays then test alpha at every hit).
+    has_cutouts: bool,
     bounds: Aabb,
+    /// Centre and radius of the bounding sphere of `bounds`.
+    sphere: (Vec3, f32),
     /// The camera used for rendering (from the file, the bounds, or set by the caller).
     pub camera: Camera,
     camera_from_file: bool,
-    /// Constant background radiance for rays that leave the scene (default 0).
-    pub background: Vec3,
     degenerate_dropped: usize,
     warnings: Vec<String>,
 }
@@ -89,12 +104,13 @@ pub struct SceneSummary {
     pub triangles: usize,
     pub materials: usize,
     pub textures: usize,
-    pub lights: usize,
+    /// Emissive triangles, punctual lights, environment (0 or 1) in the light sampler.
+    pub lights: (usize, usize, usize),
     pub bounds: Aabb,
     pub camera: Camera,
     /// Whether the camera came from the file (otherwise it frames the bounds).
     pub camera_from_file: bool,
-    pub background: Vec3,
+    pub environment: String,
     pub degenerate_dropped: usize,
     pub warnings: Vec<String>,
 }
@@ -113,7 +129,11 @@ impl fmt::Display for SceneSummary {
         }
         writeln!(f, "materials:  {}", self.materials)?;
         writeln!(f, "textures:   {}", self.textures)?;
-        writeln!(f, "lights:     {} emissive triangles", self.lights)?;
+        writeln!(
+            f,
+            "lights:     {} emissive triangles, {} punctual, {} environment",
+            self.lights.0, self.lights.1, self.lights.2
+        )?;
         writeln!(
             f,
             "bounds:     min {} max {}",
@@ -133,7 +153,7 @@ impl fmt::Display for SceneSummary {
             v(self.camera.up),
             self.camera.fov_y.to_degrees()
         )?;
-        write!(f, "background: {}", v(self.background))?;
+        write!(f, "environment: {}", self.environment)?;
         for w in &self.warnings {
             write!(f, "\nwarning:    {w}")?;
         }
@@ -155,6 +175,8 @@ impl Scene {
             positions,
             normals,
             uvs,
+            uvs1,
+            tangents,
             triangles,
             triangle_materials,
             triangle_meshes,
@@ -162,7 +184,8 @@ impl Scene {
             mut materials,
             textures,
             camera,
-            background,
+            environment,
+            lights: punctual,
             warnings,
         } = desc;
         let invalid = |message: String| SceneError::Invalid {
@@ -176,6 +199,14 @@ impl Scene {
             return Err(invalid(
                 "texture coordinates and positions differ in count".into(),
             ));
+        }
+        if !uvs1.is_empty() && uvs1.len() != positions.len() {
+            return Err(invalid(
+                "second texture coordinates and positions differ in count".into(),
+            ));
+        }
+        if !tangents.is_empty() && tangents.len() != positions.len() {
+            return Err(invalid("tangents and positions differ in count".into()));
         }
         if triangle_materials.len() != triangles.len() {
             return Err(invalid("every triangle needs a material index".into()));
@@ -191,6 +222,7 @@ impl Scene {
                 &m.transmission_texture,
                 &m.specular_texture,
                 &m.specular_color_texture,
+                &m.normal_texture,
             ]
             .into_iter()
             .flatten()
@@ -269,6 +301,23 @@ impl Scene {
         // BVH, then triangle records in BVH order.
         let (accel, order) = Accel::build(&corners);
         let tris: Vec<TriangleRecord> = order.iter().map(|&i| kept[i as usize]).collect();
+        let corner_tangents = if materials.iter().any(|m| m.normal_texture.is_some()) {
+            crate::tangents::corner_tangents(
+                &positions,
+                &normals,
+                [&uvs, &uvs1],
+                &tangents,
+                &tris.iter().map(|t| (t.v, t.ng)).collect::<Vec<_>>(),
+                |t| {
+                    materials[tris[t].material as usize]
+                        .normal_texture
+                        .map(|r| r.tex_coord)
+                },
+            )
+        } else {
+            Vec::new()
+        };
+        let has_cutouts = materials.iter().any(Material::has_cutout);
 
         let mut bounds = Aabb::EMPTY;
         for c in &corners {
@@ -277,6 +326,20 @@ impl Scene {
             }
         }
 
+        for (i, l) in punctual.iter().enumerate() {
+            let ok = l.intensity.is_finite()
+                && l.intensity.min_element() >= 0.0
+                && l.position.is_finite()
+                && l.direction.is_finite()
+                && (l.direction.length() - 1.0).abs() < 1e-3
+                && l.range.is_none_or(|r| r.is_finite() && r > 0.0);
+            if !ok {
+                return Err(invalid(format!(
+                    "punctual light {i} has a negative or non-finite intensity, position, direction or range"
+                )));
+            }
+        }
+        let sphere = (bounds.center(), (0.5 * bounds.extent().length()).max(1e-6));
         let mut scene = Scene {
             source,
             accel,
@@ -284,13 +347,18 @@ impl Scene {
             positions,
             normals,
             uvs,
+            uvs1,
+            corner_tangents,
             materials,
             textures,
             lights: LightSampler::default(),
+            punctual,
+            environment,
+            has_cutouts,
             bounds,
+            sphere,
             camera: Camera::framing(&bounds),
             camera_from_file: false,
-            background,
             degenerate_dropped,
             warnings,
         };
@@ -302,7 +370,7 @@ impl Scene {
         Ok(scene)
     }
 
-    /// Emissive triangles with their power, for the light sampler.
+    /// The light sampler over the emissive triangles, punctual lights and environment, by power.
     fn build_lights(&self) -> LightSampler {
         // Barycentrics (b1, b2) at which a textured emitter's radiance is averaged: the
         // centroid, the three vertices and three interior points.
@@ -324,7 +392,7 @@ impl Scene {
             let le_mean = if m.emissive_texture.is_some() {
                 PROBES
                     .iter()
-                    .map(|&(b1, b2)| m.emission(&self.textures, self.uv_at(i, b1, b2)))
+                    .map(|&(b1, b2)| m.emission(&self.textures, &self.uv_at(i, b1, b2)))
                     .sum::<Vec3>()
                     / PROBES.len() as f32
             } else {
@@ -334,16 +402,33 @@ impl Scene {
             let sides = if m.double_sided { 2.0 } else { 1.0 };
             emitters.push((i as u32, area, luminance(le_mean) * area * sides));
         }
-        LightSampler::new(self.tris.len(), &emitters)
+        let r = self.sphere.1;
+        let punctual: Vec<f32> = self.punctual.iter().map(|l| l.power(r)).collect();
+        let environment =
+            (r as f64 * r as f64 * self.environment.luminance_integral() / std::f64::consts::PI)
+                as f32;
+        LightSampler::new(self.tris.len(), &emitters, &punctual, environment)
     }
 
+    /// Both texture coordinate sets at barycentrics `(b1, b2)` of triangle `tri`.
     #[inline]
-    fn uv_at(&self, tri: usize, b1: f32, b2: f32) -> Vec2 {
-        if self.uvs.is_empty() {
-            return Vec2::ZERO;
-        }
-        let [a, b, c] = self.tris[tri].v.map(|k| self.uvs[k as usize]);
-        a * (1.0 - b1 - b2) + b * b1 + c * b2
+    fn uv_at(&self, tri: usize, b1: f32, b2: f32) -> [Vec2; 2] {
+        let v = self.tris[tri].v;
+        let at = |uvs: &[Vec2]| {
+            if uvs.is_empty() {
+                return Vec2::ZERO;
+            }
+            let [a, b, c] = v.map(|k| uvs[k as usize]);
+            a * (1.0 - b1 - b2) + b * b1 + c * b2
+        };
+        [at(&self.uvs), at(&self.uvs1)]
+    }
+
+    /// Whether the surface exists at barycentrics `(b1, b2)` of triangle `tri` (alpha cut-outs).
+    #[inline]
+    fn solid_at(&self, tri: u32, b1: f32, b2: f32) -> bool {
+        let m = &self.materials[self.tris[tri as usize].material as usize];
+        !m.has_cutout() || m.is_solid(&self.textures, &self.uv_at(tri as usize, b1, b2))
     }
 
     #[inline]
@@ -355,13 +440,21 @@ impl Scene {
     /// The closest intersection along the ray with `0 ≤ t < ray.t_max`.
     #[inline]
     pub fn intersect(&self, ray: &Ray) -> Option<Hit> {
-        self.accel.intersect(ray)
+        if self.has_cutouts {
+            self.accel.intersect(ray, |t, b1, b2| self.solid_at(t, b1, b2))
+        } else {
+            self.accel.intersect(ray, |_, _, _| true)
+        }
     }
 
     /// Whether any surface lies along the ray with `0 ≤ t < ray.t_max`.
     #[inline]
     pub fn occluded(&self, ray: &Ray) -> bool {
-        self.accel.occluded(ray)
+        if self.has_cutouts {
+            self.accel.occluded(ray, |t, b1, b2| self.solid_at(t, b1, b2))
+        } else {
+            self.accel.occluded(ray, |_, _, _| true)
+        }
     }
 
     /// The surface description at a hit of `ray`.
@@ -373,24 +466,36 @@ impl Scene {
         let b0 = 1.0 - b1 - b2;
         let p = self.position_at(i, b1, b2);
         let ng = rec.ng;
-        let ns = if self.normals.is_empty() {
+        let uv = self.uv_at(i, b1, b2);
+        let mut n = if self.normals.is_empty() {
             ng
         } else {
             let [a, b, c] = rec.v.map(|k| self.normals[k as usize]);
             let n = (a * b0 + b * b1 + c * b2).normalize_or_zero();
-            if n == Vec3::ZERO {
-                ng
-            } else if n.dot(ng) < 0.0 {
-                -n
-            } else {
-                n
-            }
+            if n == Vec3::ZERO { ng } else { n }
         };
+        // Tangent-space normal map: n' = T x + B y + N z with the interpolated tangent made
+        // orthogonal to N and B = w (N × T) (glTF's convention, MikkTSpace's reconstruction).
+        if let Some(t) = self.corner_tangents.get(i)
+            && let Some(m) = self.materials[rec.material as usize].mapped_normal(&self.textures, &uv)
+        {
+            let t4 = t[0] * b0 + t[1] * b1 + t[2] * b2;
+            let tangent = (t4.truncate() - n * n.dot(t4.truncate())).normalize_or_zero();
+            if tangent != Vec3::ZERO {
+                let sign = if t4.w < 0.0 { -1.0 } else { 1.0 };
+                let bitangent = sign * n.cross(tangent);
+                let mapped = (tangent * m.x + bitangent * m.y + n * m.z).normalize_or_zero();
+                if mapped != Vec3::ZERO && mapped.is_finite() {
+                    n = mapped;
+                }
+            }
+        }
+        let ns = if n.dot(ng) < 0.0 { -n } else { n };
         SurfaceInteraction {
             p,
             ng,
             ns,
-            uv: self.uv_at(i, b1, b2),
+            uv,
             wo: -ray.d.normalize(),
             material: rec.material,
             tri: hit.tri,
@@ -400,7 +505,7 @@ impl Scene {
     /// Material parameters at a surface point, textures applied.
     #[inline]
     pub fn pbr(&self, si: &SurfaceInteraction) -> PbrParams {
-        self.materials[si.material as usize].pbr(&self.textures, si.uv)
+        self.materials[si.material as usize].pbr(&self.textures, &si.uv)
     }
 
     /// Radiance emitted from the surface point toward `si.wo` (zero on the back face of a
@@ -409,31 +514,79 @@ impl Scene {
     pub fn emission(&self, si: &SurfaceInteraction) -> Vec3 {
         let m = &self.materials[si.material as usize];
         if m.is_emissive() && m.emits_toward(si.ng, si.wo) {
-            m.emission(&self.textures, si.uv)
+            m.emission(&self.textures, &si.uv)
         } else {
             Vec3::ZERO
         }
     }
 
-    /// A point on the lights: a light chosen in proportion to power with `u_select`, a
-    /// uniform point on it with `u_tri`. `None` when the scene has no light.
+    /// A sample of the lights: a light chosen in proportion to power with `u_select`, then
+    /// with `u`: a uniform point on an emissive triangle, or a direction from the environment's
+    /// distribution (punctual lights use no number). `None` when nothing lights the scene.
     #[inline]
-    pub fn sample_light(&self, u_select: f32, u_tri: Vec2) -> Option<LightSample> {
-        let (tri, _) = self.lights.select(u_select)?;
-        let (b1, b2) = sample_uniform_triangle(u_tri);
-        let i = tri as usize;
-        let rec = &self.tris[i];
-        let m = &self.materials[rec.material as usize];
-        let uv = self.uv_at(i, b1, b2);
-        Some(LightSample {
-            p: self.position_at(i, b1, b2),
-            n: rec.ng,
-            uv,
-            le: m.emission(&self.textures, uv),
-            two_sided: m.double_sided,
-            pdf_area: self.lights.pdf_area(tri),
-            tri,
-        })
+    pub fn sample_light(&self, u_select: f32, u: Vec2) -> Option<LightSample> {
+        let (source, pmf) = self.lights.select(u_select)?;
+        match source {
+            LightSource::Triangle(tri) => {
+                let (b1, b2) = sample_uniform_triangle(u);
+                let i = tri as usize;
+                let rec = &self.tris[i];
+                let m = &self.materials[rec.material as usize];
+                let uv = self.uv_at(i, b1, b2);
+                Some(LightSample::Surface(SurfaceLightSample {
+                    p: self.position_at(i, b1, b2),
+                    n: rec.ng,
+                    uv: uv[0],
+                    le: m.emission(&self.textures, &uv),
+                    two_sided: m.double_sided,
+                    pdf_area: self.lights.pdf_area(tri),
+                    tri,
+                }))
+            }
+            LightSource::Punctual(index) => Some(LightSample::Punctual {
+                light: self.punctual[index as usize],
+                index,
+                pmf,
+            }),
+            LightSource::Environment => {
+                let (dir, pdf) = self.environment.sample(u)?;
+                Some(LightSample::Environment {
+                    dir,
+                    le: self.environment.radiance(dir),
+                    pdf: pdf * pmf,
+                })
+            }
+        }
+    }
+
+    /// Solid-angle density with which [`Scene::sample_light`] produces environment direction
+    /// `d` (zero when the environment is not among the lights).
+    #[inline]
+    pub fn environment_light_pdf(&self, d: Vec3) -> f32 {
+        let pmf = self.lights.environment_pmf();
+        if pmf > 0.0 { pmf * self.environment.pdf(d) } else { 0.0 }
+    }
+
+    /// The environment.
+    pub fn environment(&self) -> &Environment {
+        &self.environment
+    }
+
+    /// Replaces the environment (and rebuilds the light sampler, whose powers depend on it).
+    pub fn set_environment(&mut self, environment: Environment) {
+        self.environment = environment;
+        self.lights = self.build_lights();
+    }
+
+    /// The punctual lights.
+    pub fn punctual_lights(&self) -> &[PunctualLight] {
+        &self.punctual
+    }
+
+    /// Centre and radius of the scene's bounding sphere (where light paths from lights at
+    /// infinity start).
+    pub fn bounding_sphere(&self) -> (Vec3, f32) {
+        self.sphere
     }
 
     /// Area density of [`Scene::sample_light`] producing a point on triangle `tri` (zero
@@ -477,7 +630,7 @@ impl Scene {
         self.tris.len()
     }
 
-    /// Number of lights (emissive triangles).
+    /// Number of lights (emissive triangles, punctual lights, the environment unless black).
     pub fn light_count(&self) -> usize {
         self.lights.len()
     }
@@ -517,11 +670,11 @@ impl Scene {
             triangles: self.tris.len(),
             materials: self.materials.len(),
             textures: self.textures.len(),
-            lights: self.lights.len(),
+            lights: self.lights.counts(),
             bounds: self.bounds,
             camera: self.camera,
             camera_from_file: self.camera_from_file,
-            background: self.background,
+            environment: self.environment.describe(),
             degenerate_dropped: self.degenerate_dropped,
             warnings: self.warnings.clone(),
         }

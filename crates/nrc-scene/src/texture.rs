@@ -135,12 +135,15 @@ pub struct TextureRef {
     pub texture: u32,
     /// Optional `KHR_texture_transform`.
     pub transform: Option<UvTransform>,
+    /// Which texture coordinate set it reads (`TEXCOORD_0` or `TEXCOORD_1`).
+    pub tex_coord: u32,
 }
 
 impl TextureRef {
-    /// The texture coordinates to look up for surface coordinates `uv`.
+    /// The texture coordinates to look up for the surface's coordinate sets `uvs`.
     #[inline]
-    pub fn uv(&self, uv: Vec2) -> Vec2 {
+    pub fn uv(&self, uvs: &[Vec2; 2]) -> Vec2 {
+        let uv = uvs[(self.tex_coord as usize).min(1)];
         match &self.transform {
             Some(t) => t.apply(uv),
             None => uv,
@@ -216,11 +219,15 @@ mod tests {
         let uv = t.apply(Vec2::new(1.0, 1.0));
         // S: (2, 3); R(π/2): (cos·2 + sin·3, −sin·2 + cos·3) = (3, −2); T: (3.5, −1.75).
         assert!((uv - Vec2::new(3.5, -1.75)).length() < 1e-5, "{uv}");
-        let r = TextureRef {
+        let mut r = TextureRef {
             texture: 0,
             transform: None,
+            tex_coord: 0,
         };
-        assert_eq!(r.uv(Vec2::new(0.3, 0.7)), Vec2::new(0.3, 0.7));
+        let sets = [Vec2::new(0.3, 0.7), Vec2::new(0.9, 0.1)];
+        assert_eq!(r.uv(&sets), sets[0]);
+        r.tex_coord = 1;
+        assert_eq!(r.uv(&sets), sets[1]);
     }
 
     #[test]

@@ -104,6 +104,8 @@ pub struct FrameStats {
     pub steps: u32,
     /// Mean loss of the frame's last step.
     pub loss: f32,
+    /// Mean luminance of the frame's finite targets (zero: the producers found no light).
+    pub target_mean: f32,
     pub producer: ProducerStats,
     pub inference: PassStats,
 }
@@ -195,6 +197,14 @@ impl OnlineTrainer {
         stats.produce_ms = t.elapsed().as_secs_f64() * 1e3;
         stats.records = produced.batch.queries.len();
         stats.producer = produced.stats;
+        let finite: Vec<f32> = produced
+            .batch
+            .targets
+            .iter()
+            .map(|t| nrc_scene::sampling::luminance(glam::Vec3::from(*t)))
+            .filter(|l| l.is_finite())
+            .collect();
+        stats.target_mean = finite.iter().sum::<f32>() / finite.len().max(1) as f32;
 
         let t = Instant::now();
         let order = shuffled(produced.batch.queries.len(), seed);

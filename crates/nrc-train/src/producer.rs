@@ -70,16 +70,13 @@ pub trait Producer: Send {
     }
 }
 
-/// The check of the producers that start light paths at the scene's emissive triangles: light
-/// from the constant background never enters a light path, so their targets would miss it
-/// (until environment lights can emit light paths, issue 16). Refused rather than trained
-/// silently toward too little light.
+/// The check of the producers that start light paths: a scene that nothing lights (no
+/// emissive triangle, punctual light or environment) has no light to start them from, and
+/// they would produce no target at all. Refused rather than trained silently on nothing.
 pub(crate) fn check_light_paths(name: &str, scene: &Scene) -> Result<(), String> {
-    let bg = scene.background;
-    if bg.max_element() > 0.0 {
+    if scene.light_count() == 0 {
         return Err(format!(
-            "producer {name} cannot serve this scene: it is lit by the background ({}, {}, {}), and {name}'s light paths start only at emissive triangles, so its targets would leave that light out; use pt or pt-sl instead",
-            bg.x, bg.y, bg.z
+            "producer {name} cannot serve this scene: nothing lights it (no emissive triangle, punctual light or environment), so its light paths have nowhere to start; use pt or pt-sl instead"
         ));
     }
     Ok(())
@@ -386,29 +383,25 @@ mod tests {
         assert_eq!(unweighted.batch.weights, None);
     }
 
-    /// Light-path producers refuse a scene lit by the background, which their light paths
-    /// cannot carry (they produced all-zero targets there once, silently); path tracing serves
-    /// it.
+    /// Light-path producers serve a scene lit only by the environment (their light paths start
+    /// there too) and refuse one that nothing lights; path tracing serves both.
     #[test]
-    fn light_path_producers_refuse_a_background_lit_scene() {
+    fn light_path_producers_need_a_light() {
         let mut scene = one_triangle();
         let options = ProducerOptions::default();
         for name in ["bt", "lt", "sppc", "mix:pt-sl=0.5,sppc=0.5"] {
             let mix = ProducerMix::new(&name.parse().unwrap(), &options);
-            assert!(mix.check(&scene).is_ok(), "{name} without a background");
-        }
-        scene.background = glam::Vec3::splat(1.0);
-        for name in ["bt", "lt", "sppc", "mix:pt-sl=0.5,sppc=0.5"] {
-            let mix = ProducerMix::new(&name.parse().unwrap(), &options);
             let e = mix.check(&scene).unwrap_err();
-            assert!(
-                e.contains("background") && e.contains("pt-sl"),
-                "{name}: {e}"
-            );
+            assert!(e.contains("nothing lights it") && e.contains("pt-sl"), "{name}: {e}");
         }
         for name in ["pt", "pt-sl"] {
             let mix = ProducerMix::new(&name.parse().unwrap(), &options);
             assert!(mix.check(&scene).is_ok(), "{name}");
+        }
+        scene.set_environment(nrc_scene::Environment::constant(glam::Vec3::ONE));
+        for name in ["bt", "lt", "sppc", "mix:pt-sl=0.5,sppc=0.5", "pt"] {
+            let mix = ProducerMix::new(&name.parse().unwrap(), &options);
+            assert!(mix.check(&scene).is_ok(), "{name} under an environment");
         }
     }
 

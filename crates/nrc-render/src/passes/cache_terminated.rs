@@ -210,8 +210,8 @@ impl CacheTerminatedPass {
         };
         loop {
             let h = match walk.arrive(scene, &mut stats) {
-                Arrival::Escaped { background } => {
-                    out.prefix += walk.throughput() * background;
+                Arrival::Escaped { le, mis } => {
+                    out.prefix += walk.throughput() * le * mis;
                     break;
                 }
                 Arrival::Hit(h) => h,

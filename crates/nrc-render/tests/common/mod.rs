@@ -212,7 +212,7 @@ impl SceneBuilder {
     }
 
     pub fn background(&mut self, b: Vec3) -> &mut Self {
-        self.desc.background = b;
+        self.desc.environment = nrc_scene::Environment::constant(b);
         self
     }
 

@@ -6,8 +6,10 @@
 //! chosen by power, a cosine-distributed emission direction, BSDF sampling, Russian roulette)
 //! and every light vertex is connected to `x` by a shadow ray:
 //!
-//! - `j = 0`, the light point itself (next-event estimation of direct light):
-//!   `f_x(ωo, ω) |ω·n_s(x)| · Le(y_0 → x) |cos θ_{y_0}| / d² / p_A(y_0)`;
+//! - `j = 0`, the light sample itself (next-event estimation of direct light):
+//!   `f_x(ωo, ω) |ω·n_s(x)| · Le(y_0 → x) |cos θ_{y_0}| / d² / p_A(y_0)` for a point on an
+//!   emitter, `f_x · I(ω)/d² / P(light)` for a point or spot light, `f_x · E / P(light)` for a
+//!   directional one, `f_x · L_env(ω) / p_ω(ω)` for an environment direction;
 //! - `j ≥ 1`, a non-delta surface vertex with flux weight `β_j`:
 //!   `f_x(ωo, ω) |ω·n_s(x)| · f_{y_j}(ω_{y_j→x}, ω_{y_j→y_{j−1}}) |cos_g θ_{y_j}| / d² · β_j`,
 //!
@@ -72,15 +74,17 @@ fn connect(
 ) -> Vec3 {
     let scene = ctx.scene;
     let mut sum = Vec3::ZERO;
-    // j = 0: the light point.
-    if let Some(ls) = path.origin {
-        let (fx, w, dist2) = x.toward(ls.p);
-        let le = ls.le_toward(-w);
-        let cos_light = ls.n.dot(w).abs();
-        let c = fx * le * (cos_light / (dist2 * ls.pdf_area));
+    // j = 0: the light sample itself (a point on an emitter, a punctual light, or an
+    // environment direction), connected as next-event estimation connects it.
+    if let Some(ls) = path.origin
+        && let Some(inc) = ls.incident(x.si.p)
+    {
+        let wi = x.frame.to_local(inc.wi);
+        let fx = x.bsdf.eval(x.wo, wi) * wi.z.abs();
+        let c = fx * inc.li / inc.pdf;
         if c.max_element() > 0.0 && c.is_finite() {
             stats.shadow_rays += 1;
-            if !scene.occluded(&spawn_ray_between(x.si.p, x.si.ng, ls.p, ls.n)) {
+            if !scene.occluded(&ls.shadow_ray(x.si.p, x.si.ng, &inc)) {
                 sum += c;
             }
         }

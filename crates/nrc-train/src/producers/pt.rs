@@ -93,9 +93,9 @@ impl PathProducer {
         let mut fired = false;
         loop {
             let h = match walk.arrive(scene, &mut stats) {
-                Arrival::Escaped { background } => {
+                Arrival::Escaped { le, mis } => {
                     if let Some(last) = out.vertices.last_mut() {
-                        last.direct += last.weight * background;
+                        last.direct += last.weight * le * mis;
                     }
                     break;
                 }
