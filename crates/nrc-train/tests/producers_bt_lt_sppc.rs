@@ -541,3 +541,169 @@ fn sppc_normal_rejection_gathers_only_the_balls_own_surface() {
         );
     }
 }
+
+/// A diffuse floor (large enough that every camera ray hits it) with a diffuse box floating
+/// 0.4 above it (no concave edge, where BT's connections' `1/d²` has unbounded variance), lit
+/// either by an environment map with a sun (`env`) or by a point light alone: light that is
+/// not the same from every direction, with shadows.
+fn floor_and_box(env: bool) -> Scene {
+    let mut b = SceneBuilder::new();
+    let floor = b.material(mat::diffuse(Vec3::new(0.6, 0.5, 0.4)));
+    let boxm = b.material(mat::diffuse(Vec3::new(0.3, 0.6, 0.7)));
+    b.mesh(
+        &Mesh::quad(Vec3::ZERO, Vec3::new(20.0, 0.0, 0.0), Vec3::new(0.0, 0.0, -20.0)),
+        floor,
+        false,
+    )
+    .mesh(
+        &Mesh::cuboid(Vec3::new(-0.5, 0.4, -0.5), Vec3::new(0.5, 1.4, 0.5), false),
+        boxm,
+        false,
+    )
+    .camera(Vec3::new(0.4, 2.5, 3.0), Vec3::new(0.0, 0.3, 0.0), 45.0);
+    if env {
+        b.desc_mut().environment = common::test_sky(32);
+    } else {
+        b.desc_mut().lights.push(nrc_scene::PunctualLight {
+            kind: nrc_scene::PunctualKind::Point,
+            position: Vec3::new(1.2, 2.0, 0.8),
+            direction: -Vec3::Y,
+            intensity: Vec3::splat(6.0),
+            range: None,
+        });
+    }
+    b.build()
+}
+
+/// Path-traced estimates of the radiance leaving each start ray's primary hit toward the
+/// camera (`k` samples each, emission excluded): the reference the producers must match.
+fn path_traced_at(scene: &Scene, starts: &[StartRay], k: u32) -> Vec<[f32; 3]> {
+    let t = tracer();
+    starts
+        .iter()
+        .enumerate()
+        .map(|(i, s)| {
+            let hit = scene.intersect(&s.ray).expect("every start hits");
+            let si = scene.interaction(&s.ray, &hit);
+            let mut sum = Vec3::ZERO;
+            for j in 0..k {
+                let mut sampler = nrc_render::PixelSampler::new(77, i as u64, j as u64);
+                let mut ps = nrc_render::PathStats::default();
+                sum += t.reflected(scene, &si, si.wo, 1, &mut sampler, &mut ps);
+            }
+            (sum / k as f32).to_array()
+        })
+        .collect()
+}
+
+/// `targets[i]` estimates the radiance at `starts[i]`'s primary hit: in each of 16 groups of
+/// consecutive starts (neighbouring image tiles) the targets' mean agrees with the path-traced
+/// mean within a Bonferroni-corrected bound, per channel.
+fn assert_matches_path_tracing(targets: &[[f32; 3]], reference: &[[f32; 3]], what: &str) {
+    assert_eq!(targets.len(), reference.len());
+    let groups = 16;
+    let n = targets.len() / groups;
+    let z = common::z_two_sided(1e-3 / (groups * 3) as f64);
+    let mut worst = 0.0f64;
+    for g in 0..groups {
+        let (a, sa) = mean_se(&targets[g * n..(g + 1) * n]);
+        let (b, sb) = mean_se(&reference[g * n..(g + 1) * n]);
+        for c in 0..3 {
+            let se = (sa[c] * sa[c] + sb[c] * sb[c]).sqrt();
+            let zz = (a[c] - b[c]) / se;
+            worst = worst.max(zz.abs());
+            assert!(
+                zz.abs() <= z,
+                "{what}: group {g} channel {c}: {:.4} vs path-traced {:.4} ({zz:+.1} se, bound {z:.1})",
+                a[c],
+                b[c]
+            );
+        }
+    }
+    let (a, _) = mean_se(targets);
+    assert!(a.iter().all(|&m| m > 1e-3), "{what}: targets {a:?}");
+    println!("{what}: worst group at {worst:.2} standard errors (bound {z:.2})");
+}
+
+/// BT's targets under an environment and under a point light (light paths start at both)
+/// match path-traced estimates at the same queries; a target with a deliberate directional
+/// error (BT run with the light of the mirrored environment) fails the same check.
+#[test]
+#[ignore = "open: BT under the environment map is 29% low in one image region (group 4, blue: 0.271 vs 0.380, -4.3 se); under the point light it passes (worst group 0.95 se). Not yet explained; see the issue 16 note"]
+fn bt_targets_match_path_tracing_under_an_environment_and_a_point_light() {
+    for env in [false, true] {
+        let scene = floor_and_box(env);
+        let starts = tiles(&scene, 4096);
+        let reference = path_traced_at(&scene, &starts, 4);
+        let out = with_ctx(&scene, &starts, |ctx| {
+            BidirectionalProducer::default().produce(ctx, starts.len(), 5)
+        });
+        assert_eq!(out.batch.targets.len(), starts.len());
+        let what = if env { "bt under the environment" } else { "bt under a point light" };
+        assert_matches_path_tracing(&out.batch.targets, &reference, what);
+    }
+    // Negative control: the sky rotated by 180° lights the scene from the other side; its BT
+    // targets must not pass as the original scene's.
+    let scene = floor_and_box(true);
+    let mut rotated = floor_and_box(true);
+    let sky = common::test_sky(32);
+    let (w, h) = (64, 32);
+    let texels = (0..w * h)
+        .map(|i| {
+            let uv = glam::Vec2::new(((i % w) as f32 + 0.5) / w as f32, ((i / w) as f32 + 0.5) / h as f32);
+            sky.radiance(nrc_scene::environment::uv_to_direction(uv) * Vec3::new(-1.0, 1.0, -1.0))
+        })
+        .collect();
+    rotated.set_environment(
+        nrc_scene::Environment::from_texels(std::path::Path::new("<mirrored>"), w, h, texels, 1.0, 0.0)
+            .unwrap()
+            .0,
+    );
+    let starts = tiles(&scene, 4096);
+    let reference = path_traced_at(&scene, &starts, 4);
+    let wrong = with_ctx(&rotated, &starts, |ctx| {
+        BidirectionalProducer::default().produce(ctx, starts.len(), 5)
+    });
+    let r = std::panic::catch_unwind(|| {
+        assert_matches_path_tracing(&wrong.batch.targets, &reference, "negative control")
+    });
+    assert!(r.is_err(), "a directionally wrong light passed the check");
+}
+
+/// LT's light paths start at the environment and at a point light: it makes queries at
+/// light-path vertices in both scenes, with positive path-traced targets.
+#[test]
+fn lt_queries_come_from_every_kind_of_light() {
+    for env in [false, true] {
+        let scene = floor_and_box(env);
+        let starts = tiles(&scene, 256);
+        let out = with_ctx(&scene, &starts, |ctx| LightProducer::default().produce(ctx, 4096, 9));
+        assert_eq!(out.batch.targets.len(), 4096, "env {env}");
+        let (m, _) = mean_se(&out.batch.targets);
+        assert!(m.iter().all(|&c| c > 1e-3), "env {env}: {m:?}");
+    }
+}
+
+/// SPPC in its radius-reduction limit: balls at the camera's primary hits, 12 frames of
+/// photons from the environment or the point light; the estimates match path tracing at the
+/// same points within the bound (the radius has shrunk far below the light's variation).
+#[test]
+#[ignore = "open: fails even under the point light (group 1, 0.030 vs 0.055): neighbouring balls share photons and 12 frames leave the radius large against the shadow edges; the check itself needs a grid of separated balls as in the enclosure test"]
+fn sppc_matches_path_tracing_under_an_environment_and_a_point_light() {
+    for env in [false, true] {
+        let scene = floor_and_box(env);
+        let starts = tiles(&scene, 4096);
+        let reference = path_traced_at(&scene, &starts, 4);
+        let mut producer = sppc(starts.len(), 0.0, 64.0);
+        let mut last = None;
+        for frame in 0..12 {
+            last = Some(with_ctx(&scene, &starts, |ctx| {
+                producer.produce(ctx, starts.len(), 300 + frame)
+            }));
+        }
+        let out = last.unwrap();
+        assert_eq!(out.batch.targets.len(), starts.len());
+        let what = if env { "sppc under the environment" } else { "sppc under a point light" };
+        assert_matches_path_tracing(&out.batch.targets, &reference, what);
+    }
+}

@@ -216,6 +216,12 @@ impl SceneBuilder {
         self
     }
 
+    /// The description being built, for what the builder has no method for (lights, an
+    /// environment map, texture coordinates, textures).
+    pub fn desc_mut(&mut self) -> &mut SceneDescription {
+        &mut self.desc
+    }
+
     pub fn build(&self) -> Scene {
         Scene::from_description(self.desc.clone()).unwrap()
     }
@@ -304,4 +310,25 @@ pub fn shared_scenes() -> Option<PathBuf> {
 /// The project's shipped scenes folder.
 pub fn project_scenes() -> PathBuf {
     std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes")
+}
+
+/// An environment map for tests: a sky gradient with a soft bright sun, `2n × n` texels.
+pub fn test_sky(n: usize) -> nrc_scene::Environment {
+    let (w, h) = (2 * n, n);
+    let sun = Vec3::new(0.5, 0.6, -0.62).normalize();
+    let texels = (0..w * h)
+        .map(|i| {
+            let uv = glam::Vec2::new(
+                ((i % w) as f32 + 0.5) / w as f32,
+                ((i / w) as f32 + 0.5) / h as f32,
+            );
+            let d = nrc_scene::environment::uv_to_direction(uv);
+            let sky = Vec3::new(0.3, 0.5, 0.9) * (0.4 + 0.6 * d.y.max(0.0)) + Vec3::splat(0.05);
+            let glow = (d.dot(sun) - 0.9).max(0.0) * 60.0;
+            sky + Vec3::new(1.0, 0.9, 0.7) * glow
+        })
+        .collect();
+    nrc_scene::Environment::from_texels(std::path::Path::new("<test sky>"), w, h, texels, 1.0, 30.0)
+        .unwrap()
+        .0
 }
