@@ -2,7 +2,8 @@
 //! hand-written writer can get wrong, done on the files as written (not on the builder):
 //! buffer length, 4-byte alignment of views and accessors, accessor bounds, POSITION
 //! min/max equal to the data, index ranges, no degenerate triangles, unit normals, declared
-//! extensions, no required extensions, readable images, and a camera.
+//! extensions, no required extensions, readable images, a camera, and well-formed
+//! `KHR_lights_punctual` lights.
 
 use std::collections::BTreeSet;
 use std::path::Path;
@@ -190,6 +191,61 @@ pub fn validate(dir: &Path, name: &str) -> Result<()> {
             used.insert(ext.0.clone());
         }
     }
+    // KHR_lights_punctual: the document's list of lights, referenced by nodes.
+    if let Some(lights) = json
+        .get("extensions")
+        .and_then(|e| e.get("KHR_lights_punctual"))
+    {
+        used.insert("KHR_lights_punctual".to_owned());
+        let lights = get(lights, "lights")
+            .map_err(in_doc)?
+            .as_array()
+            .ok_or_else(|| in_doc("KHR_lights_punctual.lights is not an array".into()))?;
+        if lights.is_empty() {
+            return Err(in_doc("KHR_lights_punctual.lights is empty".into()));
+        }
+        for (i, light) in lights.iter().enumerate() {
+            let bad = |why: &str| in_doc(format!("KHR_lights_punctual light {i}: {why}"));
+            let intensity = light.get("intensity").and_then(Value::as_f64).unwrap_or(1.0);
+            if !(intensity.is_finite() && intensity >= 0.0) {
+                return Err(bad("intensity not finite and non-negative"));
+            }
+            if let Some(c) = light.get("color").and_then(Value::as_array)
+                && (c.len() != 3 || c.iter().any(|c| !(0.0..=1.0).contains(&c.as_f64().unwrap_or(-1.0))))
+            {
+                return Err(bad("color not three values in [0, 1]"));
+            }
+            match light.get("type").and_then(Value::as_str) {
+                Some("point" | "directional") => {}
+                Some("spot") => {
+                    let spot = get(light, "spot").map_err(|e| bad(&e))?;
+                    let inner = spot.get("innerConeAngle").and_then(Value::as_f64).unwrap_or(0.0);
+                    let outer = spot
+                        .get("outerConeAngle")
+                        .and_then(Value::as_f64)
+                        .unwrap_or(std::f64::consts::FRAC_PI_4);
+                    if !(0.0 <= inner && inner < outer && outer <= std::f64::consts::FRAC_PI_2) {
+                        return Err(bad("spot cone angles not 0 ≤ inner < outer ≤ π/2"));
+                    }
+                }
+                _ => return Err(bad("type not point, spot or directional")),
+            }
+        }
+        let mut referenced = vec![false; lights.len()];
+        for node in json["nodes"].as_array().into_iter().flatten() {
+            if let Some(l) = node.pointer("/extensions/KHR_lights_punctual/light") {
+                let l = l
+                    .as_u64()
+                    .map(|l| l as usize)
+                    .filter(|&l| l < lights.len())
+                    .ok_or_else(|| in_doc(format!("node light index {l} out of range")))?;
+                referenced[l] = true;
+            }
+        }
+        if referenced.contains(&false) {
+            return Err(in_doc("a KHR_lights_punctual light is on no node".into()));
+        }
+    }
     let declared: BTreeSet<String> = json["extensionsUsed"]
         .as_array()
         .into_iter()
@@ -198,7 +254,7 @@ pub fn validate(dir: &Path, name: &str) -> Result<()> {
         .collect();
     if used != declared {
         return Err(in_doc(format!(
-            "extensionsUsed {declared:?} but materials use {used:?}"
+            "extensionsUsed {declared:?} but the document uses {used:?}"
         )));
     }
 

@@ -1,7 +1,7 @@
 //! A small glTF 2.0 writer: one `.gltf` JSON document, one `.bin` buffer beside it and PNG
 //! images, using only what the project's loader reads (indexed triangles, node transforms,
 //! perspective cameras, metallic-roughness materials with the emissive-strength,
-//! transmission, IOR and specular extensions).
+//! transmission, IOR and specular extensions, `KHR_lights_punctual` lights).
 
 use std::collections::BTreeSet;
 use std::path::Path;
@@ -25,6 +25,7 @@ const EMISSIVE_STRENGTH: &str = "KHR_materials_emissive_strength";
 const TRANSMISSION: &str = "KHR_materials_transmission";
 const IOR: &str = "KHR_materials_ior";
 const SPECULAR: &str = "KHR_materials_specular";
+const LIGHTS_PUNCTUAL: &str = "KHR_lights_punctual";
 
 /// A JSON number holding exactly the `f32` (its shortest decimal form), so that
 /// `0.1_f32` is written as `0.1` and reads back as the same `f32`.
@@ -181,6 +182,54 @@ impl Material {
     }
 }
 
+/// The kind of a `KHR_lights_punctual` light, with a spot's cone angles (radians).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum LightKind {
+    Point,
+    Spot { inner_cone_angle: f32, outer_cone_angle: f32 },
+    Directional,
+}
+
+/// A `KHR_lights_punctual` light. `color × intensity` is the radiant intensity (point, spot;
+/// glTF's candela, used as W sr⁻¹ per channel) or the irradiance at normal incidence
+/// (directional; glTF's lux, used as W m⁻² per channel): the project uses no 683 lm/W factor.
+/// It shines down its node's local −z.
+#[derive(Clone, Debug)]
+pub struct Light {
+    pub name: String,
+    pub kind: LightKind,
+    pub color: Vec3,
+    pub intensity: f32,
+}
+
+impl Light {
+    fn to_json(&self) -> Value {
+        let mut m = Map::new();
+        m.insert("name".into(), json!(self.name));
+        m.insert("color".into(), vec3(self.color));
+        m.insert("intensity".into(), num(self.intensity));
+        let kind = match self.kind {
+            LightKind::Point => "point",
+            LightKind::Directional => "directional",
+            LightKind::Spot {
+                inner_cone_angle,
+                outer_cone_angle,
+            } => {
+                m.insert(
+                    "spot".into(),
+                    json!({
+                        "innerConeAngle": num(inner_cone_angle),
+                        "outerConeAngle": num(outer_cone_angle),
+                    }),
+                );
+                "spot"
+            }
+        };
+        m.insert("type".into(), json!(kind));
+        Value::Object(m)
+    }
+}
+
 /// Accessors of one mesh's vertex data in the buffer; several glTF meshes (with different
 /// materials) may share them.
 #[derive(Clone, Debug)]
@@ -217,7 +266,16 @@ impl Transform {
     /// The placement of a camera at `eye` looking at `target`: glTF cameras look down
     /// their local −Z with +Y up.
     pub fn look_at(eye: Vec3, target: Vec3, up: Vec3) -> Self {
-        let forward = (target - eye).normalize();
+        Self::oriented(eye, (target - eye).normalize(), up)
+    }
+
+    /// The placement of a node at `position` whose local −Z points along `direction` (a
+    /// light's beam), with local +Y as close to `up` as possible.
+    pub fn facing(position: Vec3, direction: Vec3, up: Vec3) -> Self {
+        Self::oriented(position, direction.normalize(), up)
+    }
+
+    fn oriented(eye: Vec3, forward: Vec3, up: Vec3) -> Self {
         let right = forward.cross(up).normalize();
         let true_up = right.cross(forward);
         let rotation =
@@ -229,7 +287,7 @@ impl Transform {
         }
     }
 
-    fn affine(&self) -> Affine3A {
+    pub fn affine(&self) -> Affine3A {
         Affine3A::from_scale_rotation_translation(
             Vec3::splat(self.scale),
             self.rotation,
@@ -251,6 +309,9 @@ struct Node {
 pub struct Stats {
     pub triangles: usize,
     pub emissive_triangles: usize,
+    /// `KHR_lights_punctual` lights, in world space: (kind, colour × intensity, position,
+    /// direction of the beam).
+    pub punctual: Vec<(LightKind, Vec3, Vec3, Vec3)>,
     /// Emitted power Φ = π · L · A per emitting side, per channel (W, in RGB units).
     pub power: Vec3,
 }
@@ -266,6 +327,9 @@ pub struct Document {
     materials: Vec<Material>,
     nodes: Vec<Node>,
     cameras: Vec<Value>,
+    lights: Vec<Light>,
+    /// `(node, light)` pairs.
+    light_nodes: Vec<(usize, usize)>,
     images: Vec<Value>,
     textures: Vec<Value>,
     samplers: Vec<Value>,
@@ -447,6 +511,21 @@ impl Document {
         node
     }
 
+    /// A `KHR_lights_punctual` light on a node of its own, placed by `placement` (the light
+    /// shines down the node's local −z; see [`Transform::facing`]).
+    pub fn add_light(&mut self, light: Light, placement: Transform) -> usize {
+        self.lights.push(light);
+        let index = self.lights.len() - 1;
+        let name = self.lights[index].name.clone();
+        let node = self.add_node_json(&name, placement, None);
+        self.nodes[node].json.insert(
+            "extensions".into(),
+            json!({ LIGHTS_PUNCTUAL: { "light": index } }),
+        );
+        self.light_nodes.push((node, index));
+        node
+    }
+
     /// A texture from an encoded PNG written beside the document as `file_name`.
     /// `nearest` selects nearest-neighbour filtering (crisp checkers).
     pub fn add_png_texture(&mut self, file_name: &str, png: Vec<u8>, nearest: bool) -> usize {
@@ -475,6 +554,15 @@ impl Document {
         while let Some((i, parent)) = stack.pop() {
             let node = &self.nodes[i];
             let world = parent * node.transform.affine();
+            for &(_, l) in self.light_nodes.iter().filter(|(n, _)| *n == i) {
+                let light = &self.lights[l];
+                stats.punctual.push((
+                    light.kind,
+                    light.color * light.intensity,
+                    world.transform_point3(Vec3::ZERO),
+                    world.transform_vector3(Vec3::NEG_Z).normalize(),
+                ));
+            }
             if let Some(m) = node.mesh {
                 let (_, geometry, material) = self.meshes[m];
                 let mesh = &self.geometries[geometry].mesh;
@@ -497,6 +585,9 @@ impl Document {
     pub fn write(&self, dir: &Path, name: &str) -> std::io::Result<()> {
         let bin_name = format!("{name}.bin");
         let mut used = BTreeSet::new();
+        if !self.lights.is_empty() {
+            used.insert(LIGHTS_PUNCTUAL);
+        }
         let materials: Vec<Value> = self
             .materials
             .iter()
@@ -545,6 +636,12 @@ impl Document {
             if !list.is_empty() {
                 doc.insert(key.into(), Value::Array(list));
             }
+        }
+        if !self.lights.is_empty() {
+            doc.insert(
+                "extensions".into(),
+                json!({ LIGHTS_PUNCTUAL: { "lights": self.lights.iter().map(Light::to_json).collect::<Vec<_>>() } }),
+            );
         }
         doc.insert(
             "buffers".into(),

@@ -1,5 +1,6 @@
 //! Writes the scenes the project ships: `scenes/<name>.gltf` with its `.bin` buffer and PNG
-//! textures, for `cornell-box`, `caustics`, `ajar` and `glossy`, then checks each file
+//! textures, for `cornell-box`, `caustics`, `ajar`, `glossy` and `sun-spot-env` (with the
+//! HDR sky `sky.exr` it is rendered under), then checks each file
 //! against the glTF 2.0 rules (see `check.rs`), loads it with the project's own loader
 //! (`nrc_scene::Scene::load`), checks that the loader sees what was written (triangles,
 //! lights, emitted power, the camera, no warnings), and prints the figures.
@@ -17,6 +18,7 @@ mod cornell_box;
 mod glossy;
 mod gltf_doc;
 mod mesh;
+mod sun_spot_env;
 mod textures;
 
 use std::path::PathBuf;
@@ -25,11 +27,12 @@ use std::process::ExitCode;
 /// Builds one scene's document.
 type Builder = fn() -> gltf_doc::Document;
 
-const SCENES: [(&str, Builder); 4] = [
+const SCENES: [(&str, Builder); 5] = [
     ("cornell-box", cornell_box::build),
     ("caustics", caustics::build),
     ("ajar", ajar::build),
     ("glossy", glossy::build),
+    ("sun-spot-env", sun_spot_env::build),
 ];
 
 fn main() -> ExitCode {
@@ -57,10 +60,15 @@ fn main() -> ExitCode {
             return ExitCode::FAILURE;
         }
         println!(
-            "{name:12} {:6} triangles, {:2} emissive, emitted power ({:.3}, {:.3}, {:.3}) W",
-            s.triangles, s.emissive_triangles, s.power.x, s.power.y, s.power.z
+            "{name:12} {:6} triangles, {:2} emissive, emitted power ({:.3}, {:.3}, {:.3}) W, {} punctual",
+            s.triangles, s.emissive_triangles, s.power.x, s.power.y, s.power.z, s.punctual.len()
         );
     }
+    if let Err(e) = sun_spot_env::write_sky(&dir) {
+        eprintln!("error: {e}");
+        return ExitCode::FAILURE;
+    }
+    println!("sky.exr      {}x{} equirectangular sky", sun_spot_env::SKY_SIZE.0, sun_spot_env::SKY_SIZE.1);
     ExitCode::SUCCESS
 }
 
@@ -76,21 +84,61 @@ fn check_loaded(dir: &std::path::Path, name: &str, stats: &gltf_doc::Stats) -> R
             stats.triangles
         ));
     }
-    if scene.light_count() != stats.emissive_triangles {
+    if scene.light_count() != stats.emissive_triangles + stats.punctual.len() {
         return Err(format!(
-            "loader sees {} lights, {} written",
+            "loader sees {} lights, {} emissive triangles and {} punctual lights written",
             scene.light_count(),
-            stats.emissive_triangles
+            stats.emissive_triangles,
+            stats.punctual.len()
         ));
     }
-    if !scene.camera_from_file() {
-        return Err("loader did not take the camera from the file".into());
+    let loaded = scene.punctual_lights();
+    if loaded.len() != stats.punctual.len() {
+        return Err(format!(
+            "loader sees {} punctual lights, {} written",
+            loaded.len(),
+            stats.punctual.len()
+        ));
     }
-    if let Some(w) = scene.warnings().first() {
-        return Err(format!("loader warns: {w}"));
+    // Every written light must have its own loaded twin (the orders may differ).
+    let mut unmatched: Vec<&nrc_scene::light::PunctualLight> = loaded.iter().collect();
+    for (kind, intensity, position, direction) in &stats.punctual {
+        let close = |a: glam::Vec3, b: glam::Vec3| {
+            (a - b).abs().max_element() <= 1e-5 * (1.0 + b.abs().max_element())
+        };
+        let same = |l: &nrc_scene::light::PunctualLight| {
+            let kind_ok = match (l.kind, kind) {
+                (nrc_scene::light::PunctualKind::Point, gltf_doc::LightKind::Point)
+                | (nrc_scene::light::PunctualKind::Directional, gltf_doc::LightKind::Directional) => true,
+                (
+                    nrc_scene::light::PunctualKind::Spot { cos_inner, cos_outer },
+                    gltf_doc::LightKind::Spot { inner_cone_angle, outer_cone_angle },
+                ) => {
+                    (cos_inner - inner_cone_angle.cos()).abs() < 1e-6
+                        && (cos_outer - outer_cone_angle.cos()).abs() < 1e-6
+                }
+                _ => false,
+            };
+            let placed = l.kind == nrc_scene::light::PunctualKind::Directional
+                || close(l.position, *position);
+            kind_ok && placed && close(l.intensity, *intensity) && close(l.direction, *direction)
+        };
+        match unmatched.iter().position(|l| same(l)) {
+            Some(i) => {
+                unmatched.swap_remove(i);
+            }
+            None => {
+                return Err(format!(
+                    "the loader has no light like the written {kind:?}, intensity {intensity}, position {position}, direction {direction}"
+                ));
+            }
+        }
     }
-    // The loader weighs lights by luminance × area × sides, without the Lambertian π.
-    let expected = nrc_scene::sampling::luminance(stats.power) as f64 / std::f64::consts::PI;
+    // The loader weighs lights by luminance × area × sides, without the Lambertian π, and
+    // punctual lights by their own power (checked against the written lights above).
+    let radius = scene.bounding_sphere().1;
+    let expected = nrc_scene::sampling::luminance(stats.power) as f64 / std::f64::consts::PI
+        + loaded.iter().map(|l| f64::from(l.power(radius))).sum::<f64>();
     let loaded = scene.lights().total_power();
     if ((loaded - expected) / expected).abs() > 1e-3 {
         return Err(format!(
