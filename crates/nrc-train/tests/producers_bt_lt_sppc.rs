@@ -625,22 +625,48 @@ fn assert_matches_path_tracing(targets: &[[f32; 3]], reference: &[[f32; 3]], wha
     println!("{what}: worst group at {worst:.2} standard errors (bound {z:.2})");
 }
 
+/// Light paths per query in the BT comparison.
+const PATHS: usize = 16;
+
+/// The mean of each query's records: BT cycles through its `n` start rays, so record
+/// `r · n + i` belongs to query `i`.
+fn per_query_means(targets: &[[f32; 3]], n: usize) -> Vec<[f32; 3]> {
+    assert_eq!(targets.len() % n, 0, "every query got the same number of records");
+    let k = (targets.len() / n) as f32;
+    (0..n)
+        .map(|i| {
+            let mut m = [0.0f32; 3];
+            for t in targets.iter().skip(i).step_by(n) {
+                for c in 0..3 {
+                    m[c] += t[c] / k;
+                }
+            }
+            m
+        })
+        .collect()
+}
+
 /// BT's targets under an environment and under a point light (light paths start at both)
 /// match path-traced estimates at the same queries; a target with a deliberate directional
 /// error (BT run with the light of the mirrored environment) fails the same check.
+///
+/// Each query's target is the mean of `PATHS` light paths: one path per query made the
+/// environment case fail in one image region (−4.3 se, 29 % low) because the per-record
+/// distribution under a small bright sun is so skewed that 256 records rarely hold its tail
+/// and their sample variance understates the error; with 16 paths per query that region sits
+/// at 2.5 se, so the failure was that skew, not a bias.
 #[test]
-#[ignore = "open: BT under the environment map is 29% low in one image region (group 4, blue: 0.271 vs 0.380, -4.3 se); under the point light it passes (worst group 0.95 se). Not yet explained; see the issue 16 note"]
 fn bt_targets_match_path_tracing_under_an_environment_and_a_point_light() {
     for env in [false, true] {
         let scene = floor_and_box(env);
         let starts = tiles(&scene, 4096);
         let reference = path_traced_at(&scene, &starts, 4);
         let out = with_ctx(&scene, &starts, |ctx| {
-            BidirectionalProducer::default().produce(ctx, starts.len(), 5)
+            BidirectionalProducer::default().produce(ctx, PATHS * starts.len(), 5)
         });
-        assert_eq!(out.batch.targets.len(), starts.len());
+        let targets = per_query_means(&out.batch.targets, starts.len());
         let what = if env { "bt under the environment" } else { "bt under a point light" };
-        assert_matches_path_tracing(&out.batch.targets, &reference, what);
+        assert_matches_path_tracing(&targets, &reference, what);
     }
     // Negative control: the sky rotated by 180° lights the scene from the other side; its BT
     // targets must not pass as the original scene's.
@@ -662,10 +688,11 @@ fn bt_targets_match_path_tracing_under_an_environment_and_a_point_light() {
     let starts = tiles(&scene, 4096);
     let reference = path_traced_at(&scene, &starts, 4);
     let wrong = with_ctx(&rotated, &starts, |ctx| {
-        BidirectionalProducer::default().produce(ctx, starts.len(), 5)
+        BidirectionalProducer::default().produce(ctx, PATHS * starts.len(), 5)
     });
+    let wrong = per_query_means(&wrong.batch.targets, starts.len());
     let r = std::panic::catch_unwind(|| {
-        assert_matches_path_tracing(&wrong.batch.targets, &reference, "negative control")
+        assert_matches_path_tracing(&wrong, &reference, "negative control")
     });
     assert!(r.is_err(), "a directionally wrong light passed the check");
 }
