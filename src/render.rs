@@ -77,9 +77,20 @@ pub struct RenderArgs {
 
     /// The pass: pt, pt-nonee, pt-light (the reference path tracer, instead of --strategy), or
     /// cache[-TERMINATION][-nonee] (paths ending in the --cache snapshot, instead of
-    /// --termination).
+    /// --termination), or restir-di[-biased][:PARAMS] (ReSTIR DI at the primary vertex; give it
+    /// --frames for temporal reuse).
     #[arg(long)]
     pub pass: Option<PassSpec>,
+
+    /// Frames to render, the last one written: the resampling passes (restir-*) reuse samples
+    /// across them (temporal reuse), the others simply render each anew.
+    #[arg(long, default_value_t = 1)]
+    pub frames: u32,
+
+    /// With --frames: the camera of each frame from a camera path (JSON keyframes, as for
+    /// `nrc train --camera-path`); default: the scene's camera throughout.
+    #[arg(long)]
+    pub camera_path: Option<PathBuf>,
 
     /// Render with a --cache snapshot trained on another scene (or another version of this
     /// one) instead of refusing it.
@@ -94,6 +105,9 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     }
     if args.spp == 0 {
         bail!("--spp must be at least 1");
+    }
+    if args.frames == 0 {
+        bail!("--frames must be at least 1");
     }
     if !args.exposure.is_finite() {
         bail!("--exposure must be a finite number");
@@ -184,21 +198,28 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         }
         _ => spec.build(&tracer),
     };
-    let input = FrameInput {
-        scene: &scene,
-        camera: &scene.camera,
-        width: args.width,
-        height: args.height,
-        spp: args.spp,
-        seed: args.seed,
-    };
+    let cameras =
+        nrc_harness::run::camera_path(args.camera_path.as_deref(), &scene.camera, args.frames)?;
     let pool = nrc_harness::options::thread_pool(args.threads)?;
     let start = std::time::Instant::now();
-    let out = pool.install(|| match &cache {
-        Some((c, _)) => passes::run(pass.as_mut(), &input, &nrc_train::CacheSource::new(c)),
-        None => passes::run(pass.as_mut(), &input, &ZeroSource),
-    });
-    let seconds = start.elapsed().as_secs_f64();
+    let mut out = None;
+    for (f, camera) in cameras.iter().enumerate() {
+        let input = FrameInput {
+            scene: &scene,
+            camera,
+            width: args.width,
+            height: args.height,
+            spp: args.spp,
+            // One frame: the seed itself (images as before --frames existed).
+            seed: if args.frames == 1 { args.seed } else { nrc_render::pass_seed(args.seed, f as u32) },
+        };
+        out = Some(pool.install(|| match &cache {
+            Some((c, _)) => passes::run(pass.as_mut(), &input, &nrc_train::CacheSource::new(c)),
+            None => passes::run(pass.as_mut(), &input, &ZeroSource),
+        }));
+    }
+    let out = out.expect("at least one frame");
+    let seconds = start.elapsed().as_secs_f64() / args.frames as f64;
     bar.finish_and_clear();
 
     out.image.write_exr(&args.out)?;
@@ -229,8 +250,22 @@ pub fn run(args: &RenderArgs) -> Result<()> {
             )
         })
         .unwrap_or_default();
+    let frames = if args.frames > 1 {
+        format!(" (last of {} frames, each)", args.frames)
+    } else {
+        String::new()
+    };
+    let ph = &s.phases;
+    let phases = if ph.candidates_ms + ph.temporal_ms + ph.spatial_ms + ph.shading_ms > 0.0 {
+        format!(
+            "; phases: candidates {:.1} ms, temporal {:.1} ms, spatial {:.1} ms, shading {:.1} ms",
+            ph.candidates_ms, ph.temporal_ms, ph.spatial_ms, ph.shading_ms
+        )
+    } else {
+        String::new()
+    };
     println!(
-        "rendered {}x{} at {} spp with {}{from} in {seconds:.3} s on {} threads: {:.3} M samples/s, {:.2} M rays/s",
+        "rendered {}x{} at {} spp with {}{from} in {seconds:.3} s{frames} on {} threads: {:.3} M samples/s, {:.2} M rays/s{phases}",
         args.width,
         args.height,
         args.spp,

@@ -51,6 +51,22 @@ pub trait Method: Send {
         Ok(())
     }
 
+    /// Starts independent run `run` (seeded `seed`), untimed: a stateful method forgets the
+    /// state of the previous run (a pass's history, a trained cache) and builds it afresh, with
+    /// the same warm-up for every run, so that runs are independent estimates. Called before
+    /// every run, after [`Method::prepare`]. Default: nothing (stateless methods).
+    fn restart(
+        &mut self,
+        _scene: &Scene,
+        _camera: &Camera,
+        _width: u32,
+        _height: u32,
+        _run: u32,
+        _seed: u64,
+    ) -> Result<(), String> {
+        Ok(())
+    }
+
     /// Renders one pass of `width × height` pixels from `camera`; `seed` chooses the random
     /// streams, so passes with different seeds are independent estimates.
     fn render_estimate(

@@ -280,6 +280,9 @@ pub fn compare(
         let mut first: Option<(Frame, ErrorMetrics)> = None;
         for r in 0..c.runs {
             let seed = pass_seed(base, r);
+            method
+                .restart(scene, &scene.camera, w, h, r, seed)
+                .map_err(|e| anyhow::anyhow!("{name}: {e}"))?;
             let (frame, m, flip_map) = measure(method.as_mut(), seed, budget)?;
             if c.runs >= 2 {
                 acc.add(&ImageView::of_scene_image(&name, &frame.image)?)?;

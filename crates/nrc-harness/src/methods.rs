@@ -31,6 +31,7 @@ pub fn method_names() -> String {
         "pt-<N>spp (reference path tracer, N samples per pixel per estimate, NEE and BSDF sampling combined by MIS), \
          pt-<N>spp-nonee (the same with next-event estimation off: BSDF sampling only), \
          nrc-<producer>[-<termination>] (a cache trained online, 1 spp; producers: {PRODUCER_NAMES}; terminations: {TERMINATION_NAMES}), \
+         restir-di[-biased][:PARAMS] (ReSTIR DI, 1 spp; see `--pass`), \
          or in general <pass>@<N>spp[+<producer>] (any pass of `--pass`, e.g. pt-light@4spp, cache-first-nonee@2spp+pt-sl)"
     )
 }
@@ -97,6 +98,15 @@ impl FromStr for MethodSpec {
                 pass,
                 spp,
                 producer,
+            });
+        }
+        // The resampling passes by their pass names, at 1 sample per pixel.
+        if s.starts_with("restir-") || s.starts_with("wsrestir-") {
+            let pass: PassSpec = s.parse().map_err(|e: String| err(&e))?;
+            return Ok(Self {
+                pass,
+                spp: 1,
+                producer: None,
             });
         }
         if let Some(rest) = s.strip_prefix("nrc-") {
@@ -197,6 +207,7 @@ impl fmt::Display for MethodSpec {
             ) => {
                 write!(f, "pt-{spp}spp-nonee")
             }
+            (pass, None, 1) if pass.is_stateful() => write!(f, "{pass}"),
             (pass, None, spp) => write!(f, "{pass}@{spp}spp"),
             (pass, Some(p), spp) => write!(f, "{pass}@{spp}spp+{p}"),
         }
@@ -252,12 +263,14 @@ impl MethodSpec {
                 name: self.to_string(),
                 spp: self.spp,
                 pass: self.pass.build(tracer),
+                warm_up: if self.pass.is_stateful() { cache.train_frames } else { 0 },
             }),
             Some(producer) => Box::new(CacheMethod {
                 name: self.to_string(),
                 spec: self.clone(),
                 producer: producer.clone(),
                 settings: cache.clone(),
+                base_seed: cache.seed,
                 tracer: *tracer,
                 trainer: None,
             }),
@@ -265,11 +278,14 @@ impl MethodSpec {
     }
 }
 
-/// A pass that reads no source (the reference path tracer) as a method.
+/// A pass that reads no source (the reference path tracer, the resampling passes) as a
+/// method.
 struct PassMethod {
     name: String,
     spp: u32,
     pass: Box<dyn RenderPass>,
+    /// Untimed frames before each run (stateful passes: as many as cache methods train).
+    warm_up: u32,
 }
 
 impl Method for PassMethod {
@@ -279,6 +295,22 @@ impl Method for PassMethod {
 
     fn samples_per_pass(&self) -> u32 {
         self.spp
+    }
+
+    fn restart(
+        &mut self,
+        scene: &Scene,
+        camera: &Camera,
+        width: u32,
+        height: u32,
+        _run: u32,
+        seed: u64,
+    ) -> Result<(), String> {
+        self.pass.reset();
+        for f in 0..self.warm_up {
+            self.render_estimate(scene, camera, width, height, nrc_render::pass_seed(!seed, f));
+        }
+        Ok(())
     }
 
     fn render_estimate(
@@ -311,6 +343,8 @@ struct CacheMethod {
     spec: MethodSpec,
     producer: ProducerSpec,
     settings: CacheMethodSettings,
+    /// The cache seed of run 0 (later runs derive theirs from it).
+    base_seed: u64,
     tracer: PathTracer,
     trainer: Option<OnlineTrainer>,
 }
@@ -389,6 +423,25 @@ impl Method for CacheMethod {
         height: u32,
     ) -> Result<(), String> {
         self.trainer(scene, camera, width, height).map(|_| ())
+    }
+
+    fn restart(
+        &mut self,
+        scene: &Scene,
+        camera: &Camera,
+        width: u32,
+        height: u32,
+        run: u32,
+        _seed: u64,
+    ) -> Result<(), String> {
+        // Run 0 uses the cache `prepare` trained; each later run trains its own from scratch
+        // (its own seed), so that runs are independent.
+        if run > 0 {
+            self.trainer = None;
+            self.settings.seed = nrc_render::pass_seed(self.base_seed, run);
+            self.trainer(scene, camera, width, height)?;
+        }
+        Ok(())
     }
 
     fn render_estimate(

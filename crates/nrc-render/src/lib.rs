@@ -8,6 +8,8 @@
 //!   [`render()`]: its image loop (tiles, per-pixel mean and variance).
 //! - [`source`]: the radiance-source interface ([`RadianceSource`]: a batch of queries in, RGB
 //!   radiance out) and exact sources for tests.
+//! - [`reservoir`]: weighted reservoir sampling and resampled importance sampling (ReSTIR's
+//!   core), generic over the sample type.
 //! - [`passes`]: the inference passes, one file per technique, behind one trait
 //!   ([`RenderPass`]) and one spec enum ([`PassSpec`]).
 //! - [`emitters`]: the emitter-excluded image (pixels that see an emitter, and their
@@ -21,6 +23,7 @@ pub mod nee;
 pub mod passes;
 pub mod path_tracer;
 pub mod render;
+pub mod reservoir;
 pub mod sampler;
 pub mod source;
 pub mod spread;

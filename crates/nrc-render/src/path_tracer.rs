@@ -133,6 +133,31 @@ impl PathTracer {
     }
 }
 
+impl PathTracer {
+    /// One sample of the *indirect* radiance leaving vertex `v` toward its `wo`: the path
+    /// continued from `v` by BSDF sampling, with `v`'s direct light left out (NEE at `v`, and
+    /// the emission or environment its first segment reaches), everything after counted as
+    /// [`PathTracer::radiance`] counts it. For passes that estimate `v`'s direct light
+    /// themselves (ReSTIR DI). `segments`: as for [`PathTracer::reflected`].
+    pub fn indirect(
+        &self,
+        scene: &Scene,
+        v: &Vertex,
+        segments: u32,
+        sampler: &mut PixelSampler,
+        stats: &mut PathStats,
+    ) -> Vec3 {
+        let mut walk = PathWalk::from_vertex(scene, self, segments);
+        if walk.at_depth_limit() || walk.scatter(v, sampler).is_none() {
+            return Vec3::ZERO;
+        }
+        match walk.arrive(scene, stats) {
+            Arrival::Escaped { .. } => Vec3::ZERO,
+            Arrival::Hit(h) => continue_path(scene, walk, h.vertex, Vec3::ZERO, sampler, stats),
+        }
+    }
+}
+
 /// The walk from vertex `v` on, added onto `radiance` (what the path found before `v`).
 fn continue_path(
     scene: &Scene,

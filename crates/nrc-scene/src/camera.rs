@@ -121,6 +121,28 @@ impl Camera {
             self.forward + self.right * (ndc_x * tan_half * aspect) + self.up * (ndc_y * tan_half);
         Ray::new(self.position, d.normalize())
     }
+
+    /// The film position (as [`Camera::generate_ray`] takes it) at which `p` is seen, or `None`
+    /// where `p` is behind the camera or outside the `width × height` image: the inverse of
+    /// `generate_ray` (reprojection into a previous frame's camera).
+    #[inline]
+    pub fn project(&self, p: Vec3, width: u32, height: u32) -> Option<Vec2> {
+        let v = p - self.position;
+        let z = v.dot(self.forward);
+        if !(z > 0.0) {
+            return None;
+        }
+        let aspect = width as f32 / height as f32;
+        let tan_half = (0.5 * self.fov_y).tan();
+        let ndc_x = v.dot(self.right) / (z * tan_half * aspect);
+        let ndc_y = v.dot(self.up) / (z * tan_half);
+        let film = Vec2::new(
+            0.5 * (ndc_x + 1.0) * width as f32,
+            0.5 * (1.0 - ndc_y) * height as f32,
+        );
+        (film.x >= 0.0 && film.y >= 0.0 && film.x < width as f32 && film.y < height as f32)
+            .then_some(film)
+    }
 }
 
 #[cfg(test)]
@@ -138,6 +160,20 @@ mod tests {
         assert!(top.d.dot(cam.up) > 0.0, "film y=0 is the top row");
         let left = cam.generate_ray(Vec2::new(0.0, 25.0), 100, 50);
         assert!(left.d.dot(cam.right) < 0.0);
+    }
+
+    #[test]
+    fn project_inverts_generate_ray() {
+        let cam = Camera::look_at(Vec3::new(1.0, 2.0, 3.0), Vec3::ZERO, Vec3::Y, 50.0).unwrap();
+        for film in [Vec2::new(10.5, 7.25), Vec2::new(99.0, 49.0), Vec2::new(0.1, 30.0)] {
+            let r = cam.generate_ray(film, 100, 50);
+            let back = cam.project(r.o + r.d * 3.7, 100, 50).unwrap();
+            assert!((back - film).length() < 1e-3, "{film} -> {back}");
+        }
+        assert_eq!(cam.project(Vec3::new(2.0, 4.0, 6.0), 100, 50), None, "behind");
+        let r = cam.generate_ray(Vec2::new(50.0, 25.0), 100, 50);
+        let off = r.o + r.d * 2.0 + cam.right * 100.0;
+        assert_eq!(cam.project(off, 100, 50), None, "outside the image");
     }
 
     #[test]

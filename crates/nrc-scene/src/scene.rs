@@ -559,6 +559,36 @@ impl Scene {
         }
     }
 
+    /// The emitter point `si` (reached by a ray) as the light sample [`Scene::sample_light`]
+    /// could have drawn there: a BSDF-sampled emitter hit as a resampling candidate. `None` on
+    /// surfaces that do not emit.
+    pub fn light_sample_at(&self, si: &SurfaceInteraction) -> Option<LightSample> {
+        let m = &self.materials[si.material as usize];
+        if !m.is_emissive() {
+            return None;
+        }
+        Some(LightSample::Surface(SurfaceLightSample {
+            p: si.p,
+            n: si.ng,
+            uv: si.uv[0],
+            le: m.emission(&self.textures, &si.uv),
+            two_sided: m.double_sided,
+            pdf_area: self.lights.pdf_area(si.tri),
+            tri: si.tri,
+        }))
+    }
+
+    /// The environment seen along unit direction `d` as a light sample (`None` where it is
+    /// black).
+    pub fn environment_sample(&self, d: Vec3) -> Option<LightSample> {
+        let le = self.environment.radiance(d);
+        (le != Vec3::ZERO).then_some(LightSample::Environment {
+            dir: d,
+            le,
+            pdf: self.environment_light_pdf(d),
+        })
+    }
+
     /// Solid-angle density with which [`Scene::sample_light`] produces environment direction
     /// `d` (zero when the environment is not among the lights).
     #[inline]

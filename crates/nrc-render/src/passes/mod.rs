@@ -18,6 +18,8 @@
 
 pub mod cache_terminated;
 pub mod path_traced;
+pub mod restir_di;
+pub mod screen;
 
 use std::fmt;
 use std::str::FromStr;
@@ -30,6 +32,7 @@ use crate::path_tracer::{LightStrategy, PathTracer};
 use crate::source::{RadianceQuery, RadianceSource};
 pub use cache_terminated::{CacheTerminatedPass, TERMINATION_NAMES, Termination, TerminationPoint};
 pub use path_traced::PathTracedPass;
+pub use restir_di::{RestirDiPass, RestirDiSettings};
 
 /// What a pass renders this frame.
 #[derive(Clone, Copy, Debug)]
@@ -60,6 +63,19 @@ pub struct PassStats {
     pub trace_ms: f64,
     /// Milliseconds in the radiance source's call.
     pub cache_ms: f64,
+    /// The resampling passes' phases (zero for the others).
+    pub phases: PhaseTimes,
+}
+
+/// Milliseconds per phase of a resampling pass's frame.
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
+pub struct PhaseTimes {
+    /// Camera rays and initial candidates.
+    pub candidates_ms: f64,
+    pub temporal_ms: f64,
+    pub spatial_ms: f64,
+    /// Final visibility, shading and the rest of the path.
+    pub shading_ms: f64,
 }
 
 /// A rendered frame.
@@ -81,6 +97,10 @@ pub trait RenderPass: Send {
 
     /// Per-frame upkeep before tracing. Default: nothing.
     fn prepare(&mut self, _input: &FrameInput) {}
+
+    /// Forgets the state kept across frames (history, reservoirs), as at the start of an
+    /// independent run. Default: nothing (stateless passes).
+    fn reset(&mut self) {}
 
     /// Traces the frame's paths; returns the queries the radiance source must answer.
     fn trace(&mut self, input: &FrameInput) -> Vec<RadianceQuery>;
@@ -128,6 +148,9 @@ pub enum PassSpec {
     /// Camera paths that end in the radiance source: `cache[-TERMINATION][-nonee]`, e.g.
     /// `cache` (the spread heuristic), `cache-first`, `cache-bth:8`.
     CacheTerminated { termination: Termination, nee: bool },
+    /// ReSTIR DI at the primary vertex, the rest of the path traced: `restir-di[-biased]`,
+    /// parameters after a colon (see [`RestirDiSettings`]), e.g. `restir-di:light=16,k=3`.
+    RestirDi(RestirDiSettings),
 }
 
 impl Default for PassSpec {
@@ -143,7 +166,9 @@ impl Default for PassSpec {
 pub fn pass_names() -> String {
     format!(
         "pt, pt-nonee, pt-light (the reference path tracer: MIS, BSDF sampling only, NEE only); \
-         cache[-TERMINATION][-nonee] (paths ending in the radiance source; terminations: {TERMINATION_NAMES})"
+         cache[-TERMINATION][-nonee] (paths ending in the radiance source; terminations: {TERMINATION_NAMES}); \
+         restir-di[-biased][:light=N,bsdf=N,k=N,radius=PX,mcap=X,temporal=0|1,jitter=0|1] (ReSTIR DI at the primary vertex; \
+         defaults light=32,bsdf=1,k=5,radius=30,mcap=20,temporal=1)"
     )
 }
 
@@ -170,6 +195,41 @@ impl FromStr for PassSpec {
                 });
             }
             _ => {}
+        }
+        if let Some(rest) = s.strip_prefix("restir-di") {
+            let (variant, params) = rest.split_once(':').unwrap_or((rest, ""));
+            let mut set = RestirDiSettings {
+                biased: match variant {
+                    "" => false,
+                    "-biased" => true,
+                    _ => return Err(err()),
+                },
+                ..Default::default()
+            };
+            for kv in params.split(',').filter(|p| !p.is_empty()) {
+                let (k, v) = kv
+                    .split_once('=')
+                    .ok_or_else(|| format!("pass `{s}`: parameter `{kv}` is not KEY=VALUE"))?;
+                let bad = || format!("pass `{s}`: bad value `{v}` for `{k}`");
+                let count = || v.parse::<u32>().map_err(|_| bad());
+                let real = || v.parse::<f32>().map_err(|_| bad());
+                match k {
+                    "light" => set.light_candidates = count()?,
+                    "bsdf" => set.bsdf_candidates = count()?,
+                    "k" => set.spatial_neighbours = count()?,
+                    "radius" => set.spatial_radius = real()?,
+                    "mcap" => set.m_cap = real()?,
+                    "temporal" => set.temporal = count()? != 0,
+                    "jitter" => set.jitter = count()? != 0,
+                    _ => {
+                        return Err(format!(
+                            "pass `{s}`: unknown parameter `{k}` (known: light, bsdf, k, radius, mcap, temporal, jitter)"
+                        ));
+                    }
+                }
+            }
+            set.validate().map_err(|e| format!("pass `{s}`: {e}"))?;
+            return Ok(Self::RestirDi(set));
         }
         let rest = s.strip_prefix("cache").ok_or_else(err)?;
         let (rest, nee) = match rest.strip_suffix("-nonee") {
@@ -206,6 +266,36 @@ impl fmt::Display for PassSpec {
                 }
                 Ok(())
             }
+            Self::RestirDi(set) => {
+                f.write_str(if set.biased { "restir-di-biased" } else { "restir-di" })?;
+                let d = RestirDiSettings::default();
+                let mut params = Vec::new();
+                if set.light_candidates != d.light_candidates {
+                    params.push(format!("light={}", set.light_candidates));
+                }
+                if set.bsdf_candidates != d.bsdf_candidates {
+                    params.push(format!("bsdf={}", set.bsdf_candidates));
+                }
+                if set.spatial_neighbours != d.spatial_neighbours {
+                    params.push(format!("k={}", set.spatial_neighbours));
+                }
+                if set.spatial_radius != d.spatial_radius {
+                    params.push(format!("radius={}", set.spatial_radius));
+                }
+                if set.m_cap != d.m_cap {
+                    params.push(format!("mcap={}", set.m_cap));
+                }
+                if set.temporal != d.temporal {
+                    params.push(format!("temporal={}", set.temporal as u32));
+                }
+                if set.jitter != d.jitter {
+                    params.push(format!("jitter={}", set.jitter as u32));
+                }
+                if !params.is_empty() {
+                    write!(f, ":{}", params.join(","))?;
+                }
+                Ok(())
+            }
         }
     }
 }
@@ -224,6 +314,12 @@ impl<'de> serde::Deserialize<'de> for PassSpec {
 }
 
 impl PassSpec {
+    /// Whether the pass keeps state across frames (history, reservoirs): such passes get
+    /// warm-up frames and a [`RenderPass::reset`] per independent run.
+    pub fn is_stateful(&self) -> bool {
+        matches!(self, Self::RestirDi(_))
+    }
+
     /// Whether the pass asks a radiance source anything.
     pub fn uses_source(&self) -> bool {
         matches!(self, Self::CacheTerminated { .. })
@@ -240,6 +336,7 @@ impl PassSpec {
             Self::CacheTerminated { termination, nee } => {
                 Box::new(CacheTerminatedPass::new(termination, nee, tracer))
             }
+            Self::RestirDi(set) => Box::new(RestirDiPass::new(set, tracer)),
         }
     }
 }
@@ -260,6 +357,10 @@ mod tests {
             "cache-bth:8",
             "cache-nonee",
             "cache-first-nonee",
+            "restir-di",
+            "restir-di-biased",
+            "restir-di:light=16,k=3",
+            "restir-di-biased:bsdf=0,radius=10,mcap=4,temporal=0,jitter=0",
         ] {
             let spec: PassSpec = name.parse().unwrap();
             assert_eq!(spec.to_string(), name);
@@ -278,6 +379,12 @@ mod tests {
             "cachefirst",
             "cache-spread:0",
             "pt-first",
+            "restir-di-",
+            "restir-di:light",
+            "restir-di:light=x",
+            "restir-di:nope=1",
+            "restir-di:light=0,bsdf=0",
+            "restir-di:mcap=-1",
         ] {
             let e = bad.parse::<PassSpec>().unwrap_err();
             assert!(e.contains("pass"), "{bad}: {e}");

@@ -1,0 +1,424 @@
+//! ReSTIR DI: direct light at each pixel's primary vertex by spatiotemporal reservoir
+//! resampling (Bitterli et al. 2020, "Spatiotemporal reservoir resampling for real-time ray
+//! tracing with dynamic direct lighting"; the seed paper `world-space-restir-gi.txt` §3 recalls
+//! its equations 3–6). The rest of the path is traced as the path tracer traces it.
+//!
+//! Per frame and pixel sample (see [`super::screen`] for buffers and streams):
+//!
+//! 1. **Candidates**: `light_candidates` samples of the scene's light sampler (by power: points
+//!    on emissive triangles, punctual lights, environment directions; shading-point
+//!    independent, so they can be reused elsewhere) and `bsdf_candidates` BSDF samples whose
+//!    ray reaches an emitter or the environment. Each enters with the balance-heuristic RIS
+//!    weight `p̂(y) / (M_l p_l(y) + M_b p_b(y))`, densities in the light's own measure (area for
+//!    triangles, solid angle for the environment, counting for punctual lights), target `p̂`
+//!    the luminance of the unshadowed contribution `f · L · |cos θ| · G`. The chosen sample is
+//!    shadow-tested and dropped if occluded (visibility reuse, Bitterli et al. §6.1).
+//! 2. **Temporal reuse**: the previous frame's final reservoir at the reprojected pixel (if its
+//!    vertex is similar: normals within 25°, depth within 10 %), its `M` capped at `m_cap`
+//!    times the candidate count.
+//! 3. **Spatial reuse**: `spatial_neighbours` pixels in a disc of `spatial_radius` pixels,
+//!    read from the temporal step's buffer (never from one being written: deterministic
+//!    whatever the thread count).
+//! 4. **Shading**: one shadow ray for the chosen sample; `f · L · G · V · W`.
+//!
+//! Merging (steps 2–3) finishes with `W = w_sum / (Z p̂(y))`. **Unbiased** (default): `Z` sums
+//! the `M` of the reservoirs whose owner could have produced `y`, i.e. whose target is positive
+//! for `y` *and* which see it (Bitterli Alg. 6; visibility is part of each reservoir's domain
+//! after visibility reuse): one shadow ray per reused reservoir. **Biased** (`-biased`):
+//! `Z = Σ M` (Alg. 4), no extra rays, darker where neighbours see the light differently.
+
+use std::time::Instant;
+
+use glam::Vec3;
+use nrc_scene::{LightSample, Scene, light::Incident, sampling::luminance, spawn_ray};
+use rayon::prelude::*;
+
+use super::screen::{GBuffer, Phase, Primary, stream};
+use super::{FrameInput, PassOutput, PassSpec, PassStats, PhaseTimes, RenderPass};
+use crate::path_tracer::{PathStats, PathTracer};
+use crate::reservoir::Reservoir;
+use crate::sampler::PixelSampler;
+use crate::source::RadianceQuery;
+use crate::transport::Vertex;
+
+/// ReSTIR DI's parameters (defaults: Bitterli et al. 2020's interactive settings).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RestirDiSettings {
+    /// Light-sampler candidates per pixel sample and frame.
+    pub light_candidates: u32,
+    /// BSDF-sampled candidates (a ray each).
+    pub bsdf_candidates: u32,
+    /// Reuse the previous frame's reservoirs.
+    pub temporal: bool,
+    /// Spatial neighbours per pixel (0: no spatial reuse).
+    pub spatial_neighbours: u32,
+    /// Radius of the spatial neighbourhood, pixels.
+    pub spatial_radius: f32,
+    /// The history's `M` is capped at this multiple of the candidate count.
+    pub m_cap: f32,
+    /// `Z = Σ M` (no visibility rays for the merge): biased.
+    pub biased: bool,
+    /// Jitter camera rays in the pixel (off: through pixel centres, for tests against a
+    /// reference at fixed primary rays).
+    pub jitter: bool,
+}
+
+impl Default for RestirDiSettings {
+    fn default() -> Self {
+        Self {
+            light_candidates: 32,
+            bsdf_candidates: 1,
+            temporal: true,
+            spatial_neighbours: 5,
+            spatial_radius: 30.0,
+            m_cap: 20.0,
+            biased: false,
+            jitter: true,
+        }
+    }
+}
+
+impl RestirDiSettings {
+    /// Errors for settings that cannot work.
+    pub fn validate(&self) -> Result<(), String> {
+        if self.light_candidates + self.bsdf_candidates == 0 {
+            return Err("restir-di: at least one candidate (light or BSDF) is needed".into());
+        }
+        if !(self.spatial_radius >= 0.0 && self.spatial_radius.is_finite()) {
+            return Err(format!("restir-di: spatial radius must be finite and ≥ 0, got {}", self.spatial_radius));
+        }
+        if !(self.m_cap > 0.0 && self.m_cap.is_finite()) {
+            return Err(format!("restir-di: M-cap must be positive, got {}", self.m_cap));
+        }
+        Ok(())
+    }
+}
+
+/// A direct-light reservoir.
+pub type DiReservoir = Reservoir<LightSample>;
+
+/// The previous frame: its camera rays and final reservoirs.
+struct History {
+    g: GBuffer,
+    res: Vec<DiReservoir>,
+}
+
+/// The ReSTIR DI pass and its history.
+pub struct RestirDiPass {
+    pub settings: RestirDiSettings,
+    tracer: PathTracer,
+    history: Option<History>,
+    frame: Option<PassOutput>,
+}
+
+impl RestirDiPass {
+    pub fn new(settings: RestirDiSettings, tracer: &PathTracer) -> Self {
+        Self {
+            settings,
+            tracer: *tracer,
+            history: None,
+            frame: None,
+        }
+    }
+}
+
+/// A light sample's density in its own measure (what the light sampler drew it with).
+#[inline]
+fn own_pdf(y: &LightSample) -> f32 {
+    match *y {
+        LightSample::Surface(s) => s.pdf_area,
+        LightSample::Punctual { pmf, .. } => pmf,
+        LightSample::Environment { pdf, .. } => pdf,
+    }
+}
+
+/// What light sample `y` brings to vertex `v`, unshadowed.
+#[derive(Clone, Copy, Debug)]
+struct Contribution {
+    /// `f · L · |cos θ|` per unit of the sample's own measure (`G` included for area lights).
+    c: Vec3,
+    /// `p̂`: the luminance of `c`.
+    target: f32,
+    /// Density of the light sampler drawing `y`, own measure.
+    p_light: f32,
+    /// Density of BSDF sampling at `v` reaching `y`, own measure (0 for delta lights).
+    p_bsdf: f32,
+    inc: Incident,
+}
+
+#[inline]
+fn contribution(v: &Vertex, y: &LightSample) -> Option<Contribution> {
+    let inc = y.incident(v.si.p)?;
+    let wi = v.frame.to_local(inc.wi);
+    let f = v.bsdf.eval(v.wo, wi) * wi.z.abs();
+    let p_light = own_pdf(y);
+    // Own measure per solid angle at v: cos θ_l / d² for area lights, 1 otherwise.
+    let g = p_light / inc.pdf;
+    let c = f * inc.li * g;
+    let target = luminance(c);
+    if !(target > 0.0 && target.is_finite()) {
+        return None;
+    }
+    let p_bsdf = if inc.delta { 0.0 } else { v.bsdf.pdf(v.wo, wi) * g };
+    Some(Contribution {
+        c,
+        target,
+        p_light,
+        p_bsdf,
+        inc,
+    })
+}
+
+/// `p̂` of `y` at `v` (0 where it brings nothing).
+#[inline]
+fn target_at(v: &Vertex, y: &LightSample) -> f32 {
+    contribution(v, y).map_or(0.0, |c| c.target)
+}
+
+/// Whether `v` sees the light of `y` (arriving as `inc`); counts the ray.
+#[inline]
+fn sees(scene: &Scene, v: &Vertex, y: &LightSample, inc: &Incident, stats: &mut PathStats) -> bool {
+    stats.shadow_rays += 1;
+    !scene.occluded(&y.shadow_ray(v.si.p, v.si.ng, inc))
+}
+
+impl RestirDiPass {
+    /// Step 1: RIS over the candidates, then visibility reuse.
+    fn candidates(&self, scene: &Scene, v: &Vertex, s: &mut PixelSampler, stats: &mut PathStats) -> DiReservoir {
+        let set = &self.settings;
+        let (ml, mb) = (set.light_candidates as f32, set.bsdf_candidates as f32);
+        let mut r = DiReservoir::new();
+        let offer = |r: &mut DiReservoir, y: Option<LightSample>, u: f32| match y
+            .and_then(|y| contribution(v, &y).map(|c| (y, c)))
+        {
+            Some((y, c)) => {
+                r.update(y, c.target / (ml * c.p_light + mb * c.p_bsdf), c.target, u);
+            }
+            None => r.m += 1.0,
+        };
+        for _ in 0..set.light_candidates {
+            let u_select = s.next_1d();
+            let u_point = s.next_2d();
+            let u = s.next_1d();
+            offer(&mut r, scene.sample_light(u_select, u_point), u);
+        }
+        for _ in 0..set.bsdf_candidates {
+            let u_lobe = s.next_1d();
+            let u_dir = s.next_2d();
+            let u = s.next_1d();
+            let y = v.bsdf.sample(v.wo, u_dir, u_lobe).filter(|bs| !bs.delta).and_then(|bs| {
+                let ray = spawn_ray(v.si.p, v.si.ng, v.frame.to_world(bs.wi));
+                stats.closest_rays += 1;
+                match scene.intersect(&ray) {
+                    Some(hit) => scene.light_sample_at(&scene.interaction(&ray, &hit)),
+                    None => scene.environment_sample(ray.d.normalize()),
+                }
+            });
+            offer(&mut r, y, u);
+        }
+        r.finish_normalised();
+        if let Some(y) = r.sample {
+            let inc = y.incident(v.si.p).expect("a selected sample lights its owner");
+            if !sees(scene, v, &y, &inc, stats) {
+                r.clear_sample();
+            }
+        }
+        r
+    }
+
+    /// Steps 2–3: merges `others` (reservoirs with their owners' vertices) into `own` (the
+    /// reservoir of `v`), finishing with the unbiased or the biased `Z`. Returns the merged
+    /// reservoir and whether its sample is `own`'s.
+    fn combine(
+        &self,
+        scene: &Scene,
+        v: &Vertex,
+        own: &DiReservoir,
+        others: &[(DiReservoir, &Vertex)],
+        s: &mut PixelSampler,
+        stats: &mut PathStats,
+    ) -> (DiReservoir, bool) {
+        let mut out = DiReservoir::new();
+        let mut is_own = out.merge(own, own.target, s.next_1d());
+        for (o, _) in others {
+            let t = o.sample.map_or(0.0, |y| target_at(v, &y));
+            if out.merge(o, t, s.next_1d()) {
+                is_own = false;
+            }
+        }
+        let z = match out.sample {
+            None => out.m,
+            Some(_) if self.settings.biased => out.m,
+            Some(y) => {
+                let mut z = own.m;
+                for (o, ov) in others {
+                    if let Some(c) = contribution(ov, &y)
+                        && sees(scene, ov, &y, &c.inc, stats)
+                    {
+                        z += o.m;
+                    }
+                }
+                z
+            }
+        };
+        out.finish(z);
+        (out, is_own)
+    }
+}
+
+/// Per pixel sample: its reservoir after a step.
+fn par_map<T: Send>(n: usize, f: impl Fn(usize) -> T + Sync + Send) -> Vec<T> {
+    (0..n).into_par_iter().map(f).collect()
+}
+
+impl RenderPass for RestirDiPass {
+    fn name(&self) -> String {
+        PassSpec::RestirDi(self.settings).to_string()
+    }
+
+    fn reset(&mut self) {
+        self.history = None;
+    }
+
+    fn trace(&mut self, input: &FrameInput) -> Vec<RadianceQuery> {
+        let scene = input.scene;
+        let seed = input.seed;
+        let mut times = PhaseTimes::default();
+        let t = Instant::now();
+        let g = GBuffer::trace(scene, input.camera, input.width, input.height, input.spp, seed, self.settings.jitter);
+        let n = g.len();
+        let direct = self.tracer.segment_limit() >= 2 && scene.light_count() > 0;
+        fn usable(p: &Option<Primary>, direct: bool) -> Option<&Primary> {
+            p.as_ref().filter(|p| direct && !p.v.bsdf.is_delta())
+        }
+
+        // 1. Candidates.
+        let initial: Vec<(DiReservoir, PathStats)> = par_map(n, |i| {
+            let mut stats = PathStats::default();
+            let r = match usable(&g.primary[i], direct) {
+                Some(p) => self.candidates(scene, &p.v, &mut stream(seed, i, Phase::Candidates), &mut stats),
+                None => DiReservoir::new(),
+            };
+            (r, stats)
+        });
+        times.candidates_ms = t.elapsed().as_secs_f64() * 1e3;
+
+        // 2. Temporal reuse.
+        let t = Instant::now();
+        let cap = self.settings.m_cap * (self.settings.light_candidates + self.settings.bsdf_candidates) as f32;
+        let history = self
+            .history
+            .take()
+            .filter(|h| self.settings.temporal && h.g.same_shape(&g));
+        let temporal: Vec<(DiReservoir, PathStats)> = par_map(n, |i| {
+            let (own, mut stats) = initial[i];
+            let (Some(p), Some(h)) = (usable(&g.primary[i], direct), history.as_ref()) else {
+                return (own, stats);
+            };
+            let s_chain = (i % g.spp as usize) as u32;
+            let Some(j) = h.g.reproject(p.v.si.p, p.v.si.ns, s_chain) else {
+                return (own, stats);
+            };
+            let mut prev = h.res[j];
+            prev.cap(cap);
+            let pv = &h.g.primary[j].as_ref().expect("reprojection finds a vertex").v;
+            let mut s = stream(seed, i, Phase::Temporal);
+            let (mut r, is_own) = self.combine(scene, &p.v, &own, &[(prev, pv)], &mut s, &mut stats);
+            // A sample taken from the history is tested here too, so that every reservoir
+            // handed to the spatial step holds only samples its owner sees.
+            if !is_own && let Some(y) = r.sample {
+                let inc = y.incident(p.v.si.p).expect("a selected sample lights its owner");
+                if !sees(scene, &p.v, &y, &inc, &mut stats) {
+                    r.clear_sample();
+                }
+            }
+            (r, stats)
+        });
+        times.temporal_ms = t.elapsed().as_secs_f64() * 1e3;
+
+        // 3. Spatial reuse, reading only the temporal buffer.
+        let t = Instant::now();
+        let spatial: Vec<(DiReservoir, PathStats)> = par_map(n, |i| {
+            let (own, mut stats) = temporal[i];
+            let Some(p) = usable(&g.primary[i], direct) else {
+                return (own, stats);
+            };
+            if self.settings.spatial_neighbours == 0 {
+                return (own, stats);
+            }
+            let mut s = stream(seed, i, Phase::Spatial);
+            let mut near = Vec::new();
+            g.neighbours(i, p, self.settings.spatial_neighbours, self.settings.spatial_radius, &mut s, &mut near);
+            let others: Vec<(DiReservoir, &Vertex)> = near
+                .iter()
+                .map(|&q| (temporal[q].0, &g.primary[q].as_ref().expect("neighbours have vertices").v))
+                .collect();
+            let (r, _) = self.combine(scene, &p.v, &own, &others, &mut s, &mut stats);
+            (r, stats)
+        });
+        times.spatial_ms = t.elapsed().as_secs_f64() * 1e3;
+
+        // 4. Shading, and the rest of the path.
+        let t = Instant::now();
+        let shaded: Vec<(Vec3, DiReservoir, PathStats)> = par_map(n, |i| {
+            let (mut r, mut stats) = spatial[i];
+            let mut l = g.emitted[i];
+            if let Some(p) = &g.primary[i] {
+                let mut s = stream(seed, i, Phase::Path);
+                if usable(&g.primary[i], direct).is_some() {
+                    if let Some(y) = r.sample {
+                        let c = contribution(&p.v, &y).expect("a selected sample lights its owner");
+                        if sees(scene, &p.v, &y, &c.inc, &mut stats) {
+                            l += c.c * r.w;
+                        } else {
+                            r.clear_sample();
+                        }
+                    }
+                    l += self.tracer.indirect(scene, &p.v, 1, &mut s, &mut stats);
+                } else {
+                    // Delta vertices (and depth 1): the path tracer's own estimate.
+                    l += self.tracer.reflected(scene, &p.v.si, p.v.wo_world, 1, &mut s, &mut stats);
+                }
+            }
+            (l, r, stats)
+        });
+        times.shading_ms = t.elapsed().as_secs_f64() * 1e3;
+
+        let mut stats = PassStats {
+            paths: n as u64,
+            rays: g.rays,
+            phases: times,
+            ..Default::default()
+        };
+        let spp = g.spp as usize;
+        let mut image = vec![Vec3::ZERO; n / spp];
+        let mut res = Vec::with_capacity(n);
+        for (i, (l, r, ps)) in shaded.into_iter().enumerate() {
+            stats.rays += ps.rays();
+            let l = if l.is_finite() {
+                l
+            } else {
+                stats.invalid_samples += 1;
+                Vec3::ZERO
+            };
+            image[i / spp] += l / spp as f32;
+            res.push(r);
+        }
+        self.history = Some(History { g, res });
+        self.frame = Some(PassOutput {
+            image: nrc_scene::Image::from_data(input.width as usize, input.height as usize, image)
+                .expect("one value per pixel"),
+            variance: None,
+            terminations: Vec::new(),
+            stats,
+        });
+        Vec::new()
+    }
+
+    fn resolve(&mut self, input: &FrameInput, _answers: &[Vec3]) -> PassOutput {
+        if self.frame.is_none() {
+            self.trace(input);
+        }
+        self.frame.take().expect("just traced")
+    }
+}

@@ -1,0 +1,195 @@
+//! What the screen-space resampling passes share: the frame's primary vertices (a G-buffer),
+//! reprojection into the previous frame, the similarity test that rejects a neighbour or a
+//! history sample on another surface, and the choice of spatial neighbours (Bitterli et al.
+//! 2020, §4–5; Ouyang et al. 2021, §4: normals within 25°, depths within 10 %).
+//!
+//! Buffers are indexed by *pixel sample* `i = (y · width + x) · spp + s`: a pass with `spp`
+//! samples per pixel keeps `spp` independent reservoir chains per pixel, chain `s` reusing
+//! only chain `s` of its neighbours and of the previous frame.
+
+use glam::{Vec2, Vec3};
+use nrc_scene::{Camera, Ray, Scene};
+use rayon::prelude::*;
+
+use crate::path_tracer::PathStats;
+use crate::sampler::PixelSampler;
+use crate::transport::Vertex;
+
+/// Cosine of the largest angle between the normals of two vertices that may share samples.
+pub const NORMAL_COS: f32 = 0.906; // 25°
+/// Largest relative difference of two vertices' camera distances that may share samples.
+pub const DEPTH_TOLERANCE: f32 = 0.1;
+
+/// Stream ids of a pixel sample's random numbers, one per phase of a frame, so that a phase's
+/// numbers do not depend on how many another drew.
+#[derive(Clone, Copy, Debug)]
+#[repr(u64)]
+pub enum Phase {
+    Camera = 0,
+    Candidates = 1,
+    Temporal = 2,
+    Spatial = 3,
+    Shading = 4,
+    Path = 5,
+    Extra = 6,
+}
+
+/// The random stream of pixel sample `i` in `phase` of the frame seeded `seed`.
+#[inline]
+pub fn stream(seed: u64, i: usize, phase: Phase) -> PixelSampler {
+    PixelSampler::new(seed, i as u64, phase as u64)
+}
+
+/// A pixel sample's primary vertex: the camera ray's first hit.
+#[derive(Clone, Copy, Debug)]
+pub struct Primary {
+    pub v: Vertex,
+    /// Distance from the camera.
+    pub depth: f32,
+}
+
+/// One frame's camera rays and what they saw.
+#[derive(Clone, Debug)]
+pub struct GBuffer {
+    pub camera: Camera,
+    pub width: u32,
+    pub height: u32,
+    pub spp: u32,
+    /// The primary vertex of each pixel sample (`None`: the ray escaped).
+    pub primary: Vec<Option<Primary>>,
+    /// Radiance the camera ray sees directly (emission of its hit, or the environment), which
+    /// counts fully.
+    pub emitted: Vec<Vec3>,
+    /// Rays traced.
+    pub rays: u64,
+}
+
+impl GBuffer {
+    /// Traces the camera rays of a `width × height × spp` frame: jittered in the pixel with
+    /// the [`Phase::Camera`] stream, or through pixel centres without `jitter` (tests against
+    /// a reference at fixed primary rays).
+    pub fn trace(scene: &Scene, camera: &Camera, width: u32, height: u32, spp: u32, seed: u64, jitter: bool) -> Self {
+        let spp = spp.max(1);
+        let n = width as usize * height as usize * spp as usize;
+        let hits: Vec<(Option<Primary>, Vec3)> = (0..n)
+            .into_par_iter()
+            .map(|i| {
+                let pixel = i / spp as usize;
+                let (x, y) = ((pixel % width as usize) as f32, (pixel / width as usize) as f32);
+                let offset = if jitter {
+                    stream(seed, i, Phase::Camera).next_2d()
+                } else {
+                    Vec2::splat(0.5)
+                };
+                let ray = camera.generate_ray(Vec2::new(x, y) + offset, width, height);
+                primary_hit(scene, &ray)
+            })
+            .collect();
+        let (primary, emitted) = hits.into_iter().unzip();
+        Self {
+            camera: *camera,
+            width,
+            height,
+            spp,
+            primary,
+            emitted,
+            rays: n as u64,
+        }
+    }
+
+    /// Pixel samples in the frame.
+    pub fn len(&self) -> usize {
+        self.primary.len()
+    }
+
+    /// Whether the frame is empty.
+    pub fn is_empty(&self) -> bool {
+        self.primary.is_empty()
+    }
+
+    /// Whether `other` holds frames of the same shape (history is usable).
+    pub fn same_shape(&self, other: &GBuffer) -> bool {
+        (self.width, self.height, self.spp) == (other.width, other.height, other.spp)
+    }
+
+    /// The pixel sample of this (previous) frame that saw the point `p` with normal `n`
+    /// (reprojection through this frame's camera), if that sample's vertex is similar: the
+    /// temporal neighbour of a vertex of chain `s` of the current frame.
+    pub fn reproject(&self, p: Vec3, n: Vec3, s: u32) -> Option<usize> {
+        let film = self.camera.project(p, self.width, self.height)?;
+        let pixel = film.y as usize * self.width as usize + film.x as usize;
+        let j = pixel * self.spp as usize + s as usize;
+        let q = self.primary[j].as_ref()?;
+        let depth = (p - self.camera.position).length();
+        similar(q, n, depth).then_some(j)
+    }
+
+    /// Up to `k` spatial neighbours of pixel sample `i` (chain `s`): pixels uniform in a disc
+    /// of `radius` pixels, kept where their vertex is similar to `me` (Bitterli et al. 2020:
+    /// rejected candidates are not replaced).
+    pub fn neighbours(
+        &self,
+        i: usize,
+        me: &Primary,
+        k: u32,
+        radius: f32,
+        sampler: &mut PixelSampler,
+        out: &mut Vec<usize>,
+    ) {
+        out.clear();
+        let spp = self.spp as usize;
+        let pixel = i / spp;
+        let s = i % spp;
+        let (x, y) = ((pixel % self.width as usize) as f32, (pixel / self.width as usize) as f32);
+        for _ in 0..k {
+            let u = sampler.next_2d();
+            let r = radius * u.x.sqrt();
+            let phi = std::f32::consts::TAU * u.y;
+            let (nx, ny) = ((x + 0.5 + r * phi.cos()).floor(), (y + 0.5 + r * phi.sin()).floor());
+            if nx < 0.0 || ny < 0.0 || nx >= self.width as f32 || ny >= self.height as f32 {
+                continue;
+            }
+            let q = (ny as usize * self.width as usize + nx as usize) * spp + s;
+            if q == i {
+                continue;
+            }
+            if let Some(p) = &self.primary[q]
+                && similar(p, me.v.si.ns, me.depth)
+            {
+                out.push(q);
+            }
+        }
+    }
+}
+
+/// Whether `q` lies on the same surface as a vertex with normal `n` at camera distance
+/// `depth`: normals within 25°, depths within 10 %.
+#[inline]
+pub fn similar(q: &Primary, n: Vec3, depth: f32) -> bool {
+    q.v.si.ns.dot(n) >= NORMAL_COS && (q.depth - depth).abs() <= DEPTH_TOLERANCE * depth.max(q.depth)
+}
+
+/// The first hit of camera ray `ray` and the radiance it sees there directly.
+fn primary_hit(scene: &Scene, ray: &Ray) -> (Option<Primary>, Vec3) {
+    let Some(hit) = scene.intersect(ray) else {
+        return (None, scene.environment().radiance(ray.d.normalize()));
+    };
+    let si = scene.interaction(ray, &hit);
+    let le = scene.emission(&si);
+    let v = Vertex::new(scene, &si, si.wo);
+    (
+        Some(Primary {
+            v,
+            depth: hit.t * ray.d.length(),
+        }),
+        le,
+    )
+}
+
+/// Whether the segment from `a` (a surface point with geometric normal `ng_a`) to `b` (with
+/// `ng_b`) is unoccluded; counts the shadow ray.
+#[inline]
+pub fn visible_between(scene: &Scene, a: Vec3, ng_a: Vec3, b: Vec3, ng_b: Vec3, stats: &mut PathStats) -> bool {
+    stats.shadow_rays += 1;
+    !scene.occluded(&nrc_scene::spawn_ray_between(a, ng_a, b, ng_b))
+}
