@@ -82,9 +82,18 @@ impl<T: Copy> Reservoir<T> {
     /// already folded in, for GI); `M` adds up. Returns whether its sample was selected.
     #[inline]
     pub fn merge(&mut self, other: &Reservoir<T>, target_here: f32, u: f32) -> bool {
+        self.merge_shifted(other, target_here, 1.0, u)
+    }
+
+    /// [`Reservoir::merge`] of a sample shifted from the other reservoir's domain into this
+    /// one's: `jacobian` is `|∂y_here/∂y_there|` (for GI reconnection, the ratio of solid
+    /// angles, [`crate::passes::restir_gi::reconnection_jacobian`]), which carries the other
+    /// reservoir's `W` into this domain's measure (Ouyang et al. 2021, eq. 11; Lin et al. 2022).
+    #[inline]
+    pub fn merge_shifted(&mut self, other: &Reservoir<T>, target_here: f32, jacobian: f32, u: f32) -> bool {
         self.m += other.m;
         match other.sample {
-            Some(s) => self.offer(s, target_here * other.w * other.m, target_here, u),
+            Some(s) => self.offer(s, target_here * jacobian * other.w * other.m, target_here, u),
             None => false,
         }
     }

@@ -17,8 +17,10 @@
 //! Passes know nothing of burn: the cache reaches them as a [`RadianceSource`].
 
 pub mod cache_terminated;
+pub mod hash_grid;
 pub mod path_traced;
 pub mod restir_di;
+pub mod restir_gi;
 pub mod screen;
 
 use std::fmt;
@@ -33,6 +35,7 @@ use crate::source::{RadianceQuery, RadianceSource};
 pub use cache_terminated::{CacheTerminatedPass, TERMINATION_NAMES, Termination, TerminationPoint};
 pub use path_traced::PathTracedPass;
 pub use restir_di::{RestirDiPass, RestirDiSettings};
+pub use restir_gi::{RestirGiPass, RestirGiSettings};
 
 /// What a pass renders this frame.
 #[derive(Clone, Copy, Debug)]
@@ -151,6 +154,10 @@ pub enum PassSpec {
     /// ReSTIR DI at the primary vertex, the rest of the path traced: `restir-di[-biased]`,
     /// parameters after a colon (see [`RestirDiSettings`]), e.g. `restir-di:light=16,k=3`.
     RestirDi(RestirDiSettings),
+    /// ReSTIR GI: `restir-gi` (screen space) or `wsrestir-gi` (world-space hash grid), each
+    /// with `-biased` and `-nrc` (the reconnection vertex's radiance from the radiance source),
+    /// parameters after a colon (see [`RestirGiSettings`]), e.g. `wsrestir-gi-nrc:cell=0.05`.
+    RestirGi(RestirGiSettings),
 }
 
 impl Default for PassSpec {
@@ -168,7 +175,10 @@ pub fn pass_names() -> String {
         "pt, pt-nonee, pt-light (the reference path tracer: MIS, BSDF sampling only, NEE only); \
          cache[-TERMINATION][-nonee] (paths ending in the radiance source; terminations: {TERMINATION_NAMES}); \
          restir-di[-biased][:light=N,bsdf=N,k=N,radius=PX,mcap=X,temporal=0|1,jitter=0|1] (ReSTIR DI at the primary vertex; \
-         defaults light=32,bsdf=1,k=5,radius=30,mcap=20,temporal=1)"
+         defaults light=32,bsdf=1,k=5,radius=30,mcap=20,temporal=1); \
+         restir-gi[-biased][-nrc][:k=N,radius=PX,mcap=X,temporal=0|1,jitter=0|1] (screen-space ReSTIR GI, defaults k=3,radius=30,mcap=30); \
+         wsrestir-gi[-biased][-nrc][:samples=N,cell=S,dmin=F,mcap=X,temporal=0|1,jitter=0|1] (world-space ReSTIR GI, defaults samples=3,cell=0.1,dmin=0.01,mcap=30); \
+         -nrc: the reconnection vertex's radiance from the cache"
     )
 }
 
@@ -230,6 +240,57 @@ impl FromStr for PassSpec {
             }
             set.validate().map_err(|e| format!("pass `{s}`: {e}"))?;
             return Ok(Self::RestirDi(set));
+        }
+        for (prefix, world) in [("wsrestir-gi", true), ("restir-gi", false)] {
+            let Some(rest) = s.strip_prefix(prefix) else {
+                continue;
+            };
+            let (variant, params) = rest.split_once(':').unwrap_or((rest, ""));
+            let (variant, cache) = match variant.strip_suffix("-nrc") {
+                Some(v) => (v, true),
+                None => (variant, false),
+            };
+            let biased = match variant {
+                "" => false,
+                "-biased" => true,
+                _ => return Err(err()),
+            };
+            let mut set = RestirGiSettings {
+                world,
+                cache,
+                biased,
+                ..Default::default()
+            };
+            for kv in params.split(',').filter(|p| !p.is_empty()) {
+                let (k, v) = kv
+                    .split_once('=')
+                    .ok_or_else(|| format!("pass `{s}`: parameter `{kv}` is not KEY=VALUE"))?;
+                let bad = || format!("pass `{s}`: bad value `{v}` for `{k}`");
+                let count = || v.parse::<u32>().map_err(|_| bad());
+                let real = || v.parse::<f32>().map_err(|_| bad());
+                match (k, world) {
+                    ("k", false) => set.spatial_neighbours = count()?,
+                    ("radius", false) => set.spatial_radius = real()?,
+                    ("samples", true) => set.grid_samples = count()?,
+                    ("cell", true) => set.cell_scale = real()?,
+                    ("dmin", true) => set.d_min = real()?,
+                    ("mcap", _) => set.m_cap = real()?,
+                    ("temporal", _) => set.temporal = count()? != 0,
+                    ("jitter", _) => set.jitter = count()? != 0,
+                    _ => {
+                        return Err(format!(
+                            "pass `{s}`: unknown parameter `{k}` (known: {})",
+                            if world {
+                                "samples, cell, dmin, mcap, temporal, jitter"
+                            } else {
+                                "k, radius, mcap, temporal, jitter"
+                            }
+                        ));
+                    }
+                }
+            }
+            set.validate().map_err(|e| format!("pass `{s}`: {e}"))?;
+            return Ok(Self::RestirGi(set));
         }
         let rest = s.strip_prefix("cache").ok_or_else(err)?;
         let (rest, nee) = match rest.strip_suffix("-nonee") {
@@ -296,6 +357,48 @@ impl fmt::Display for PassSpec {
                 }
                 Ok(())
             }
+            Self::RestirGi(set) => {
+                f.write_str(if set.world { "wsrestir-gi" } else { "restir-gi" })?;
+                if set.biased {
+                    f.write_str("-biased")?;
+                }
+                if set.cache {
+                    f.write_str("-nrc")?;
+                }
+                let d = RestirGiSettings::default();
+                let mut params = Vec::new();
+                if set.world {
+                    if set.grid_samples != d.grid_samples {
+                        params.push(format!("samples={}", set.grid_samples));
+                    }
+                    if set.cell_scale != d.cell_scale {
+                        params.push(format!("cell={}", set.cell_scale));
+                    }
+                    if set.d_min != d.d_min {
+                        params.push(format!("dmin={}", set.d_min));
+                    }
+                } else {
+                    if set.spatial_neighbours != d.spatial_neighbours {
+                        params.push(format!("k={}", set.spatial_neighbours));
+                    }
+                    if set.spatial_radius != d.spatial_radius {
+                        params.push(format!("radius={}", set.spatial_radius));
+                    }
+                }
+                if set.m_cap != d.m_cap {
+                    params.push(format!("mcap={}", set.m_cap));
+                }
+                if set.temporal != d.temporal {
+                    params.push(format!("temporal={}", set.temporal as u32));
+                }
+                if set.jitter != d.jitter {
+                    params.push(format!("jitter={}", set.jitter as u32));
+                }
+                if !params.is_empty() {
+                    write!(f, ":{}", params.join(","))?;
+                }
+                Ok(())
+            }
         }
     }
 }
@@ -317,12 +420,15 @@ impl PassSpec {
     /// Whether the pass keeps state across frames (history, reservoirs): such passes get
     /// warm-up frames and a [`RenderPass::reset`] per independent run.
     pub fn is_stateful(&self) -> bool {
-        matches!(self, Self::RestirDi(_))
+        matches!(self, Self::RestirDi(_) | Self::RestirGi(_))
     }
 
     /// Whether the pass asks a radiance source anything.
     pub fn uses_source(&self) -> bool {
-        matches!(self, Self::CacheTerminated { .. })
+        matches!(
+            self,
+            Self::CacheTerminated { .. } | Self::RestirGi(RestirGiSettings { cache: true, .. })
+        )
     }
 
     /// The pass's state, with `tracer`'s depth limit and Russian roulette (its light strategy
@@ -337,6 +443,7 @@ impl PassSpec {
                 Box::new(CacheTerminatedPass::new(termination, nee, tracer))
             }
             Self::RestirDi(set) => Box::new(RestirDiPass::new(set, tracer)),
+            Self::RestirGi(set) => Box::new(RestirGiPass::new(set, tracer)),
         }
     }
 }
@@ -361,6 +468,13 @@ mod tests {
             "restir-di-biased",
             "restir-di:light=16,k=3",
             "restir-di-biased:bsdf=0,radius=10,mcap=4,temporal=0,jitter=0",
+            "restir-gi",
+            "restir-gi-biased",
+            "restir-gi-nrc",
+            "restir-gi-biased-nrc:k=5,radius=12",
+            "wsrestir-gi",
+            "wsrestir-gi-nrc",
+            "wsrestir-gi-biased:samples=5,cell=0.05,dmin=0.02,mcap=10,temporal=0,jitter=0",
         ] {
             let spec: PassSpec = name.parse().unwrap();
             assert_eq!(spec.to_string(), name);
@@ -385,6 +499,10 @@ mod tests {
             "restir-di:nope=1",
             "restir-di:light=0,bsdf=0",
             "restir-di:mcap=-1",
+            "restir-gi-nrc-biased",
+            "restir-gi:samples=3",
+            "wsrestir-gi:k=3",
+            "wsrestir-gi:cell=0",
         ] {
             let e = bad.parse::<PassSpec>().unwrap_err();
             assert!(e.contains("pass"), "{bad}: {e}");

@@ -1,0 +1,633 @@
+//! ReSTIR GI, in screen space (`restir-gi`: Ouyang et al. 2021, the seed paper's baseline) and
+//! in world space (`wsrestir-gi`: `world-space-restir-gi.txt`, Zhang and Wang), and with the
+//! neural cache at the reconnection vertex (`-nrc`, beyond the paper).
+//!
+//! A sample is a *reconnection vertex* `y` (a surface point reached from the shading vertex
+//! `x₁` by BSDF sampling) with the radiance `L` leaving it toward `x₁`, emission excluded (the
+//! direct light at `x₁` is next-event estimation's: NEE alone, weight 1). The target at a
+//! vertex `v` is `p̂_v(y) = lum(f_v(ω_o, ω_y) |cos θ| L)`, per solid angle at `v`; the initial
+//! reservoir holds one BSDF sample, `W = 1/p_ω`. `L` is a traced path tail (NEE and MIS at
+//! `y`, further bounces) or, for `-nrc`, one cache query at `y`.
+//!
+//! - **Shading vertex `x₁`**: `restir-gi` uses the primary vertex (non-delta; delta primaries
+//!   fall back to the path tracer); `wsrestir-gi` the first vertex of roughness ≥ 0.2 (§4.1),
+//!   the path traced through the specular ones before it (their NEE and emission counted as
+//!   the path tracer counts them).
+//! - **Temporal reuse** (both): the previous frame's final reservoir at the reprojected pixel
+//!   (normals within 25°, depths within 10 %), `M` capped at `m_cap`; only where `x₁` is the
+//!   primary vertex.
+//! - **Spatial reuse**: `restir-gi` from `k` screen neighbours in a disc of `radius` pixels
+//!   (read from the temporal buffer); `wsrestir-gi` from up to `samples` entries of the cell of
+//!   the previous frame's hash grid ([`super::hash_grid`], Alg. 2: a random offset and a fixed
+//!   stride through the cell) whose owner's normal is within 15°. The grid read while the new
+//!   one is built holds, per path, the temporal reservoir keyed at `x₁` and (traced tails only)
+//!   the initial sample of the next non-specular vertex `x₂` keyed at `x₂` (Alg. 1: vertices
+//!   from the first non-specular one on), so a vertex also reuses paths that passed it at
+//!   their second bounce.
+//! - **Shift**: the donor's `y` and `L` kept, `W` carried by the reconnection Jacobian
+//!   [`reconnection_jacobian`]; visibility from the receiver tested by the final shadow ray.
+//! - **Bias**: unbiased (default) — `Z` sums the `M` of the inputs whose owner has `p̂ > 0` for
+//!   `y` and sees it (a shadow ray per input); `-biased`: `Z = Σ M`. Reusing `L` toward another
+//!   receiver is exact where `y` is diffuse; at glossy `y` it is the method's approximation.
+
+use std::time::Instant;
+
+use glam::Vec3;
+use nrc_scene::{Scene, sampling::luminance, spawn_ray};
+use rayon::prelude::*;
+
+use super::hash_grid::{CellRule, HashGrid};
+use super::screen::{GBuffer, Phase, Primary, stream, visible_between};
+use super::{FrameInput, PassOutput, PassSpec, PassStats, PhaseTimes, RenderPass};
+use crate::nee::next_event;
+use crate::path_tracer::{PathStats, PathTracer};
+use crate::reservoir::Reservoir;
+use crate::source::RadianceQuery;
+use crate::transport::{Arrival, PathWalk, Vertex};
+
+/// Vertices below this roughness count as specular (§4.1).
+pub const SPECULAR_ROUGHNESS: f32 = 0.2;
+/// Cosine of the largest normal difference between a grid entry's owner and the receiver.
+const GRID_NORMAL_COS: f32 = 0.966; // 15°
+
+/// ReSTIR GI's parameters; defaults from Ouyang et al. 2021 and the seed paper.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RestirGiSettings {
+    /// World space (`wsrestir-gi`): spatial reuse from the hash grid.
+    pub world: bool,
+    /// The reconnection vertex's radiance from the radiance source (`-nrc`).
+    pub cache: bool,
+    /// `Z = Σ M`: biased.
+    pub biased: bool,
+    pub temporal: bool,
+    /// Screen space: spatial neighbours per pixel (0: none).
+    pub spatial_neighbours: u32,
+    /// Screen space: radius of the neighbourhood, pixels.
+    pub spatial_radius: f32,
+    /// World space: samples drawn from the cell (Alg. 2: 3).
+    pub grid_samples: u32,
+    /// World space: projected cell size as a fraction of the image width (eq. 11's `s`: 10 %).
+    pub cell_scale: f32,
+    /// World space: the smallest cell as a fraction of the scene box's smallest extent (1 %).
+    pub d_min: f32,
+    /// The history's `M` cap (Ouyang et al.: 30 frames).
+    pub m_cap: f32,
+    /// Jitter camera rays in the pixel.
+    pub jitter: bool,
+}
+
+impl Default for RestirGiSettings {
+    fn default() -> Self {
+        Self {
+            world: false,
+            cache: false,
+            biased: false,
+            temporal: true,
+            spatial_neighbours: 3,
+            spatial_radius: 30.0,
+            grid_samples: 3,
+            cell_scale: 0.1,
+            d_min: 0.01,
+            m_cap: 30.0,
+            jitter: true,
+        }
+    }
+}
+
+impl RestirGiSettings {
+    /// Errors for settings that cannot work.
+    pub fn validate(&self) -> Result<(), String> {
+        let positive = |x: f32| x > 0.0 && x.is_finite();
+        if !(self.spatial_radius >= 0.0 && self.spatial_radius.is_finite()) {
+            return Err(format!("spatial radius must be finite and ≥ 0, got {}", self.spatial_radius));
+        }
+        if !positive(self.m_cap) {
+            return Err(format!("M-cap must be positive, got {}", self.m_cap));
+        }
+        if !positive(self.cell_scale) || !positive(self.d_min) {
+            return Err(format!("cell scale and d_min must be positive, got {} and {}", self.cell_scale, self.d_min));
+        }
+        Ok(())
+    }
+}
+
+/// A reconnection vertex and the radiance leaving it toward the vertex that found it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct GiSample {
+    pub x: Vec3,
+    /// Its geometric normal.
+    pub n: Vec3,
+    pub l: Vec3,
+}
+
+pub type GiReservoir = Reservoir<GiSample>;
+
+/// `|∂ω_receiver / ∂ω_donor|` for a sample `y` (normal `n_y`) found from `donor` and reused at
+/// `receiver`: `(|cos φ_r| / |cos φ_d|) · (‖donor − y‖² / ‖receiver − y‖²)`, the angles at `y`
+/// between `n_y` and the directions to the two vertices (Ouyang et al. 2021, eq. 11). 0 where
+/// undefined.
+#[inline]
+pub fn reconnection_jacobian(receiver: Vec3, donor: Vec3, y: Vec3, n_y: Vec3) -> f32 {
+    let (to_r, to_d) = (receiver - y, donor - y);
+    let (dr2, dd2) = (to_r.length_squared(), to_d.length_squared());
+    let cos_r = n_y.dot(to_r).abs() / dr2.sqrt();
+    let cos_d = n_y.dot(to_d).abs() / dd2.sqrt();
+    let j = (cos_r / cos_d) * (dd2 / dr2);
+    if j.is_finite() && j > 0.0 { j } else { 0.0 }
+}
+
+/// `f · |cos| · L` of sample `y` at vertex `v` (per solid angle) and its luminance `p̂`.
+#[inline]
+fn contribution(v: &Vertex, y: &GiSample) -> Option<(Vec3, f32)> {
+    let d = y.x - v.si.p;
+    let wi = v.frame.to_local(d.normalize());
+    let c = v.bsdf.eval(v.wo, wi) * wi.z.abs() * y.l;
+    let t = luminance(c);
+    (t > 0.0 && t.is_finite()).then_some((c, t))
+}
+
+#[inline]
+fn target_at(v: &Vertex, y: &GiSample) -> f32 {
+    contribution(v, y).map_or(0.0, |c| c.1)
+}
+
+/// The shading vertex `x₁` of a pixel sample and what its path gathered before it.
+#[derive(Clone, Copy, Debug)]
+struct Shading {
+    v: Vertex,
+    /// Throughput from the camera to `x₁` (1 at the primary vertex).
+    throughput: Vec3,
+    /// `x₁` is the primary vertex (temporal reuse applies).
+    primary: bool,
+    /// NEE at `x₁`.
+    direct: Vec3,
+    /// The initial candidate: its vertex (radiance filled in later for `-nrc`) and BSDF pdf.
+    candidate: Option<(GiSample, f32)>,
+    /// `-nrc`: the cache query at the candidate's vertex, then its index in the frame's batch.
+    query: Option<RadianceQuery>,
+    query_index: Option<usize>,
+}
+
+/// One pixel sample after the trace phase.
+#[derive(Clone, Copy, Debug, Default)]
+struct Traced {
+    /// Radiance gathered before `x₁` (emission seen, NEE at specular vertices), or the whole
+    /// path tracer's estimate where there is no `x₁`.
+    radiance: Vec3,
+    shading: Option<Shading>,
+    /// World space, traced tails, rough `x₂`: its initial sample (sample and pdf; `None`: its
+    /// path found none) with its owner, for the grid.
+    second: Option<(Vertex, Option<(GiSample, f32)>)>,
+    stats: PathStats,
+}
+
+/// A grid entry: a reservoir and its owner vertex, and whether the owner's path reached it
+/// from the camera directly (receivers with a depth limit reuse only such entries when they
+/// are primary too: the radiance a sample carries depends on the segments left).
+#[derive(Clone, Copy, Debug)]
+struct Entry {
+    owner: Vertex,
+    res: GiReservoir,
+    primary: bool,
+}
+
+struct History {
+    g: GBuffer,
+    res: Vec<GiReservoir>,
+    grid: HashGrid,
+    entries: Vec<Entry>,
+    rule: CellRule,
+}
+
+/// The ReSTIR GI pass (screen or world space) and its history.
+pub struct RestirGiPass {
+    pub settings: RestirGiSettings,
+    tracer: PathTracer,
+    history: Option<History>,
+    frame: Option<(GBuffer, Vec<Traced>, f64)>,
+}
+
+impl RestirGiPass {
+    pub fn new(settings: RestirGiSettings, tracer: &PathTracer) -> Self {
+        Self {
+            settings,
+            tracer: *tracer,
+            history: None,
+            frame: None,
+        }
+    }
+
+    /// Whether `v` is rough enough to be the shading vertex.
+    fn is_rough(&self, v: &Vertex) -> bool {
+        !v.bsdf.is_delta() && (!self.settings.world || v.bsdf.roughness() >= SPECULAR_ROUGHNESS)
+    }
+
+    /// The trace phase of one pixel sample: the path to `x₁`, NEE there, the initial
+    /// candidate and (traced tails) its radiance.
+    fn trace_one(&self, scene: &Scene, seed: u64, i: usize, p: Option<&Primary>, emitted: Vec3) -> Traced {
+        let mut out = Traced {
+            radiance: emitted,
+            ..Default::default()
+        };
+        let Some(p) = p else { return out };
+        let mut s = stream(seed, i, Phase::Path);
+        let limit = self.tracer.segment_limit();
+        // The path to the first rough vertex.
+        let (mut v, mut throughput, mut segments) = (p.v, Vec3::ONE, 1u32);
+        if !self.is_rough(&v) {
+            if !self.settings.world {
+                out.radiance += self.tracer.reflected(scene, &v.si, v.wo_world, 1, &mut s, &mut out.stats);
+                return out;
+            }
+            let mut walk = PathWalk::from_vertex(scene, &self.tracer, 1);
+            loop {
+                if walk.at_depth_limit() {
+                    return out;
+                }
+                out.radiance += walk.throughput() * walk.next_event(scene, &v, &mut s, &mut out.stats);
+                if walk.scatter(&v, &mut s).is_none() {
+                    return out;
+                }
+                segments += 1;
+                match walk.arrive(scene, &mut out.stats) {
+                    Arrival::Escaped { le, mis } => {
+                        out.radiance += walk.throughput() * le * mis;
+                        return out;
+                    }
+                    Arrival::Hit(h) => {
+                        out.radiance += walk.throughput() * h.le * h.mis;
+                        v = h.vertex;
+                        if self.is_rough(&v) {
+                            throughput = walk.throughput();
+                            break;
+                        }
+                    }
+                }
+            }
+        }
+        if segments >= limit {
+            return out;
+        }
+        let direct = next_event(scene, &v.si, &v.bsdf, &v.frame, v.wo, false, &mut s, &mut out.stats);
+        let mut shading = Shading {
+            v,
+            throughput,
+            primary: segments == 1,
+            direct,
+            candidate: None,
+            query: None,
+            query_index: None,
+        };
+        // The initial candidate: one BSDF sample (indirect light needs one more segment).
+        if segments + 1 < limit {
+            let mut sc = stream(seed, i, Phase::Candidates);
+            let u_lobe = sc.next_1d();
+            let u_dir = sc.next_2d();
+            if let Some(bs) = v.bsdf.sample(v.wo, u_dir, u_lobe).filter(|b| !b.delta && b.pdf > 0.0) {
+                let ray = spawn_ray(v.si.p, v.si.ng, v.frame.to_world(bs.wi));
+                out.stats.closest_rays += 1;
+                if let Some(hit) = scene.intersect(&ray) {
+                    let si = scene.interaction(&ray, &hit);
+                    let y = Vertex::new(scene, &si, si.wo);
+                    let mut sample = GiSample {
+                        x: si.p,
+                        n: si.ng,
+                        l: Vec3::ZERO,
+                    };
+                    if self.settings.cache {
+                        shading.query = Some(y.query());
+                    } else {
+                        let (l, second) = self.tail(scene, &y, segments + 1, &mut sc, &mut out.stats);
+                        sample.l = l;
+                        // x₂'s sample has one segment less left than x₁'s: reused at another
+                        // x₁ it is right only when depth is unlimited (Russian roulette alone).
+                        let unlimited = self.tracer.segment_limit() == u32::MAX;
+                        out.second = second
+                            .filter(|_| self.settings.world && unlimited && segments == 1)
+                            .map(|y3| (y, y3));
+                    }
+                    shading.candidate = Some((sample, bs.pdf));
+                }
+            }
+        }
+        out.shading = Some(shading);
+        out
+    }
+
+    /// The radiance leaving `y` toward the vertex before it (`segments` used to reach it),
+    /// emission excluded, by a traced path; and where `y` is rough, its own initial sample
+    /// (the next vertex with the radiance leaving it toward `y`, and its BSDF pdf).
+    fn tail(
+        &self,
+        scene: &Scene,
+        y: &Vertex,
+        segments: u32,
+        s: &mut crate::sampler::PixelSampler,
+        stats: &mut PathStats,
+    ) -> (Vec3, Option<Option<(GiSample, f32)>>) {
+        let mut walk = PathWalk::from_vertex(scene, &self.tracer, segments);
+        if walk.at_depth_limit() {
+            return (Vec3::ZERO, None);
+        }
+        // y's own sample for the grid, where y is rough: `Some(None)` when its path found
+        // none (an empty reservoir of one candidate: it counts in Z like any other).
+        let rough = self.is_rough(y);
+        let nee = walk.next_event(scene, y, s, stats);
+        let Some(bs) = walk.scatter(y, s) else {
+            return (nee, rough.then_some(None));
+        };
+        match walk.arrive(scene, stats) {
+            Arrival::Escaped { le, mis } => (nee + bs.weight * le * mis, rough.then_some(None)),
+            Arrival::Hit(h) => {
+                let l3 = self.tracer.reflected(scene, &h.vertex.si, h.vertex.wo_world, segments + 1, s, stats);
+                let l = nee + bs.weight * (h.le * h.mis + l3);
+                let sample = (!bs.delta && bs.pdf > 0.0).then_some((
+                    GiSample {
+                        x: h.vertex.si.p,
+                        n: h.vertex.si.ng,
+                        l: l3,
+                    },
+                    bs.pdf,
+                ));
+                (l, rough.then_some(sample))
+            }
+        }
+    }
+
+    /// Merges `others` into `own` at `v`, shifting each by the reconnection Jacobian; the
+    /// unbiased `Z` tests each input's owner (target and visibility). Returns the reservoir
+    /// and whether its sample is `own`'s.
+    fn combine(
+        &self,
+        scene: &Scene,
+        v: &Vertex,
+        own: &GiReservoir,
+        others: &[(GiReservoir, &Vertex)],
+        s: &mut crate::sampler::PixelSampler,
+        stats: &mut PathStats,
+    ) -> (GiReservoir, bool) {
+        let mut out = GiReservoir::new();
+        let mut is_own = out.merge(own, own.target, s.next_1d());
+        for (o, ov) in others {
+            let (t, j) = match o.sample {
+                Some(y) => (target_at(v, &y), reconnection_jacobian(v.si.p, ov.si.p, y.x, y.n)),
+                None => (0.0, 0.0),
+            };
+            if out.merge_shifted(o, t, j, s.next_1d()) {
+                is_own = false;
+            }
+        }
+        let z = match out.sample {
+            Some(y) if !self.settings.biased => {
+                let mut z = own.m;
+                for (o, ov) in others {
+                    if target_at(ov, &y) > 0.0 && visible_between(scene, ov.si.p, ov.si.ng, y.x, y.n, stats) {
+                        z += o.m;
+                    }
+                }
+                z
+            }
+            _ => out.m,
+        };
+        out.finish(z);
+        (out, is_own)
+    }
+}
+
+fn par_map<T: Send>(n: usize, f: impl Fn(usize) -> T + Sync + Send) -> Vec<T> {
+    (0..n).into_par_iter().map(f).collect()
+}
+
+impl RenderPass for RestirGiPass {
+    fn name(&self) -> String {
+        PassSpec::RestirGi(self.settings).to_string()
+    }
+
+    fn reset(&mut self) {
+        self.history = None;
+    }
+
+    fn trace(&mut self, input: &FrameInput) -> Vec<RadianceQuery> {
+        let scene = input.scene;
+        let t = Instant::now();
+        let g = GBuffer::trace(scene, input.camera, input.width, input.height, input.spp, input.seed, self.settings.jitter);
+        let mut traced: Vec<Traced> =
+            par_map(g.len(), |i| self.trace_one(scene, input.seed, i, g.primary[i].as_ref(), g.emitted[i]));
+        let mut queries = Vec::new();
+        for t in traced.iter_mut() {
+            if let Some(sh) = &mut t.shading
+                && let Some(q) = sh.query.take()
+            {
+                sh.query_index = Some(queries.len());
+                queries.push(q);
+            }
+        }
+        self.frame = Some((g, traced, t.elapsed().as_secs_f64() * 1e3));
+        queries
+    }
+
+    fn resolve(&mut self, input: &FrameInput, answers: &[Vec3]) -> PassOutput {
+        if self.frame.is_none() {
+            let q = self.trace(input);
+            assert!(q.is_empty(), "resolve without trace needs a pass that asks no source");
+        }
+        let (g, traced, trace_ms) = self.frame.take().expect("just traced");
+        let scene = input.scene;
+        let seed = input.seed;
+        let n = g.len();
+        let set = self.settings;
+        let mut times = PhaseTimes {
+            candidates_ms: trace_ms,
+            ..Default::default()
+        };
+
+        // Initial reservoirs: one candidate, W = 1/p.
+        let initial: Vec<(GiReservoir, PathStats)> = par_map(n, |i| {
+            let t = &traced[i];
+            let mut r = GiReservoir::new();
+            if let Some(sh) = &t.shading {
+                r.m = 0.0;
+                match sh.candidate {
+                    Some((mut y, pdf)) => {
+                        if let Some(q) = sh.query_index {
+                            y.l = answers[q];
+                        }
+                        let target = target_at(&sh.v, &y);
+                        r.update(y, target / pdf, target, stream(seed, i, Phase::Extra).next_1d());
+                    }
+                    None => r.m = 1.0,
+                }
+                r.finish(r.m);
+            }
+            (r, t.stats)
+        });
+
+        // Temporal reuse.
+        let t0 = Instant::now();
+        let history = self.history.take().filter(|h| h.g.same_shape(&g));
+        let temporal: Vec<(GiReservoir, PathStats)> = par_map(n, |i| {
+            let (own, mut stats) = initial[i];
+            let (Some(sh), Some(h)) = (traced[i].shading.as_ref(), history.as_ref().filter(|_| set.temporal)) else {
+                return (own, stats);
+            };
+            if !sh.primary {
+                return (own, stats);
+            }
+            let Some(j) = h.g.reproject(sh.v.si.p, sh.v.si.ns, (i % g.spp as usize) as u32) else {
+                return (own, stats);
+            };
+            let mut prev = h.res[j];
+            prev.cap(set.m_cap);
+            let pv = &h.g.primary[j].as_ref().expect("reprojection finds a vertex").v;
+            let mut s = stream(seed, i, Phase::Temporal);
+            let (mut r, is_own) = self.combine(scene, &sh.v, &own, &[(prev, pv)], &mut s, &mut stats);
+            if !is_own
+                && let Some(y) = r.sample
+                && !visible_between(scene, sh.v.si.p, sh.v.si.ng, y.x, y.n, &mut stats)
+            {
+                r.clear_sample();
+            }
+            (r, stats)
+        });
+        times.temporal_ms = t0.elapsed().as_secs_f64() * 1e3;
+
+        // Spatial reuse: screen neighbours from the temporal buffer, or the previous grid.
+        let t0 = Instant::now();
+        let unlimited = self.tracer.segment_limit() == u32::MAX;
+        let spatial: Vec<(GiReservoir, PathStats)> = par_map(n, |i| {
+            let (own, mut stats) = temporal[i];
+            let Some(sh) = traced[i].shading.as_ref() else {
+                return (own, stats);
+            };
+            let mut s = stream(seed, i, Phase::Spatial);
+            let mut others: Vec<(GiReservoir, &Vertex)> = Vec::new();
+            if set.world {
+                if let Some(h) = &history {
+                    let jitter = Vec3::new(s.next_1d(), s.next_1d(), s.next_1d()) - Vec3::splat(0.5);
+                    let cell = h.grid.find(h.rule.key(sh.v.si.p, sh.v.si.ns, jitter));
+                    let count = cell.len();
+                    if count > 0 && set.grid_samples > 0 {
+                        let step = count.div_ceil(set.grid_samples as usize).max(1);
+                        let off = ((s.next_1d() * step as f32) as usize).min(step - 1);
+                        for k in (0..count).step_by(step) {
+                            let e = &h.entries[cell[(k + off) % count] as usize];
+                            let same_budget = unlimited || e.primary == sh.primary;
+                            if same_budget && e.owner.si.ns.dot(sh.v.si.ns) >= GRID_NORMAL_COS {
+                                let mut res = e.res;
+                                res.cap(set.m_cap);
+                                others.push((res, &e.owner));
+                            }
+                        }
+                    }
+                }
+            } else if set.spatial_neighbours > 0
+                && let Some(p) = g.primary[i].as_ref().filter(|_| sh.primary)
+            {
+                let mut near = Vec::new();
+                g.neighbours(i, p, set.spatial_neighbours, set.spatial_radius, &mut s, &mut near);
+                for q in near {
+                    if let Some(qs) = traced[q].shading.as_ref().filter(|qs| qs.primary) {
+                        others.push((temporal[q].0, &qs.v));
+                    }
+                }
+            }
+            if others.is_empty() {
+                return (own, stats);
+            }
+            let (r, _) = self.combine(scene, &sh.v, &own, &others, &mut s, &mut stats);
+            (r, stats)
+        });
+        times.spatial_ms = t0.elapsed().as_secs_f64() * 1e3;
+
+        // Shading: one shadow ray for the chosen sample.
+        let t0 = Instant::now();
+        let shaded: Vec<(Vec3, GiReservoir, PathStats)> = par_map(n, |i| {
+            let (mut r, mut stats) = spatial[i];
+            let t = &traced[i];
+            let mut l = t.radiance;
+            if let Some(sh) = &t.shading {
+                let mut indirect = Vec3::ZERO;
+                if let Some(y) = r.sample {
+                    if visible_between(scene, sh.v.si.p, sh.v.si.ng, y.x, y.n, &mut stats) {
+                        indirect = contribution(&sh.v, &y).map_or(Vec3::ZERO, |c| c.0) * r.w;
+                    } else {
+                        r.clear_sample();
+                    }
+                }
+                l += sh.throughput * (sh.direct + indirect);
+            }
+            (l, r, stats)
+        });
+        times.shading_ms = t0.elapsed().as_secs_f64() * 1e3;
+
+        // The grid for the next frame: temporal reservoirs keyed at x₁, second samples at x₂.
+        let rule = CellRule::new(input.camera, input.width, input.height, &scene.bounds(), set.cell_scale, set.d_min);
+        let mut entries = Vec::new();
+        // Empty reservoirs go in too: a donor that found nothing still counts in Z (leaving
+        // them out made reuse select only lucky donors and brightened dark regions 2×).
+        if set.world {
+            for (i, t) in traced.iter().enumerate() {
+                if let Some(sh) = &t.shading {
+                    entries.push(Entry {
+                        owner: sh.v,
+                        res: temporal[i].0,
+                        primary: sh.primary,
+                    });
+                }
+                if let Some((owner, sample)) = t.second {
+                    let mut res = GiReservoir::new();
+                    match sample {
+                        Some((y, pdf)) => {
+                            let target = target_at(&owner, &y);
+                            res.update(y, target / pdf, target, 0.5);
+                        }
+                        None => res.m = 1.0,
+                    }
+                    res.finish(1.0);
+                    entries.push(Entry {
+                        owner,
+                        res,
+                        primary: false,
+                    });
+                }
+            }
+        }
+        let keys: Vec<u64> = entries.iter().map(|e| rule.key(e.owner.si.p, e.owner.si.ns, Vec3::ZERO)).collect();
+        let grid = HashGrid::build(&keys);
+
+        let mut stats = PassStats {
+            paths: n as u64,
+            rays: g.rays,
+            phases: times,
+            ..Default::default()
+        };
+        let spp = g.spp as usize;
+        let mut image = vec![Vec3::ZERO; n / spp];
+        let mut res = Vec::with_capacity(n);
+        for (i, (l, r, ps)) in shaded.into_iter().enumerate() {
+            stats.rays += ps.rays();
+            let l = if l.is_finite() {
+                l
+            } else {
+                stats.invalid_samples += 1;
+                Vec3::ZERO
+            };
+            image[i / spp] += l / spp as f32;
+            res.push(r);
+        }
+        self.history = Some(History {
+            g,
+            res,
+            grid,
+            entries,
+            rule,
+        });
+        PassOutput {
+            image: nrc_scene::Image::from_data(input.width as usize, input.height as usize, image)
+                .expect("one value per pixel"),
+            variance: None,
+            terminations: Vec::new(),
+            stats,
+        }
+    }
+}
