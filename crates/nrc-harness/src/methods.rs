@@ -25,13 +25,18 @@ use nrc_train::query::QueryMaker;
 
 use crate::budget::{Estimate, Method};
 
+/// The producer of the cache that a resampling pass's `-nrc` variant reads when its name
+/// names none.
+pub const DEFAULT_PASS_PRODUCER: &str = "pt-sl";
+
 /// The grammar of all method names.
 pub fn method_names() -> String {
     format!(
         "pt-<N>spp (reference path tracer, N samples per pixel per estimate, NEE and BSDF sampling combined by MIS), \
          pt-<N>spp-nonee (the same with next-event estimation off: BSDF sampling only), \
          nrc-<producer>[-<termination>] (a cache trained online, 1 spp; producers: {PRODUCER_NAMES}; terminations: {TERMINATION_NAMES}), \
-         restir-di[-biased][:PARAMS] (ReSTIR DI, 1 spp; see `--pass`), \
+         restir-di[-biased][:PARAMS], restir-gi[-biased][-nrc][:PARAMS], wsrestir-gi[-biased][-nrc][:PARAMS] \
+         (the resampling passes at 1 spp, see `--pass`; -nrc reads a cache trained online by pt-sl), \
          or in general <pass>@<N>spp[+<producer>] (any pass of `--pass`, e.g. pt-light@4spp, cache-first-nonee@2spp+pt-sl)"
     )
 }
@@ -101,12 +106,17 @@ impl FromStr for MethodSpec {
             });
         }
         // The resampling passes by their pass names, at 1 sample per pixel.
+        // `-nrc` variants read a cache trained online by `pt-sl` (other producers: the general
+        // form, e.g. wsrestir-gi-nrc@1spp+bt).
         if s.starts_with("restir-") || s.starts_with("wsrestir-") {
             let pass: PassSpec = s.parse().map_err(|e: String| err(&e))?;
+            let producer = pass
+                .uses_source()
+                .then(|| DEFAULT_PASS_PRODUCER.parse::<ProducerSpec>().expect("a producer name"));
             return Ok(Self {
                 pass,
                 spp: 1,
-                producer: None,
+                producer,
             });
         }
         if let Some(rest) = s.strip_prefix("nrc-") {
@@ -208,6 +218,9 @@ impl fmt::Display for MethodSpec {
                 write!(f, "pt-{spp}spp-nonee")
             }
             (pass, None, 1) if pass.is_stateful() => write!(f, "{pass}"),
+            (pass, Some(p), 1) if pass.is_stateful() && p.to_string() == DEFAULT_PASS_PRODUCER => {
+                write!(f, "{pass}")
+            }
             (pass, None, spp) => write!(f, "{pass}@{spp}spp"),
             (pass, Some(p), spp) => write!(f, "{pass}@{spp}spp+{p}"),
         }
@@ -396,8 +409,11 @@ impl CacheMethod {
                 &self.settings,
                 self.tracer,
             )?;
+            // Stateful passes (the resampling -nrc variants) render while training, so that
+            // their history is warm too.
+            let render = self.spec.pass.is_stateful();
             for _ in 0..self.settings.train_frames {
-                t.frame(scene, camera, width, height, false)
+                t.frame(scene, camera, width, height, render)
                     .map_err(|e| e.to_string())?;
             }
             self.trainer = Some(t);
@@ -511,6 +527,14 @@ mod tests {
             "pt-light@4spp",
             "cache-first-nonee@1spp+pt-sl",
             "cache-bth:8@2spp+bt",
+            "restir-di",
+            "restir-di-biased:k=3",
+            "restir-gi",
+            "wsrestir-gi",
+            "wsrestir-gi-nrc",
+            "restir-gi-nrc",
+            "wsrestir-gi-nrc@1spp+bt",
+            "restir-di@4spp",
         ] {
             let spec: MethodSpec = name.parse().unwrap();
             assert_eq!(spec.to_string(), name);
@@ -521,6 +545,8 @@ mod tests {
             ("pt-nonee@2spp", "pt-2spp-nonee"),
             ("cache@1spp+pt-sl", "nrc-pt-sl"),
             ("cache-first@1spp+bt", "nrc-bt-first"),
+            ("wsrestir-gi-nrc@1spp+pt-sl", "wsrestir-gi-nrc"),
+            ("restir-di@1spp", "restir-di"),
         ] {
             assert_eq!(general.parse::<MethodSpec>().unwrap().to_string(), short);
         }

@@ -47,6 +47,20 @@ use crate::transport::{Arrival, PathWalk, Vertex};
 
 /// Vertices below this roughness count as specular (§4.1).
 pub const SPECULAR_ROUGHNESS: f32 = 0.2;
+/// The shift from a donor to a receiver is defined only where the reconnection Jacobian lies
+/// in `[1/JACOBIAN_MAX, JACOBIAN_MAX]` (Ouyang et al. reject reuse beyond such a bound): a
+/// donor never lends a sample outside it, and counts in `Z` only for samples inside it, so the
+/// estimator stays unbiased (the receiver's own samples cover everything) and loses the
+/// fireflies of near-singular shifts.
+pub const JACOBIAN_MAX: f32 = 10.0;
+
+/// The reconnection Jacobian where the shift is defined, else 0.
+#[inline]
+fn bounded_jacobian(receiver: Vec3, donor: Vec3, y: &GiSample) -> f32 {
+    let j = reconnection_jacobian(receiver, donor, y.x, y.n);
+    if (1.0 / JACOBIAN_MAX..=JACOBIAN_MAX).contains(&j) { j } else { 0.0 }
+}
+
 /// Cosine of the largest normal difference between a grid entry's owner and the receiver.
 const GRID_NORMAL_COS: f32 = 0.966; // 15°
 
@@ -370,7 +384,7 @@ impl RestirGiPass {
         let mut is_own = out.merge(own, own.target, s.next_1d());
         for (o, ov) in others {
             let (t, j) = match o.sample {
-                Some(y) => (target_at(v, &y), reconnection_jacobian(v.si.p, ov.si.p, y.x, y.n)),
+                Some(y) => (target_at(v, &y), bounded_jacobian(v.si.p, ov.si.p, &y)),
                 None => (0.0, 0.0),
             };
             if out.merge_shifted(o, t, j, s.next_1d()) {
@@ -381,7 +395,10 @@ impl RestirGiPass {
             Some(y) if !self.settings.biased => {
                 let mut z = own.m;
                 for (o, ov) in others {
-                    if target_at(ov, &y) > 0.0 && visible_between(scene, ov.si.p, ov.si.ng, y.x, y.n, stats) {
+                    if bounded_jacobian(v.si.p, ov.si.p, &y) > 0.0
+                        && target_at(ov, &y) > 0.0
+                        && visible_between(scene, ov.si.p, ov.si.ng, y.x, y.n, stats)
+                    {
                         z += o.m;
                     }
                 }
@@ -560,7 +577,9 @@ impl RenderPass for RestirGiPass {
         });
         times.shading_ms = t0.elapsed().as_secs_f64() * 1e3;
 
-        // The grid for the next frame: temporal reservoirs keyed at x₁, second samples at x₂.
+        // The grid for the next frame: temporal reservoirs keyed at x₁, second samples at x₂
+        // (its build is counted in the spatial phase).
+        let t0 = Instant::now();
         let rule = CellRule::new(input.camera, input.width, input.height, &scene.bounds(), set.cell_scale, set.d_min);
         let mut entries = Vec::new();
         // Empty reservoirs go in too: a donor that found nothing still counts in Z (leaving
@@ -594,6 +613,7 @@ impl RenderPass for RestirGiPass {
         }
         let keys: Vec<u64> = entries.iter().map(|e| rule.key(e.owner.si.p, e.owner.si.ns, Vec3::ZERO)).collect();
         let grid = HashGrid::build(&keys);
+        times.spatial_ms += t0.elapsed().as_secs_f64() * 1e3;
 
         let mut stats = PassStats {
             paths: n as u64,
