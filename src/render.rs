@@ -211,7 +211,11 @@ pub fn run(args: &RenderArgs) -> Result<()> {
             height: args.height,
             spp: args.spp,
             // One frame: the seed itself (images as before --frames existed).
-            seed: if args.frames == 1 { args.seed } else { nrc_render::pass_seed(args.seed, f as u32) },
+            seed: if args.frames == 1 {
+                args.seed
+            } else {
+                nrc_render::pass_seed(args.seed, f as u32)
+            },
         };
         out = Some(pool.install(|| match &cache {
             Some((c, _)) => passes::run(pass.as_mut(), &input, &nrc_train::CacheSource::new(c)),

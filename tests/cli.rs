@@ -333,29 +333,81 @@ fn resampling_passes_render_and_train_from_the_command_line() {
     let s = cornell.to_str().unwrap();
     for pass in ["restir-di", "restir-gi-biased", "wsrestir-gi:samples=2"] {
         let o = nrc(&[
-            "render", "--scene", s, "--pass", pass, "--frames", "3", "--camera-path",
-            path.to_str().unwrap(), "--spp", "1", "--width", "16", "--height", "12", "--out",
+            "render",
+            "--scene",
+            s,
+            "--pass",
+            pass,
+            "--frames",
+            "3",
+            "--camera-path",
+            path.to_str().unwrap(),
+            "--spp",
+            "1",
+            "--width",
+            "16",
+            "--height",
+            "12",
+            "--out",
             out.to_str().unwrap(),
         ]);
         assert!(o.status.success(), "{pass}: {}", text(&o.stderr));
         let stdout = text(&o.stdout);
-        assert!(stdout.contains("last of 3 frames") && stdout.contains("phases: candidates"), "{stdout}");
+        assert!(
+            stdout.contains("last of 3 frames") && stdout.contains("phases: candidates"),
+            "{stdout}"
+        );
         let img = nrc_scene::Image::read_exr(&out).unwrap();
-        assert!(img.data.iter().any(|p| p.max_element() > 0.0), "{pass} rendered black");
+        assert!(
+            img.data.iter().any(|p| p.max_element() > 0.0),
+            "{pass} rendered black"
+        );
     }
     let o = nrc(&[
-        "train", "--scene", s, "--producer", "pt-sl", "--pass", "wsrestir-gi-nrc", "--frames", "2",
-        "--width", "16", "--height", "12", "--records", "512",
+        "train",
+        "--scene",
+        s,
+        "--producer",
+        "pt-sl",
+        "--pass",
+        "wsrestir-gi-nrc",
+        "--frames",
+        "2",
+        "--width",
+        "16",
+        "--height",
+        "12",
+        "--records",
+        "512",
     ]);
     assert!(o.status.success(), "{}", text(&o.stderr));
     for bad in ["restir-di:k=x", "wsrestir-gi:k=3", "restir-gi:mcap=0"] {
         let o = nrc(&[
-            "render", "--scene", s, "--pass", bad, "--spp", "1", "--width", "8", "--height", "8",
-            "--out", out.to_str().unwrap(),
+            "render",
+            "--scene",
+            s,
+            "--pass",
+            bad,
+            "--spp",
+            "1",
+            "--width",
+            "8",
+            "--height",
+            "8",
+            "--out",
+            out.to_str().unwrap(),
         ]);
         // Rejected by the argument parser: its error line names the pass, no panic.
         let err = text(&o.stderr);
-        assert!(!o.status.success() && !err.contains("panicked"), "{bad}: {err}");
-        assert!(err.lines().next().is_some_and(|l| l.starts_with("error: ") && l.contains(bad)), "{err}");
+        assert!(
+            !o.status.success() && !err.contains("panicked"),
+            "{bad}: {err}"
+        );
+        assert!(
+            err.lines()
+                .next()
+                .is_some_and(|l| l.starts_with("error: ") && l.contains(bad)),
+            "{err}"
+        );
     }
 }

@@ -288,7 +288,15 @@ fn every_producer_trains_on_the_environment_lit_kajiya_scene() {
             a.extend(["--background", "1"]);
         }
         a.extend([
-            "--width", "8", "--height", "8", "--frames", "2", "--records", "512", "--stats",
+            "--width",
+            "8",
+            "--height",
+            "8",
+            "--frames",
+            "2",
+            "--records",
+            "512",
+            "--stats",
             stats.to_str().unwrap(),
         ]);
         nrc(&a)

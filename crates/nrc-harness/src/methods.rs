@@ -110,9 +110,11 @@ impl FromStr for MethodSpec {
         // form, e.g. wsrestir-gi-nrc@1spp+bt).
         if s.starts_with("restir-") || s.starts_with("wsrestir-") {
             let pass: PassSpec = s.parse().map_err(|e: String| err(&e))?;
-            let producer = pass
-                .uses_source()
-                .then(|| DEFAULT_PASS_PRODUCER.parse::<ProducerSpec>().expect("a producer name"));
+            let producer = pass.uses_source().then(|| {
+                DEFAULT_PASS_PRODUCER
+                    .parse::<ProducerSpec>()
+                    .expect("a producer name")
+            });
             return Ok(Self {
                 pass,
                 spp: 1,
@@ -276,7 +278,11 @@ impl MethodSpec {
                 name: self.to_string(),
                 spp: self.spp,
                 pass: self.pass.build(tracer),
-                warm_up: if self.pass.is_stateful() { cache.train_frames } else { 0 },
+                warm_up: if self.pass.is_stateful() {
+                    cache.train_frames
+                } else {
+                    0
+                },
             }),
             Some(producer) => Box::new(CacheMethod {
                 name: self.to_string(),
@@ -321,7 +327,13 @@ impl Method for PassMethod {
     ) -> Result<(), String> {
         self.pass.reset();
         for f in 0..self.warm_up {
-            self.render_estimate(scene, camera, width, height, nrc_render::pass_seed(!seed, f));
+            self.render_estimate(
+                scene,
+                camera,
+                width,
+                height,
+                nrc_render::pass_seed(!seed, f),
+            );
         }
         Ok(())
     }

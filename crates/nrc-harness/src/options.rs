@@ -155,7 +155,12 @@ pub struct SceneArgs {
     pub env_intensity: f32,
 
     /// Rotation of the environment map about the up axis (+y), degrees.
-    #[arg(long, default_value_t = 0.0, requires = "env", allow_hyphen_values = true)]
+    #[arg(
+        long,
+        default_value_t = 0.0,
+        requires = "env",
+        allow_hyphen_values = true
+    )]
     pub env_rotate: f32,
 }
 

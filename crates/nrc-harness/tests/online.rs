@@ -242,5 +242,8 @@ fn online_training_on_the_environment_lit_kajiya_scene_brings_the_error_down() {
         );
     }
     let frozen = errors_over_a_run(&scene, "pt-sl", frozen_preset());
-    assert!(frozen[1] > 0.95 * frozen[0], "a frozen cache passed: {frozen:?}");
+    assert!(
+        frozen[1] > 0.95 * frozen[0],
+        "a frozen cache passed: {frozen:?}"
+    );
 }

@@ -14,7 +14,9 @@
 //! flux arriving per unit *geometric* area while the BSDF integrals use shading cosines.
 
 use glam::Vec3;
-use nrc_scene::{LightSample, Ray, Scene, SurfaceInteraction, bsdf::Bsdf, sampling::Frame, spawn_ray};
+use nrc_scene::{
+    LightSample, Ray, Scene, SurfaceInteraction, bsdf::Bsdf, sampling::Frame, spawn_ray,
+};
 
 use crate::path_tracer::{PathStats, PathTracer};
 use crate::sampler::PixelSampler;

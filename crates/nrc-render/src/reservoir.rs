@@ -90,10 +90,21 @@ impl<T: Copy> Reservoir<T> {
     /// angles, [`crate::passes::restir_gi::reconnection_jacobian`]), which carries the other
     /// reservoir's `W` into this domain's measure (Ouyang et al. 2021, eq. 11; Lin et al. 2022).
     #[inline]
-    pub fn merge_shifted(&mut self, other: &Reservoir<T>, target_here: f32, jacobian: f32, u: f32) -> bool {
+    pub fn merge_shifted(
+        &mut self,
+        other: &Reservoir<T>,
+        target_here: f32,
+        jacobian: f32,
+        u: f32,
+    ) -> bool {
         self.m += other.m;
         match other.sample {
-            Some(s) => self.offer(s, target_here * jacobian * other.w * other.m, target_here, u),
+            Some(s) => self.offer(
+                s,
+                target_here * jacobian * other.w * other.m,
+                target_here,
+                u,
+            ),
             None => false,
         }
     }

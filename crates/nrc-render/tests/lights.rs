@@ -9,7 +9,6 @@
 
 mod common;
 
-use std::f32::consts::PI;
 use common::{Mesh, SceneBuilder, channels, mat, render_scene, test_sky, z_two_sided};
 use glam::{Vec2, Vec3, Vec4};
 use nrc_render::{LightStrategy, PathStats, PathTracer, PixelSampler, RenderOutput};
@@ -17,6 +16,7 @@ use nrc_scene::{
     AlphaMode, Environment, PunctualKind, PunctualLight, Ray, Scene, Texture, TextureRef,
     bsdf::Bsdf, sampling::Frame,
 };
+use std::f32::consts::PI;
 
 /// Checks every pixel of `out` against `expected[pixel]` (per channel) within the Bonferroni
 /// bound plus a relative allowance `rel` for the expectation's own quadrature error.
@@ -104,23 +104,38 @@ fn albedo_table(bsdf: &Bsdf) -> Vec<f32> {
 fn white_furnace_under_a_constant_environment() {
     let (w, h, spp) = (24, 18, 64);
     let tracer = PathTracer::default();
-    let diffuse = sphere_filling_the_frame(mat::diffuse(Vec3::ONE), Environment::constant(Vec3::ONE));
+    let diffuse =
+        sphere_filling_the_frame(mat::diffuse(Vec3::ONE), Environment::constant(Vec3::ONE));
     assert_eq!(diffuse.light_count(), 1, "the environment is a light");
     let out = render_scene(&diffuse, &tracer, w, h, spp, 5);
     assert_eq!(out.stats.invalid_samples, 0);
-    assert_pixels(&out, spp, &vec![Vec3::ONE; (w * h) as usize], 1e-5, "diffuse furnace");
+    assert_pixels(
+        &out,
+        spp,
+        &vec![Vec3::ONE; (w * h) as usize],
+        1e-5,
+        "diffuse furnace",
+    );
 
     let metal = mat::metal(Vec3::ONE, 0.6);
     let scene = sphere_filling_the_frame(metal.clone(), Environment::constant(Vec3::ONE));
     let bsdf = Bsdf::from_pbr(&metal.pbr(&[], &[Vec2::ZERO; 2]));
     let table = albedo_table(&bsdf);
-    assert!(table[32] < 0.99 && table[32] > 0.5, "rough conductor albedo {}", table[32]);
+    assert!(
+        table[32] < 0.99 && table[32] > 0.5,
+        "rough conductor albedo {}",
+        table[32]
+    );
     let expected = pixel_average(&scene, w, h, 6, |ray| {
         let hit = scene.intersect(ray).expect("the sphere fills the frame");
         let si = scene.interaction(ray, &hit);
         let t = si.ns.dot(si.wo).clamp(0.0, 1.0) * 64.0;
         let (i, f) = (t.floor() as usize, t.fract());
-        let a = if i >= 64 { table[64] } else { table[i] * (1.0 - f) + table[i + 1] * f };
+        let a = if i >= 64 {
+            table[64]
+        } else {
+            table[i] * (1.0 - f) + table[i + 1] * f
+        };
         Vec3::splat(a)
     });
     let out = render_scene(&scene, &tracer, w, h, spp, 6);
@@ -133,7 +148,11 @@ fn floor_under(light: PunctualLight, rho: f32) -> Scene {
     let mut b = SceneBuilder::new();
     let m = b.material(mat::diffuse(Vec3::splat(rho)));
     b.mesh(
-        &Mesh::quad(Vec3::ZERO, Vec3::new(4.0, 0.0, 0.0), Vec3::new(0.0, 0.0, -4.0)),
+        &Mesh::quad(
+            Vec3::ZERO,
+            Vec3::new(4.0, 0.0, 0.0),
+            Vec3::new(0.0, 0.0, -4.0),
+        ),
         m,
         false,
     )
@@ -172,7 +191,10 @@ fn point_light_follows_the_inverse_square_law() {
         ..PathTracer::default()
     };
     let dark = render_scene(&scene, &bsdf_only, w, h, 4, 2);
-    assert!(dark.mean.data.iter().all(|p| *p == Vec3::ZERO), "BSDF sampling hit a delta light");
+    assert!(
+        dark.mean.data.iter().all(|p| *p == Vec3::ZERO),
+        "BSDF sampling hit a delta light"
+    );
 }
 
 /// A directional light of irradiance E at 40° from the vertical over the diffuse floor:
@@ -210,11 +232,19 @@ fn nee_bsdf_and_mis_agree_under_an_environment_map() {
     let floor = b.material(mat::diffuse(Vec3::new(0.7, 0.6, 0.5)));
     let ball = b.material(mat::plastic(Vec3::new(0.8, 0.3, 0.2), 0.4));
     b.mesh(
-        &Mesh::quad(Vec3::ZERO, Vec3::new(3.0, 0.0, 0.0), Vec3::new(0.0, 0.0, -3.0)),
+        &Mesh::quad(
+            Vec3::ZERO,
+            Vec3::new(3.0, 0.0, 0.0),
+            Vec3::new(0.0, 0.0, -3.0),
+        ),
         floor,
         false,
     )
-    .mesh(&Mesh::sphere(Vec3::new(0.0, 0.5, 0.0), 0.5, 16, 32), ball, true)
+    .mesh(
+        &Mesh::sphere(Vec3::new(0.0, 0.5, 0.0), 0.5, 16, 32),
+        ball,
+        true,
+    )
     .camera(Vec3::new(0.0, 1.2, 2.5), Vec3::new(0.0, 0.4, 0.0), 50.0);
     b.desc_mut().environment = test_sky(32);
     let scene = b.build();
@@ -232,8 +262,14 @@ fn nee_bsdf_and_mis_agree_under_an_environment_map() {
     let bsdf = render(LightStrategy::BsdfOnly, 3);
     let z = z_two_sided(1e-4 / (2 * w * h * 3) as f64);
     for (name, other) in [("nee", &nee), ("bsdf", &bsdf)] {
-        let (a, va) = (channels(&mis.mean), channels(mis.variance.as_ref().unwrap()));
-        let (b, vb) = (channels(&other.mean), channels(other.variance.as_ref().unwrap()));
+        let (a, va) = (
+            channels(&mis.mean),
+            channels(mis.variance.as_ref().unwrap()),
+        );
+        let (b, vb) = (
+            channels(&other.mean),
+            channels(other.variance.as_ref().unwrap()),
+        );
         let (mut diff, mut var) = ([0.0f64; 3], [0.0f64; 3]);
         for i in 0..a.len() {
             let se = ((va[i] + vb[i]) / spp as f64).sqrt();
@@ -252,10 +288,16 @@ fn nee_bsdf_and_mis_agree_under_an_environment_map() {
         for c in 0..3 {
             let zc = diff[c] / var[c].sqrt();
             println!("{name} vs mis: image mean channel {c} differs by {zc:+.2} se");
-            assert!(zc.abs() < 4.0, "{name} vs mis: image mean channel {c}: {zc:.2} se");
+            assert!(
+                zc.abs() < 4.0,
+                "{name} vs mis: image mean channel {c}: {zc:.2} se"
+            );
         }
     }
-    assert!(mis.mean.mean().min_element() > 0.05, "the sky lights the scene");
+    assert!(
+        mis.mean.mean().min_element() > 0.05,
+        "the sky lights the scene"
+    );
 }
 
 /// A tangent-space normal map on a plane: the shading normal is `T x + B y + N z` of the
@@ -276,7 +318,11 @@ fn a_normal_mapped_plane_shades_as_the_mapped_normal_says() {
     let id = b.material(m);
     // The floor y = 0 with u along +x, v along +z: T = +x, N = +y, B = N × T = −z.
     b.mesh(
-        &Mesh::quad(Vec3::ZERO, Vec3::new(2.0, 0.0, 0.0), Vec3::new(0.0, 0.0, -2.0)),
+        &Mesh::quad(
+            Vec3::ZERO,
+            Vec3::new(2.0, 0.0, 0.0),
+            Vec3::new(0.0, 0.0, -2.0),
+        ),
         id,
         false,
     )
@@ -298,7 +344,11 @@ fn a_normal_mapped_plane_shades_as_the_mapped_normal_says() {
     let ray = Ray::new(Vec3::new(0.1, 1.0, 0.1), Vec3::NEG_Y);
     let si = scene.interaction(&ray, &scene.intersect(&ray).unwrap());
     let want = Vec3::new(tilt.sin(), tilt.cos(), 0.0);
-    assert!((si.ns - want).length() < 1e-3, "shading normal {} vs {want}", si.ns);
+    assert!(
+        (si.ns - want).length() < 1e-3,
+        "shading normal {} vs {want}",
+        si.ns
+    );
     assert_eq!(si.ng, Vec3::Y);
     let (w, h) = (8, 6);
     let out = render_scene(&scene, &PathTracer::default(), w, h, 4, 1);
@@ -328,12 +378,20 @@ fn a_masked_quad_casts_the_masked_shadow() {
     });
     let cut = b.material(cut);
     b.mesh(
-        &Mesh::quad(Vec3::ZERO, Vec3::new(3.0, 0.0, 0.0), Vec3::new(0.0, 0.0, -3.0)),
+        &Mesh::quad(
+            Vec3::ZERO,
+            Vec3::new(3.0, 0.0, 0.0),
+            Vec3::new(0.0, 0.0, -3.0),
+        ),
         floor,
         false,
     )
     .mesh(
-        &Mesh::quad(Vec3::new(0.0, 1.0, 0.0), Vec3::new(1.0, 0.0, 0.0), Vec3::new(0.0, 0.0, -1.0)),
+        &Mesh::quad(
+            Vec3::new(0.0, 1.0, 0.0),
+            Vec3::new(1.0, 0.0, 0.0),
+            Vec3::new(0.0, 0.0, -1.0),
+        ),
         cut,
         false,
     )
@@ -341,7 +399,11 @@ fn a_masked_quad_casts_the_masked_shadow() {
     {
         let d = b.desc_mut();
         // u = (x + 1)/2 over the quad [-1, 1]; the floor's coordinates do not matter.
-        d.uvs = d.positions.iter().map(|p| Vec2::new((p.x + 1.0) / 2.0, 0.5)).collect();
+        d.uvs = d
+            .positions
+            .iter()
+            .map(|p| Vec2::new((p.x + 1.0) / 2.0, 0.5))
+            .collect();
         let mut t = Texture::new(
             2,
             1,
@@ -379,11 +441,20 @@ fn a_masked_quad_casts_the_masked_shadow() {
         )
     };
     let lit = Vec3::splat(0.5 / PI);
-    assert!((direct_at(-0.5) - lit).length() < 1e-5, "under the cut-away half: {}", direct_at(-0.5));
+    assert!(
+        (direct_at(-0.5) - lit).length() < 1e-5,
+        "under the cut-away half: {}",
+        direct_at(-0.5)
+    );
     assert_eq!(direct_at(0.5), Vec3::ZERO, "under the solid half");
     assert!((direct_at(-1.5) - lit).length() < 1e-5, "beside the quad");
     // From above: through the cut-away half to the floor, stopped by the solid half.
-    let down = |x: f32| scene.intersect(&Ray::new(Vec3::new(x, 2.0, -0.2), Vec3::NEG_Y)).unwrap().t;
+    let down = |x: f32| {
+        scene
+            .intersect(&Ray::new(Vec3::new(x, 2.0, -0.2), Vec3::NEG_Y))
+            .unwrap()
+            .t
+    };
     assert!((down(-0.5) - 2.0).abs() < 1e-4);
     assert!((down(0.5) - 1.0).abs() < 1e-4);
 }

@@ -28,11 +28,16 @@ fn weighted_reservoir_sampling_picks_in_proportion_to_weight() {
         counts[r.sample.unwrap()] += 1.0;
     }
     let total: f32 = WEIGHTS.iter().sum();
-    let expected: Vec<f64> = WEIGHTS.iter().map(|&w| (w / total) as f64 * trials as f64).collect();
+    let expected: Vec<f64> = WEIGHTS
+        .iter()
+        .map(|&w| (w / total) as f64 * trials as f64)
+        .collect();
     let chi2 = stat::chi2_test(&counts, &expected).unwrap();
     assert!(chi2.p_value > 1e-4, "{chi2:?}");
     let uniform = vec![trials as f64 / WEIGHTS.len() as f64; WEIGHTS.len()];
-    let wrong = stat::chi2_test(&counts, &uniform).map(|c| c.p_value).unwrap_or(0.0);
+    let wrong = stat::chi2_test(&counts, &uniform)
+        .map(|c| c.p_value)
+        .unwrap_or(0.0);
     assert!(wrong < 1e-6, "a uniform choice passed: p {wrong}");
 }
 
@@ -58,7 +63,11 @@ fn merging_two_reservoirs_equals_streaming_the_union() {
         merged.merge(&a, a.target, s.next_1d());
         merged.merge(&b, b.target, s.next_1d());
         let union: f32 = (0..2 * WEIGHTS.len()).map(weight).sum();
-        assert!((merged.w_sum - union).abs() <= 1e-5 * union, "{} vs {union}", merged.w_sum);
+        assert!(
+            (merged.w_sum - union).abs() <= 1e-5 * union,
+            "{} vs {union}",
+            merged.w_sum
+        );
         assert_eq!(merged.m, 2.0 * WEIGHTS.len() as f32);
         counts[merged.sample.unwrap()] += 1.0;
     }
@@ -103,9 +112,15 @@ fn ris_with_the_integrand_as_target_is_the_plain_monte_carlo_mean() {
     let mean = sum / n;
     let se = ((sum2 / n - mean * mean) / (n - 1.0)).sqrt();
     let exact = 13.0 / 30.0;
-    assert!((mean - exact).abs() < 4.0 * se, "{mean} vs {exact} (se {se})");
+    assert!(
+        (mean - exact).abs() < 4.0 * se,
+        "{mean} vs {exact} (se {se})"
+    );
     let wrong = wrong / n;
-    assert!((wrong - exact).abs() > 4.0 * se * m as f64, "W without 1/M passed: {wrong}");
+    assert!(
+        (wrong - exact).abs() > 4.0 * se * m as f64,
+        "W without 1/M passed: {wrong}"
+    );
 }
 
 fn cornell() -> Scene {
@@ -113,7 +128,15 @@ fn cornell() -> Scene {
 }
 
 /// The last of `frames` frames of `spec` (state restarted first), seed `seed`.
-fn last_frame(scene: &Scene, spec: &PassSpec, tracer: &PathTracer, w: u32, h: u32, frames: u32, seed: u64) -> Image {
+fn last_frame(
+    scene: &Scene,
+    spec: &PassSpec,
+    tracer: &PathTracer,
+    w: u32,
+    h: u32,
+    frames: u32,
+    seed: u64,
+) -> Image {
     let mut pass = spec.build(tracer);
     pass.reset();
     let mut image = None;
@@ -134,7 +157,12 @@ fn last_frame(scene: &Scene, spec: &PassSpec, tracer: &PathTracer, w: u32, h: u3
 /// Per pixel and channel: the mean of `runs` against the reference (its variance of one
 /// sample `ref_var` over `ref_spp`), as the largest |z| and the count of pixel channels
 /// beyond the Bonferroni bound for a family-wise false alarm of 10⁻³.
-fn per_pixel_z(runs: &[Image], reference: &Image, ref_var: &Image, ref_spp: u32) -> (f64, usize, f64) {
+fn per_pixel_z(
+    runs: &[Image],
+    reference: &Image,
+    ref_var: &Image,
+    ref_spp: u32,
+) -> (f64, usize, f64) {
     let n = runs.len() as f64;
     let cells = reference.data.len() * 3;
     let bound = common::z_two_sided(1e-3 / cells as f64);
@@ -146,13 +174,21 @@ fn per_pixel_z(runs: &[Image], reference: &Image, ref_var: &Image, ref_spp: u32)
             let var = xs.iter().map(|x| (x - mean) * (x - mean)).sum::<f64>() / (n - 1.0);
             let se2 = var / n + ref_var.data[p][c] as f64 / ref_spp as f64;
             if se2 <= 0.0 {
-                assert!((mean - reference.data[p][c] as f64).abs() < 1e-6, "pixel {p}: {mean} with no variance");
+                assert!(
+                    (mean - reference.data[p][c] as f64).abs() < 1e-6,
+                    "pixel {p}: {mean} with no variance"
+                );
                 continue;
             }
             let z = (mean - reference.data[p][c] as f64) / se2.sqrt();
             worst = worst.max(z.abs());
             if z.abs() > bound && std::env::var("DIAG").is_ok() && c == 1 {
-                eprintln!("pixel ({}, {}): mean {mean:.4} ref {:.4} z {z:.1}", p % 24, p / 24, reference.data[p][c]);
+                eprintln!(
+                    "pixel ({}, {}): mean {mean:.4} ref {:.4} z {z:.1}",
+                    p % 24,
+                    p / 24,
+                    reference.data[p][c]
+                );
             }
             if z.abs() > bound {
                 beyond += 1;
@@ -164,7 +200,13 @@ fn per_pixel_z(runs: &[Image], reference: &Image, ref_var: &Image, ref_spp: u32)
 
 /// The path-traced radiance through each pixel's centre (`spp` samples): the mean and the
 /// variance of one sample.
-fn reference_at_centres(scene: &Scene, tracer: &PathTracer, w: u32, h: u32, spp: u32) -> (Image, Image) {
+fn reference_at_centres(
+    scene: &Scene,
+    tracer: &PathTracer,
+    w: u32,
+    h: u32,
+    spp: u32,
+) -> (Image, Image) {
     reference_at_centres_from(scene, &scene.camera, tracer, w, h, spp)
 }
 
@@ -185,13 +227,18 @@ fn reference_at_centres_from(
             let mut stats = nrc_render::PathStats::default();
             for s in 0..spp {
                 let mut sampler = PixelSampler::new(77, p as u64, s as u64);
-                let l = tracer.radiance(scene, ray, &mut sampler, &mut stats).as_dvec3();
+                let l = tracer
+                    .radiance(scene, ray, &mut sampler, &mut stats)
+                    .as_dvec3();
                 sum += l;
                 sum2 += l * l;
             }
             let n = spp as f64;
             let mean = sum / n;
-            ((mean).as_vec3(), ((sum2 / n - mean * mean) * (n / (n - 1.0))).as_vec3())
+            (
+                (mean).as_vec3(),
+                ((sum2 / n - mean * mean) * (n / (n - 1.0))).as_vec3(),
+            )
         })
         .collect();
     let image = |f: fn(&(glam::Vec3, glam::Vec3)) -> glam::Vec3| {
@@ -219,17 +266,25 @@ fn unbiased_restir_di_matches_the_depth_two_reference_per_pixel_and_biased_fails
     let ref_spp = 4096;
     let (reference, ref_var) = reference_at_centres(&scene, &tracer, w, h, ref_spp);
     let runs = 256;
-    for (name, expect_pass) in [("restir-di:jitter=0", true), ("restir-di-biased:jitter=0", false)] {
+    for (name, expect_pass) in [
+        ("restir-di:jitter=0", true),
+        ("restir-di-biased:jitter=0", false),
+    ] {
         let spec: PassSpec = name.parse().unwrap();
         let images: Vec<Image> = (0..runs)
             .map(|r| last_frame(&scene, &spec, &tracer, w, h, 6, 1000 + r))
             .collect();
         let (worst, beyond, bound) = per_pixel_z(&images, &reference, &ref_var, ref_spp);
-        println!("{name}: worst per-pixel |z| {worst:.2}, {beyond} pixel channels beyond {bound:.2}");
+        println!(
+            "{name}: worst per-pixel |z| {worst:.2}, {beyond} pixel channels beyond {bound:.2}"
+        );
         if expect_pass {
             assert_eq!(beyond, 0, "{name}: worst |z| {worst:.2} (bound {bound:.2})");
         } else {
-            assert!(beyond > 0, "{name} passed the unbiasedness test: worst |z| {worst:.2}");
+            assert!(
+                beyond > 0,
+                "{name} passed the unbiasedness test: worst |z| {worst:.2}"
+            );
         }
     }
 }
@@ -261,8 +316,8 @@ fn restir_di_is_identical_on_one_and_two_threads() {
 /// Strackee's formula).
 #[test]
 fn the_reconnection_jacobian_is_the_ratio_of_solid_angles() {
-    use nrc_render::passes::restir_gi::reconnection_jacobian;
     use glam::Vec3;
+    use nrc_render::passes::restir_gi::reconnection_jacobian;
     let solid_angle = |o: Vec3, a: Vec3, b: Vec3, c: Vec3| {
         let (a, b, c) = ((a - o).as_dvec3(), (b - o).as_dvec3(), (c - o).as_dvec3());
         let (la, lb, lc) = (a.length(), b.length(), c.length());
@@ -275,7 +330,11 @@ fn the_reconnection_jacobian_is_the_ratio_of_solid_angles() {
     let t = n.cross(Vec3::X).normalize();
     let b = n.cross(t);
     let h = 1e-3f32;
-    let (p0, p1, p2) = (y - (t + b) * h / 3.0, y + t * h - (t + b) * h / 3.0, y + b * h - (t + b) * h / 3.0);
+    let (p0, p1, p2) = (
+        y - (t + b) * h / 3.0,
+        y + t * h - (t + b) * h / 3.0,
+        y + b * h - (t + b) * h / 3.0,
+    );
     for (receiver, donor) in [
         (Vec3::new(1.0, 2.0, 0.5), Vec3::new(-0.7, 1.1, 1.3)),
         (Vec3::new(0.3, 0.4, 0.2), Vec3::new(3.0, 5.0, -2.0)),
@@ -285,9 +344,20 @@ fn the_reconnection_jacobian_is_the_ratio_of_solid_angles() {
         let back = reconnection_jacobian(donor, receiver, y, n);
         assert!((j * back - 1.0).abs() < 1e-5, "{j} · {back}");
         let fd = solid_angle(receiver, p0, p1, p2) / solid_angle(donor, p0, p1, p2);
-        assert!((j as f64 / fd - 1.0).abs() < 2e-3, "jacobian {j}, solid-angle ratio {fd}");
+        assert!(
+            (j as f64 / fd - 1.0).abs() < 2e-3,
+            "jacobian {j}, solid-angle ratio {fd}"
+        );
     }
-    assert_eq!(reconnection_jacobian(Vec3::ONE, Vec3::X + y, y, (Vec3::X).cross(n).normalize() * 0.0), 0.0);
+    assert_eq!(
+        reconnection_jacobian(
+            Vec3::ONE,
+            Vec3::X + y,
+            y,
+            (Vec3::X).cross(n).normalize() * 0.0
+        ),
+        0.0
+    );
 }
 
 /// Per-pixel unbiasedness of the GI passes at `--max-depth 3` (one indirect bounce), as for
@@ -309,7 +379,9 @@ fn unbiased_restir_gi_passes_match_the_depth_three_reference_per_pixel() {
             .map(|r| last_frame(&scene, &spec, &tracer, w, h, 6, 1000 + r))
             .collect();
         let (worst, beyond, bound) = per_pixel_z(&images, &reference, &ref_var, ref_spp);
-        println!("{name}: worst per-pixel |z| {worst:.2}, {beyond} pixel channels beyond {bound:.2}");
+        println!(
+            "{name}: worst per-pixel |z| {worst:.2}, {beyond} pixel channels beyond {bound:.2}"
+        );
         assert_eq!(beyond, 0, "{name}: worst |z| {worst:.2} (bound {bound:.2})");
     }
 }
@@ -350,14 +422,31 @@ fn unbiased_wsrestir_gi_converges_to_the_reference_on_the_cornell_box() {
     let (reference, ref_var) = reference_at_centres(&scene, &tracer, w, h, ref_spp);
     let spec: PassSpec = "wsrestir-gi:jitter=0".parse().unwrap();
     let images: Vec<Image> = (0..256)
-        .map(|r| blocks(&last_frame(&scene, &spec, &tracer, w, h, 6, 5000 + r), 4, false))
+        .map(|r| {
+            blocks(
+                &last_frame(&scene, &spec, &tracer, w, h, 6, 5000 + r),
+                4,
+                false,
+            )
+        })
         .collect();
-    let (worst, beyond, bound) = per_pixel_z(&images, &blocks(&reference, 4, false), &blocks(&ref_var, 4, true), ref_spp);
-    println!("wsrestir-gi, unlimited depth: worst 4x4-block |z| {worst:.2}, {beyond} beyond {bound:.2}");
+    let (worst, beyond, bound) = per_pixel_z(
+        &images,
+        &blocks(&reference, 4, false),
+        &blocks(&ref_var, 4, true),
+        ref_spp,
+    );
+    println!(
+        "wsrestir-gi, unlimited depth: worst 4x4-block |z| {worst:.2}, {beyond} beyond {bound:.2}"
+    );
     assert_eq!(beyond, 0, "worst block |z| {worst:.2} (bound {bound:.2})");
 
     let mse = |a: &Image| {
-        a.data.iter().zip(&reference.data).map(|(x, y)| (*x - *y).length_squared() as f64).sum::<f64>()
+        a.data
+            .iter()
+            .zip(&reference.data)
+            .map(|(x, y)| (*x - *y).length_squared() as f64)
+            .sum::<f64>()
             / a.data.len() as f64
     };
     let mut pass = spec.build(&tracer);
@@ -384,8 +473,15 @@ fn unbiased_wsrestir_gi_converges_to_the_reference_on_the_cornell_box() {
         single += mse(&last.unwrap());
         accumulated += mse(&Image::from_data(w as usize, h as usize, sum).unwrap());
     }
-    println!("wsrestir-gi: MSE of one frame {:.3e}, of 32 accumulated {:.3e}", single / 4.0, accumulated / 4.0);
-    assert!(accumulated < single / 3.0, "accumulation: {accumulated} vs {single}");
+    println!(
+        "wsrestir-gi: MSE of one frame {:.3e}, of 32 accumulated {:.3e}",
+        single / 4.0,
+        accumulated / 4.0
+    );
+    assert!(
+        accumulated < single / 3.0,
+        "accumulation: {accumulated} vs {single}"
+    );
 }
 
 /// Reprojection under a moving camera: the camera orbits 1° per frame about the box; after 12
@@ -406,18 +502,30 @@ fn temporal_reuse_follows_a_moving_camera() {
     let camera = |f: u32| {
         let angle = (f as f32 - 11.0).to_radians();
         let off = base.position - target;
-        let rotated = Vec3::new(off.x * angle.cos() + off.z * angle.sin(), off.y, -off.x * angle.sin() + off.z * angle.cos());
-        nrc_scene::Camera::look_at(target + rotated, target, Vec3::Y, base.fov_y.to_degrees()).unwrap()
+        let rotated = Vec3::new(
+            off.x * angle.cos() + off.z * angle.sin(),
+            off.y,
+            -off.x * angle.sin() + off.z * angle.cos(),
+        );
+        nrc_scene::Camera::look_at(target + rotated, target, Vec3::Y, base.fov_y.to_degrees())
+            .unwrap()
     };
     let last = camera(11);
-    for (base_name, depth, bound) in [("restir-di:k=0,jitter=0", 2, 0.95), ("restir-gi:jitter=0", 3, 0.8)] {
+    for (base_name, depth, bound) in [
+        ("restir-di:k=0,jitter=0", 2, 0.95),
+        ("restir-gi:jitter=0", 3, 0.8),
+    ] {
         let tracer = PathTracer {
             max_depth: depth,
             ..Default::default()
         };
         let (reference, _) = reference_at_centres_from(&scene, &last, &tracer, w, h, 2048);
         let bright = |x: i64, y: i64| {
-            x >= 0 && y >= 0 && x < w as i64 && y < h as i64 && reference.data[(y * w as i64 + x) as usize].max_element() > 1.0
+            x >= 0
+                && y >= 0
+                && x < w as i64
+                && y < h as i64
+                && reference.data[(y * w as i64 + x) as usize].max_element() > 1.0
         };
         let keep: Vec<bool> = (0..(w * h) as i64)
             .map(|p| {
@@ -445,13 +553,23 @@ fn temporal_reuse_follows_a_moving_camera() {
                 let mut img = None;
                 for f in 0..12 {
                     let cam = camera(f);
-                    let input = FrameInput { scene: &scene, camera: &cam, width: w, height: h, spp: 1, seed: nrc_render::pass_seed(300 + run, f) };
+                    let input = FrameInput {
+                        scene: &scene,
+                        camera: &cam,
+                        width: w,
+                        height: h,
+                        spp: 1,
+                        seed: nrc_render::pass_seed(300 + run, f),
+                    };
                     img = Some(passes::run(pass.as_mut(), &input, &ZeroSource).image);
                 }
                 errors[k] += mse(&img.unwrap()) / 4.0;
             }
         }
-        println!("{base_name} under a moving camera: MSE with temporal reuse {:.3e}, without {:.3e}", errors[0], errors[1]);
+        println!(
+            "{base_name} under a moving camera: MSE with temporal reuse {:.3e}, without {:.3e}",
+            errors[0], errors[1]
+        );
         assert!(errors[0] < bound * errors[1], "{base_name}: {errors:?}");
     }
 }

@@ -165,12 +165,20 @@ mod tests {
     #[test]
     fn project_inverts_generate_ray() {
         let cam = Camera::look_at(Vec3::new(1.0, 2.0, 3.0), Vec3::ZERO, Vec3::Y, 50.0).unwrap();
-        for film in [Vec2::new(10.5, 7.25), Vec2::new(99.0, 49.0), Vec2::new(0.1, 30.0)] {
+        for film in [
+            Vec2::new(10.5, 7.25),
+            Vec2::new(99.0, 49.0),
+            Vec2::new(0.1, 30.0),
+        ] {
             let r = cam.generate_ray(film, 100, 50);
             let back = cam.project(r.o + r.d * 3.7, 100, 50).unwrap();
             assert!((back - film).length() < 1e-3, "{film} -> {back}");
         }
-        assert_eq!(cam.project(Vec3::new(2.0, 4.0, 6.0), 100, 50), None, "behind");
+        assert_eq!(
+            cam.project(Vec3::new(2.0, 4.0, 6.0), 100, 50),
+            None,
+            "behind"
+        );
         let r = cam.generate_ray(Vec2::new(50.0, 25.0), 100, 50);
         let off = r.o + r.d * 2.0 + cam.right * 100.0;
         assert_eq!(cam.project(off, 100, 50), None, "outside the image");

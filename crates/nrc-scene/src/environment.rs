@@ -71,11 +71,17 @@ impl Environment {
     /// An environment image (`.exr` or `.hdr`) scaled by `intensity` and rotated by
     /// `rotate_degrees` about +y. A width other than twice the height is allowed (the
     /// mapping stretches it) and reported in the returned warning.
-    pub fn load(path: &Path, intensity: f32, rotate_degrees: f32) -> Result<(Self, Option<String>)> {
+    pub fn load(
+        path: &Path,
+        intensity: f32,
+        rotate_degrees: f32,
+    ) -> Result<(Self, Option<String>)> {
         if !(intensity.is_finite() && intensity >= 0.0) {
             return Err(SceneError::Invalid {
                 path: path.into(),
-                message: format!("environment intensity must be finite and non-negative, got {intensity}"),
+                message: format!(
+                    "environment intensity must be finite and non-negative, got {intensity}"
+                ),
             });
         }
         if !rotate_degrees.is_finite() {
@@ -171,7 +177,11 @@ impl Environment {
 
     /// Whether no light comes from outside.
     pub fn is_black(&self) -> bool {
-        self.scale == Vec3::ZERO || self.map.as_ref().is_some_and(|m| m.luminance_integral <= 0.0)
+        self.scale == Vec3::ZERO
+            || self
+                .map
+                .as_ref()
+                .is_some_and(|m| m.luminance_integral <= 0.0)
     }
 
     /// Whether the environment is a constant.
@@ -202,7 +212,14 @@ impl Environment {
 
     /// A key that changes whenever the radiance in any direction changes.
     pub fn content_key(&self) -> String {
-        let bits = |v: Vec3| format!("{:08x}{:08x}{:08x}", v.x.to_bits(), v.y.to_bits(), v.z.to_bits());
+        let bits = |v: Vec3| {
+            format!(
+                "{:08x}{:08x}{:08x}",
+                v.x.to_bits(),
+                v.y.to_bits(),
+                v.z.to_bits()
+            )
+        };
         match &self.map {
             None => format!("constant {}", bits(self.scale)),
             Some(m) => format!(
@@ -271,7 +288,10 @@ impl Environment {
                 if p <= 0.0 || sin_theta <= 0.0 {
                     return None;
                 }
-                Some((self.to_world(uv_to_direction(uv)), p / (2.0 * PI * PI * sin_theta)))
+                Some((
+                    self.to_world(uv_to_direction(uv)),
+                    p / (2.0 * PI * PI * sin_theta),
+                ))
             }
         }
     }
@@ -301,7 +321,10 @@ pub fn direction_to_uv(d: Vec3) -> Vec2 {
         u += 1.0;
     }
     let v = d.y.clamp(-1.0, 1.0).acos() / PI;
-    Vec2::new(u.min(1.0 - f32::EPSILON / 2.0), v.min(1.0 - f32::EPSILON / 2.0))
+    Vec2::new(
+        u.min(1.0 - f32::EPSILON / 2.0),
+        v.min(1.0 - f32::EPSILON / 2.0),
+    )
 }
 
 /// `(u, v)` → map direction (unit).
@@ -358,7 +381,10 @@ mod tests {
     #[test]
     fn mapping_round_trips() {
         for i in 0..200 {
-            let u = Vec2::new((i as f32 * 0.618_034) % 1.0, (i as f32 * 0.414_213 + 0.01) % 1.0);
+            let u = Vec2::new(
+                (i as f32 * 0.618_034) % 1.0,
+                (i as f32 * 0.414_213 + 0.01) % 1.0,
+            );
             let d = uv_to_direction(u);
             let back = direction_to_uv(d);
             assert!((back - u).abs().max_element() < 1e-4, "{u} {back}");
@@ -391,11 +417,13 @@ mod tests {
         let p = Path::new("sky.exr");
         let nan = vec![Vec3::ONE, Vec3::new(f32::NAN, 0.0, 0.0)];
         let e = Environment::from_texels(p, 2, 1, nan, 1.0, 0.0).unwrap_err();
-        assert!(e.to_string().contains("non-finite") && e.to_string().contains("sky.exr"), "{e}");
+        assert!(
+            e.to_string().contains("non-finite") && e.to_string().contains("sky.exr"),
+            "{e}"
+        );
         let neg = vec![Vec3::ONE, Vec3::splat(-1.0)];
         assert!(Environment::from_texels(p, 2, 1, neg, 1.0, 0.0).is_err());
-        let (_, warning) =
-            Environment::from_texels(p, 3, 1, vec![Vec3::ONE; 3], 1.0, 0.0).unwrap();
+        let (_, warning) = Environment::from_texels(p, 3, 1, vec![Vec3::ONE; 3], 1.0, 0.0).unwrap();
         assert!(warning.unwrap().contains("not 2:1"));
     }
 }

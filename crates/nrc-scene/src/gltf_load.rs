@@ -333,7 +333,14 @@ impl Loader<'_> {
             }
             if let Some(mesh) = node.mesh() {
                 for prim in mesh.primitives() {
-                    self.primitive(&mesh, &prim, &world, default_material, &mut desc, &mut attrs)?;
+                    self.primitive(
+                        &mesh,
+                        &prim,
+                        &world,
+                        default_material,
+                        &mut desc,
+                        &mut attrs,
+                    )?;
                 }
             }
             for child in node.children() {
@@ -567,8 +574,12 @@ impl Loader<'_> {
             (w.is_finite() && w != Vec3::ZERO).then_some(w)
         });
         let [uvs0, uvs1] = uvs;
-        extend(&mut attrs.uvs, uvs0, n_vertices, |t: Vec2| t.is_finite().then_some(t));
-        extend(&mut attrs.uvs1, uvs1, n_vertices, |t: Vec2| t.is_finite().then_some(t));
+        extend(&mut attrs.uvs, uvs0, n_vertices, |t: Vec2| {
+            t.is_finite().then_some(t)
+        });
+        extend(&mut attrs.uvs1, uvs1, n_vertices, |t: Vec2| {
+            t.is_finite().then_some(t)
+        });
         // Tangents transform as directions; a mirroring transform flips the handedness.
         let flip = if det < 0.0 { -1.0 } else { 1.0 };
         extend(&mut attrs.tangents, tangents, n_vertices, |t: Vec4| {
@@ -599,7 +610,11 @@ impl Loader<'_> {
     /// translation, direction the node's −z). Validated here: a negative or non-finite
     /// intensity or colour, a range that is not positive, and a spot whose outer cone angle is
     /// below its inner one or beyond π/2 are errors naming the light.
-    fn light(&self, light: &gltf::khr_lights_punctual::Light, world: &Mat4) -> Result<PunctualLight> {
+    fn light(
+        &self,
+        light: &gltf::khr_lights_punctual::Light,
+        world: &Mat4,
+    ) -> Result<PunctualLight> {
         let name = light
             .name()
             .map(|n| format!("`{n}`"))
@@ -609,11 +624,17 @@ impl Loader<'_> {
         };
         let color = Vec3::from(light.color());
         if !color.is_finite() || color.min_element() < 0.0 {
-            return Err(bad("color", format!("must be finite and non-negative, got {color}")));
+            return Err(bad(
+                "color",
+                format!("must be finite and non-negative, got {color}"),
+            ));
         }
         let intensity = light.intensity();
         if !intensity.is_finite() || intensity < 0.0 {
-            return Err(bad("intensity", format!("must be finite and non-negative, got {intensity}")));
+            return Err(bad(
+                "intensity",
+                format!("must be finite and non-negative, got {intensity}"),
+            ));
         }
         let range = light.range();
         if let Some(r) = range
@@ -650,14 +671,21 @@ impl Loader<'_> {
         };
         let direction = world.transform_vector3(Vec3::NEG_Z).normalize_or_zero();
         if direction == Vec3::ZERO || !direction.is_finite() {
-            return Err(bad("node", "has a degenerate transform (no direction)".into()));
+            return Err(bad(
+                "node",
+                "has a degenerate transform (no direction)".into(),
+            ));
         }
         Ok(PunctualLight {
             kind,
             position: world.transform_point3(Vec3::ZERO),
             direction,
             intensity: color * intensity,
-            range: if kind == PunctualKind::Directional { None } else { range },
+            range: if kind == PunctualKind::Directional {
+                None
+            } else {
+                range
+            },
         })
     }
 

@@ -50,11 +50,11 @@ pub mod texture;
 pub use accel::Hit;
 pub use bsdf::PbrParams;
 pub use camera::{Camera, CameraError};
+pub use environment::Environment;
 pub use error::SceneError;
 pub use geometry::{Aabb, Ray, offset_ray_origin, spawn_ray, spawn_ray_between, spawn_ray_to};
 pub use image::Image;
 pub use interaction::SurfaceInteraction;
-pub use environment::Environment;
 pub use light::{
     Incident, LightSample, LightSampler, LightSource, PunctualKind, PunctualLight,
     SurfaceLightSample,

@@ -32,7 +32,10 @@ use crate::sampling::{Frame, luminance, sample_concentric_disk, sample_uniform_s
 pub enum PunctualKind {
     Point,
     /// Cosines of glTF's inner and outer cone angles (`cos_inner ≥ cos_outer`).
-    Spot { cos_inner: f32, cos_outer: f32 },
+    Spot {
+        cos_inner: f32,
+        cos_outer: f32,
+    },
     Directional,
 }
 
@@ -614,7 +617,10 @@ mod tests {
         };
         let mut ratio = None;
         for i in 0..500 {
-            let u = Vec2::new(((i as f32 + 0.5) * 0.618_034) % 1.0, (i as f32 * 0.754_877) % 1.0);
+            let u = Vec2::new(
+                ((i as f32 + 0.5) * 0.618_034) % 1.0,
+                (i as f32 * 0.754_877) % 1.0,
+            );
             let (d, pdf) = spot.sample_direction(u).unwrap();
             assert!((spot.direction_pdf(d) - pdf).abs() < 1e-3 * pdf);
             let r = spot.intensity_toward(d).x / pdf;

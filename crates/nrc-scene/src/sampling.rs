@@ -156,8 +156,17 @@ pub struct Distribution1D {
 impl Distribution1D {
     /// The distribution of `weights` (at least one). Negative and non-finite weights count as 0.
     pub fn new(weights: &[f32]) -> Self {
-        assert!(!weights.is_empty(), "a distribution needs at least one cell");
-        let clean = |w: f32| if w.is_finite() && w > 0.0 { w as f64 } else { 0.0 };
+        assert!(
+            !weights.is_empty(),
+            "a distribution needs at least one cell"
+        );
+        let clean = |w: f32| {
+            if w.is_finite() && w > 0.0 {
+                w as f64
+            } else {
+                0.0
+            }
+        };
         let mut total: f64 = weights.iter().map(|&w| clean(w)).sum();
         let n = weights.len();
         let uniform = !(total > 0.0 && total.is_finite());
@@ -207,7 +216,11 @@ impl Distribution1D {
         let i = self.cdf.partition_point(|&c| c <= u).min(n - 1);
         let start = if i == 0 { 0.0 } else { self.cdf[i - 1] };
         let p = self.cdf[i] - start;
-        let t = if p > 0.0 { ((u - start) / p).clamp(0.0, 1.0) } else { 0.5 };
+        let t = if p > 0.0 {
+            ((u - start) / p).clamp(0.0, 1.0)
+        } else {
+            0.5
+        };
         let x = ((i as f32 + t) / n as f32).min(1.0 - f32::EPSILON / 2.0);
         (x, self.density[i], i)
     }

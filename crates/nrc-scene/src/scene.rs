@@ -9,10 +9,10 @@ use glam::{Vec2, Vec3, Vec4};
 use crate::accel::{Accel, Hit};
 use crate::bsdf::PbrParams;
 use crate::camera::Camera;
+use crate::environment::Environment;
 use crate::error::{Result, SceneError};
 use crate::geometry::{Aabb, Ray};
 use crate::interaction::SurfaceInteraction;
-use crate::environment::Environment;
 use crate::light::{LightSample, LightSampler, LightSource, PunctualLight, SurfaceLightSample};
 use crate::material::Material;
 use crate::sampling::{luminance, sample_uniform_triangle};
@@ -404,9 +404,8 @@ impl Scene {
         }
         let r = self.sphere.1;
         let punctual: Vec<f32> = self.punctual.iter().map(|l| l.power(r)).collect();
-        let environment =
-            (r as f64 * r as f64 * self.environment.luminance_integral() / std::f64::consts::PI)
-                as f32;
+        let environment = (r as f64 * r as f64 * self.environment.luminance_integral()
+            / std::f64::consts::PI) as f32;
         LightSampler::new(self.tris.len(), &emitters, &punctual, environment)
     }
 
@@ -441,7 +440,8 @@ impl Scene {
     #[inline]
     pub fn intersect(&self, ray: &Ray) -> Option<Hit> {
         if self.has_cutouts {
-            self.accel.intersect(ray, |t, b1, b2| self.solid_at(t, b1, b2))
+            self.accel
+                .intersect(ray, |t, b1, b2| self.solid_at(t, b1, b2))
         } else {
             self.accel.intersect(ray, |_, _, _| true)
         }
@@ -451,7 +451,8 @@ impl Scene {
     #[inline]
     pub fn occluded(&self, ray: &Ray) -> bool {
         if self.has_cutouts {
-            self.accel.occluded(ray, |t, b1, b2| self.solid_at(t, b1, b2))
+            self.accel
+                .occluded(ray, |t, b1, b2| self.solid_at(t, b1, b2))
         } else {
             self.accel.occluded(ray, |_, _, _| true)
         }
@@ -477,7 +478,8 @@ impl Scene {
         // Tangent-space normal map: n' = T x + B y + N z with the interpolated tangent made
         // orthogonal to N and B = w (N × T) (glTF's convention, MikkTSpace's reconstruction).
         if let Some(t) = self.corner_tangents.get(i)
-            && let Some(m) = self.materials[rec.material as usize].mapped_normal(&self.textures, &uv)
+            && let Some(m) =
+                self.materials[rec.material as usize].mapped_normal(&self.textures, &uv)
         {
             let t4 = t[0] * b0 + t[1] * b1 + t[2] * b2;
             let tangent = (t4.truncate() - n * n.dot(t4.truncate())).normalize_or_zero();
@@ -594,7 +596,11 @@ impl Scene {
     #[inline]
     pub fn environment_light_pdf(&self, d: Vec3) -> f32 {
         let pmf = self.lights.environment_pmf();
-        if pmf > 0.0 { pmf * self.environment.pdf(d) } else { 0.0 }
+        if pmf > 0.0 {
+            pmf * self.environment.pdf(d)
+        } else {
+            0.0
+        }
     }
 
     /// The environment.

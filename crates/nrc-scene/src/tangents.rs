@@ -23,7 +23,10 @@ pub fn corner_tangents(
         let Some(set) = tex_coord(t) else { continue };
         let from_file = (!tangents.is_empty())
             .then(|| v.map(|k| tangents[k as usize]))
-            .filter(|c| c.iter().all(|q| q.truncate() != Vec3::ZERO && q.is_finite()));
+            .filter(|c| {
+                c.iter()
+                    .all(|q| q.truncate() != Vec3::ZERO && q.is_finite())
+            });
         match from_file {
             Some(c) => out[t] = c,
             None => generate.push((t, set)),

@@ -28,7 +28,10 @@ fn p_value(samples: &[Vec3], pdf: &dyn Fn(Vec3) -> f64) -> f64 {
     let mass = bins.integrate(pdf, 1e-9, 1e-5, &|_| 3);
     let total: f64 = mass.iter().sum();
     // Adaptive Simpson meets the environment density's 1/sin θ at its poles (integrable): 0.5 %.
-    assert!((total - 1.0).abs() < 5e-3, "the density integrates to {total}");
+    assert!(
+        (total - 1.0).abs() < 5e-3,
+        "the density integrates to {total}"
+    );
     let expected: Vec<f64> = mass.iter().map(|m| m * samples.len() as f64).collect();
     let r = chi2_test(&observed, &expected).unwrap_or_else(|e| panic!("{e}"));
     println!("χ² {:.1} dof {} p {:.3e}", r.statistic, r.dof, r.p_value);
@@ -39,7 +42,11 @@ fn p_value(samples: &[Vec3], pdf: &dyn Fn(Vec3) -> f64) -> f64 {
 fn texel(i: usize, w: usize) -> Vec3 {
     let (x, y) = (i % w, i / w);
     let base = if y < 4 { 2.0 } else { 0.3 };
-    let spot = if (10..13).contains(&x) && (5..8).contains(&y) { 20.0 } else { 0.0 };
+    let spot = if (10..13).contains(&x) && (5..8).contains(&y) {
+        20.0
+    } else {
+        0.0
+    };
     let band = if y == 12 { 0.0 } else { 1.0 };
     Vec3::new(base + spot, 0.5 * base + spot, base) * band
 }
@@ -68,7 +75,11 @@ fn environment_sampling_matches_its_density() {
         };
         assert!(pdf > 0.0);
         mismatched += ((env.pdf(d) / pdf - 1.0).abs() > 1e-4) as usize;
-        let map = Vec3::new(r.cos() * d.x - r.sin() * d.z, d.y, r.sin() * d.x + r.cos() * d.z);
+        let map = Vec3::new(
+            r.cos() * d.x - r.sin() * d.z,
+            d.y,
+            r.sin() * d.x + r.cos() * d.z,
+        );
         let uv = nrc_scene::environment::direction_to_uv(map);
         let (x, y) = ((uv.x * w as f32) as usize, (uv.y * h as f32) as usize);
         observed[y.min(h - 1) * w + x.min(w - 1)] += 1.0;
@@ -88,20 +99,32 @@ fn environment_sampling_matches_its_density() {
         weights.iter().map(|x| x / sum * total).collect()
     };
     let good = chi2_test(&observed, &expected_with(true)).unwrap();
-    println!("χ² {:.1} dof {} p {:.3e}", good.statistic, good.dof, good.p_value);
+    println!(
+        "χ² {:.1} dof {} p {:.3e}",
+        good.statistic, good.dof, good.p_value
+    );
     assert!(good.p_value > sidak(0.01, 3));
     let bad = chi2_test(&observed, &expected_with(false)).unwrap();
-    println!("without sin θ: χ² {:.1} p {:.3e}", bad.statistic, bad.p_value);
+    println!(
+        "without sin θ: χ² {:.1} p {:.3e}",
+        bad.statistic, bad.p_value
+    );
     assert!(bad.p_value < 1e-6);
     // ∫ pdf dω = Σ over a fine (u, v) grid of pdf · 2π² sin θ Δu Δv.
     let n = 1024;
     let mut integral = 0.0f64;
     for a in 0..n {
         for b in 0..n / 2 {
-            let uv = Vec2::new((a as f32 + 0.5) / n as f32, (b as f32 + 0.5) / (n / 2) as f32);
+            let uv = Vec2::new(
+                (a as f32 + 0.5) / n as f32,
+                (b as f32 + 0.5) / (n / 2) as f32,
+            );
             let d = nrc_scene::environment::uv_to_direction(uv);
-            let world =
-                Vec3::new(r.cos() * d.x + r.sin() * d.z, d.y, -r.sin() * d.x + r.cos() * d.z);
+            let world = Vec3::new(
+                r.cos() * d.x + r.sin() * d.z,
+                d.y,
+                -r.sin() * d.x + r.cos() * d.z,
+            );
             let jac =
                 2.0 * std::f64::consts::PI.powi(2) * (std::f64::consts::PI * uv.y as f64).sin();
             integral += env.pdf(world) as f64 * jac / (n * n / 2) as f64;
@@ -111,7 +134,12 @@ fn environment_sampling_matches_its_density() {
     // The constant environment samples the sphere uniformly.
     let uniform = Environment::constant(Vec3::ONE);
     let u: Vec<Vec3> = (0..SAMPLES)
-        .map(|_| uniform.sample(Vec2::new(rng.random(), rng.random())).unwrap().0)
+        .map(|_| {
+            uniform
+                .sample(Vec2::new(rng.random(), rng.random()))
+                .unwrap()
+                .0
+        })
         .collect();
     assert!(p_value(&u, &|w| uniform.pdf(w) as f64) > sidak(0.01, 3));
 }

@@ -77,7 +77,11 @@ fn cornell_box_glb() {
         "default camera frames the scene: {hits} hits"
     );
     // Sampled light points lie on their triangles and face into the box.
-    let s = *scene.sample_light(0.5, Vec2::new(0.3, 0.6)).unwrap().surface().unwrap();
+    let s = *scene
+        .sample_light(0.5, Vec2::new(0.3, 0.6))
+        .unwrap()
+        .surface()
+        .unwrap();
     assert!(s.pdf_area > 0.0 && s.le.max_element() > 0.0);
     assert_eq!(scene.light_pdf_area(s.tri), s.pdf_area);
     let probe = Ray::new(s.p - s.n * 1e-2, s.n);

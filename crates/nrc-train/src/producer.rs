@@ -392,7 +392,10 @@ mod tests {
         for name in ["bt", "lt", "sppc", "mix:pt-sl=0.5,sppc=0.5"] {
             let mix = ProducerMix::new(&name.parse().unwrap(), &options);
             let e = mix.check(&scene).unwrap_err();
-            assert!(e.contains("nothing lights it") && e.contains("pt-sl"), "{name}: {e}");
+            assert!(
+                e.contains("nothing lights it") && e.contains("pt-sl"),
+                "{name}: {e}"
+            );
         }
         for name in ["pt", "pt-sl"] {
             let mix = ProducerMix::new(&name.parse().unwrap(), &options);

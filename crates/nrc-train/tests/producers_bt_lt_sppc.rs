@@ -556,7 +556,11 @@ fn floor_and_box_sized(env: bool, half: f32, sky: Option<nrc_scene::Environment>
     let floor = b.material(mat::diffuse(Vec3::new(0.6, 0.5, 0.4)));
     let boxm = b.material(mat::diffuse(Vec3::new(0.3, 0.6, 0.7)));
     b.mesh(
-        &Mesh::quad(Vec3::ZERO, Vec3::new(half, 0.0, 0.0), Vec3::new(0.0, 0.0, -half)),
+        &Mesh::quad(
+            Vec3::ZERO,
+            Vec3::new(half, 0.0, 0.0),
+            Vec3::new(0.0, 0.0, -half),
+        ),
         floor,
         false,
     )
@@ -636,7 +640,10 @@ fn mirrored_sky() -> nrc_scene::Environment {
     let (w, h) = (64, 32);
     let texels = (0..w * h)
         .map(|i| {
-            let uv = glam::Vec2::new(((i % w) as f32 + 0.5) / w as f32, ((i / w) as f32 + 0.5) / h as f32);
+            let uv = glam::Vec2::new(
+                ((i % w) as f32 + 0.5) / w as f32,
+                ((i / w) as f32 + 0.5) / h as f32,
+            );
             sky.radiance(nrc_scene::environment::uv_to_direction(uv) * Vec3::new(-1.0, 1.0, -1.0))
         })
         .collect();
@@ -651,7 +658,11 @@ const PATHS: usize = 16;
 /// The mean of each query's records: BT cycles through its `n` start rays, so record
 /// `r · n + i` belongs to query `i`.
 fn per_query_means(targets: &[[f32; 3]], n: usize) -> Vec<[f32; 3]> {
-    assert_eq!(targets.len() % n, 0, "every query got the same number of records");
+    assert_eq!(
+        targets.len() % n,
+        0,
+        "every query got the same number of records"
+    );
     let k = (targets.len() / n) as f32;
     (0..n)
         .map(|i| {
@@ -685,7 +696,11 @@ fn bt_targets_match_path_tracing_under_an_environment_and_a_point_light() {
             BidirectionalProducer::default().produce(ctx, PATHS * starts.len(), 5)
         });
         let targets = per_query_means(&out.batch.targets, starts.len());
-        let what = if env { "bt under the environment" } else { "bt under a point light" };
+        let what = if env {
+            "bt under the environment"
+        } else {
+            "bt under a point light"
+        };
         assert_matches_path_tracing(&targets, &reference, what);
     }
     // Negative control: the sky rotated by 180° lights the scene from the other side; its BT
@@ -711,7 +726,9 @@ fn lt_queries_come_from_every_kind_of_light() {
     for env in [false, true] {
         let scene = floor_and_box(env);
         let starts = tiles(&scene, 256);
-        let out = with_ctx(&scene, &starts, |ctx| LightProducer::default().produce(ctx, 4096, 9));
+        let out = with_ctx(&scene, &starts, |ctx| {
+            LightProducer::default().produce(ctx, 4096, 9)
+        });
         assert_eq!(out.batch.targets.len(), 4096, "env {env}");
         let (m, _) = mean_se(&out.batch.targets);
         assert!(m.iter().all(|&c| c > 1e-3), "env {env}: {m:?}");
@@ -736,16 +753,26 @@ fn sppc_matches_path_tracing_under_an_environment_and_a_point_light() {
         let scene = floor_and_box_sized(env, 2.5, None);
         let (starts, reference) = sppc_balls_and_reference(&scene);
         let targets = sppc_targets(&scene, &starts);
-        let what = if env { "sppc under the environment" } else { "sppc under a point light" };
+        let what = if env {
+            "sppc under the environment"
+        } else {
+            "sppc under a point light"
+        };
         assert_paired_with_path_tracing(&targets, &reference, what);
     }
     let scene = floor_and_box_sized(true, 2.5, None);
     let (starts, reference) = sppc_balls_and_reference(&scene);
-    let wrong = sppc_targets(&floor_and_box_sized(true, 2.5, Some(mirrored_sky())), &starts);
+    let wrong = sppc_targets(
+        &floor_and_box_sized(true, 2.5, Some(mirrored_sky())),
+        &starts,
+    );
     let r = std::panic::catch_unwind(|| {
         assert_paired_with_path_tracing(&wrong, &reference, "sppc negative control")
     });
-    assert!(r.is_err(), "photons from a directionally wrong light passed the check");
+    assert!(
+        r.is_err(),
+        "photons from a directionally wrong light passed the check"
+    );
 }
 
 /// Camera rays to a grid of points 0.25 apart on the floor and the box's top (those the camera
@@ -763,7 +790,9 @@ fn sppc_balls_and_reference(scene: &Scene) -> (Vec<StartRay>, Vec<[f32; 3]>) {
     }
     for p in points {
         let ray = Ray::new(eye, (p - eye).normalize());
-        let Some(hit) = scene.intersect(&ray) else { continue };
+        let Some(hit) = scene.intersect(&ray) else {
+            continue;
+        };
         if (ray.at(hit.t) - p).length() < 1e-3 {
             starts.push(StartRay { ray });
         }
@@ -780,7 +809,9 @@ fn sppc_targets(scene: &Scene, starts: &[StartRay]) -> Vec<[f32; 3]> {
     producer.initial_radius = 0.05 / (bounds.max - bounds.min).length();
     let mut last = None;
     for frame in 0..12 {
-        last = Some(with_ctx(scene, starts, |ctx| producer.produce(ctx, starts.len(), 300 + frame)));
+        last = Some(with_ctx(scene, starts, |ctx| {
+            producer.produce(ctx, starts.len(), 300 + frame)
+        }));
     }
     let out = last.unwrap();
     assert_eq!(out.batch.targets.len(), starts.len(), "one record per ball");

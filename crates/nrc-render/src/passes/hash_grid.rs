@@ -37,7 +37,14 @@ impl CellRule {
     /// The rule for a `width × height` frame of `camera` over scene box `bounds`, with the
     /// projected cell size `cell_scale · width` pixels and `d_min = d_min_fraction` times the
     /// box's smallest extent.
-    pub fn new(camera: &Camera, width: u32, height: u32, bounds: &Aabb, cell_scale: f32, d_min_fraction: f32) -> Self {
+    pub fn new(
+        camera: &Camera,
+        width: u32,
+        height: u32,
+        bounds: &Aabb,
+        cell_scale: f32,
+        d_min_fraction: f32,
+    ) -> Self {
         let (rx, ry) = (width.max(1) as f32, height.max(1) as f32);
         let ext = bounds.max - bounds.min;
         let smallest = ext.min_element().max(1e-3 * ext.max_element()).max(1e-6);
@@ -123,7 +130,11 @@ impl HashGrid {
 
     /// [`HashGrid::build`] with another slot hash (tests force collisions with it).
     pub fn build_with(keys: &[u64], slot_hash: fn(u64) -> u64) -> Self {
-        let mut sorted: Vec<(u64, u32)> = keys.iter().enumerate().map(|(i, &k)| (k, i as u32)).collect();
+        let mut sorted: Vec<(u64, u32)> = keys
+            .iter()
+            .enumerate()
+            .map(|(i, &k)| (k, i as u32))
+            .collect();
         sorted.sort_unstable();
         let mut cells = Vec::new();
         let mut start = 0;
@@ -203,7 +214,11 @@ mod tests {
             assert_eq!(r.cell_size(q).1, r.cell_size(p).1, "same level");
             assert_eq!(r.key(q, n, Vec3::ZERO), key, "inside the cell at {f}");
         }
-        assert_ne!(r.key(corner + Vec3::splat(1.01 * d), n, Vec3::ZERO), key, "next cell");
+        assert_ne!(
+            r.key(corner + Vec3::splat(1.01 * d), n, Vec3::ZERO),
+            key,
+            "next cell"
+        );
         assert_ne!(r.key(p, -n, Vec3::ZERO), key, "opposite normal");
         for axis in [Vec3::X, Vec3::Y, Vec3::Z] {
             assert_ne!(quantise_normal(axis), quantise_normal(-axis));
@@ -221,7 +236,10 @@ mod tests {
             let d_c = dist * (r.angle_per_pixel * r.cell_pixels).tan();
             let expect = (d_c / r.d_min).log2().floor().max(0.0) as i32;
             assert_eq!(k, expect, "distance {dist}");
-            assert!(d <= d_c.max(r.d_min) * 1.0001 && (d_c < r.d_min || 2.0 * d > d_c), "distance {dist}: {d} vs {d_c}");
+            assert!(
+                d <= d_c.max(r.d_min) * 1.0001 && (d_c < r.d_min || 2.0 * d > d_c),
+                "distance {dist}: {d} vs {d_c}"
+            );
         }
         let (_, k1) = r.cell_size(r.camera_position + Vec3::new(0.0, 0.0, -3.0));
         let (_, k2) = r.cell_size(r.camera_position + Vec3::new(0.0, 0.0, -6.0));

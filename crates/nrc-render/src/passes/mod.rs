@@ -182,6 +182,54 @@ pub fn pass_names() -> String {
     )
 }
 
+/// Adds `KEY=VALUE` to a pass name's parameters where the value is not the default.
+fn param<T: PartialEq + fmt::Display>(params: &mut Vec<String>, key: &str, value: T, default: T) {
+    if value != default {
+        params.push(format!("{key}={value}"));
+    }
+}
+
+/// One `KEY=VALUE` parameter of a pass name (after its colon).
+struct PassParam<'a> {
+    pass: &'a str,
+    key: &'a str,
+    value: &'a str,
+}
+
+impl PassParam<'_> {
+    fn bad(&self) -> String {
+        format!(
+            "pass `{}`: bad value `{}` for `{}`",
+            self.pass, self.value, self.key
+        )
+    }
+
+    fn count(&self) -> Result<u32, String> {
+        self.value.parse().map_err(|_| self.bad())
+    }
+
+    fn real(&self) -> Result<f32, String> {
+        self.value.parse().map_err(|_| self.bad())
+    }
+
+    fn flag(&self) -> Result<bool, String> {
+        Ok(self.count()? != 0)
+    }
+}
+
+/// The comma-separated parameters `params` of pass name `pass`.
+fn pass_params<'a>(
+    pass: &'a str,
+    params: &'a str,
+) -> impl Iterator<Item = Result<PassParam<'a>, String>> {
+    params.split(',').filter(|p| !p.is_empty()).map(move |kv| {
+        let (key, value) = kv
+            .split_once('=')
+            .ok_or_else(|| format!("pass `{pass}`: parameter `{kv}` is not KEY=VALUE"))?;
+        Ok(PassParam { pass, key, value })
+    })
+}
+
 impl FromStr for PassSpec {
     type Err = String;
 
@@ -216,22 +264,17 @@ impl FromStr for PassSpec {
                 },
                 ..Default::default()
             };
-            for kv in params.split(',').filter(|p| !p.is_empty()) {
-                let (k, v) = kv
-                    .split_once('=')
-                    .ok_or_else(|| format!("pass `{s}`: parameter `{kv}` is not KEY=VALUE"))?;
-                let bad = || format!("pass `{s}`: bad value `{v}` for `{k}`");
-                let count = || v.parse::<u32>().map_err(|_| bad());
-                let real = || v.parse::<f32>().map_err(|_| bad());
-                match k {
-                    "light" => set.light_candidates = count()?,
-                    "bsdf" => set.bsdf_candidates = count()?,
-                    "k" => set.spatial_neighbours = count()?,
-                    "radius" => set.spatial_radius = real()?,
-                    "mcap" => set.m_cap = real()?,
-                    "temporal" => set.temporal = count()? != 0,
-                    "jitter" => set.jitter = count()? != 0,
-                    _ => {
+            for param in pass_params(s, params) {
+                let p = param?;
+                match p.key {
+                    "light" => set.light_candidates = p.count()?,
+                    "bsdf" => set.bsdf_candidates = p.count()?,
+                    "k" => set.spatial_neighbours = p.count()?,
+                    "radius" => set.spatial_radius = p.real()?,
+                    "mcap" => set.m_cap = p.real()?,
+                    "temporal" => set.temporal = p.flag()?,
+                    "jitter" => set.jitter = p.flag()?,
+                    k => {
                         return Err(format!(
                             "pass `{s}`: unknown parameter `{k}` (known: light, bsdf, k, radius, mcap, temporal, jitter)"
                         ));
@@ -261,23 +304,18 @@ impl FromStr for PassSpec {
                 biased,
                 ..Default::default()
             };
-            for kv in params.split(',').filter(|p| !p.is_empty()) {
-                let (k, v) = kv
-                    .split_once('=')
-                    .ok_or_else(|| format!("pass `{s}`: parameter `{kv}` is not KEY=VALUE"))?;
-                let bad = || format!("pass `{s}`: bad value `{v}` for `{k}`");
-                let count = || v.parse::<u32>().map_err(|_| bad());
-                let real = || v.parse::<f32>().map_err(|_| bad());
-                match (k, world) {
-                    ("k", false) => set.spatial_neighbours = count()?,
-                    ("radius", false) => set.spatial_radius = real()?,
-                    ("samples", true) => set.grid_samples = count()?,
-                    ("cell", true) => set.cell_scale = real()?,
-                    ("dmin", true) => set.d_min = real()?,
-                    ("mcap", _) => set.m_cap = real()?,
-                    ("temporal", _) => set.temporal = count()? != 0,
-                    ("jitter", _) => set.jitter = count()? != 0,
-                    _ => {
+            for param in pass_params(s, params) {
+                let p = param?;
+                match (p.key, world) {
+                    ("k", false) => set.spatial_neighbours = p.count()?,
+                    ("radius", false) => set.spatial_radius = p.real()?,
+                    ("samples", true) => set.grid_samples = p.count()?,
+                    ("cell", true) => set.cell_scale = p.real()?,
+                    ("dmin", true) => set.d_min = p.real()?,
+                    ("mcap", _) => set.m_cap = p.real()?,
+                    ("temporal", _) => set.temporal = p.flag()?,
+                    ("jitter", _) => set.jitter = p.flag()?,
+                    (k, _) => {
                         return Err(format!(
                             "pass `{s}`: unknown parameter `{k}` (known: {})",
                             if world {
@@ -328,37 +366,46 @@ impl fmt::Display for PassSpec {
                 Ok(())
             }
             Self::RestirDi(set) => {
-                f.write_str(if set.biased { "restir-di-biased" } else { "restir-di" })?;
+                f.write_str(if set.biased {
+                    "restir-di-biased"
+                } else {
+                    "restir-di"
+                })?;
                 let d = RestirDiSettings::default();
                 let mut params = Vec::new();
-                if set.light_candidates != d.light_candidates {
-                    params.push(format!("light={}", set.light_candidates));
-                }
-                if set.bsdf_candidates != d.bsdf_candidates {
-                    params.push(format!("bsdf={}", set.bsdf_candidates));
-                }
-                if set.spatial_neighbours != d.spatial_neighbours {
-                    params.push(format!("k={}", set.spatial_neighbours));
-                }
-                if set.spatial_radius != d.spatial_radius {
-                    params.push(format!("radius={}", set.spatial_radius));
-                }
-                if set.m_cap != d.m_cap {
-                    params.push(format!("mcap={}", set.m_cap));
-                }
-                if set.temporal != d.temporal {
-                    params.push(format!("temporal={}", set.temporal as u32));
-                }
-                if set.jitter != d.jitter {
-                    params.push(format!("jitter={}", set.jitter as u32));
-                }
+                param(
+                    &mut params,
+                    "light",
+                    set.light_candidates,
+                    d.light_candidates,
+                );
+                param(&mut params, "bsdf", set.bsdf_candidates, d.bsdf_candidates);
+                param(
+                    &mut params,
+                    "k",
+                    set.spatial_neighbours,
+                    d.spatial_neighbours,
+                );
+                param(&mut params, "radius", set.spatial_radius, d.spatial_radius);
+                param(&mut params, "mcap", set.m_cap, d.m_cap);
+                param(
+                    &mut params,
+                    "temporal",
+                    set.temporal as u32,
+                    d.temporal as u32,
+                );
+                param(&mut params, "jitter", set.jitter as u32, d.jitter as u32);
                 if !params.is_empty() {
                     write!(f, ":{}", params.join(","))?;
                 }
                 Ok(())
             }
             Self::RestirGi(set) => {
-                f.write_str(if set.world { "wsrestir-gi" } else { "restir-gi" })?;
+                f.write_str(if set.world {
+                    "wsrestir-gi"
+                } else {
+                    "restir-gi"
+                })?;
                 if set.biased {
                     f.write_str("-biased")?;
                 }
@@ -368,32 +415,26 @@ impl fmt::Display for PassSpec {
                 let d = RestirGiSettings::default();
                 let mut params = Vec::new();
                 if set.world {
-                    if set.grid_samples != d.grid_samples {
-                        params.push(format!("samples={}", set.grid_samples));
-                    }
-                    if set.cell_scale != d.cell_scale {
-                        params.push(format!("cell={}", set.cell_scale));
-                    }
-                    if set.d_min != d.d_min {
-                        params.push(format!("dmin={}", set.d_min));
-                    }
+                    param(&mut params, "samples", set.grid_samples, d.grid_samples);
+                    param(&mut params, "cell", set.cell_scale, d.cell_scale);
+                    param(&mut params, "dmin", set.d_min, d.d_min);
                 } else {
-                    if set.spatial_neighbours != d.spatial_neighbours {
-                        params.push(format!("k={}", set.spatial_neighbours));
-                    }
-                    if set.spatial_radius != d.spatial_radius {
-                        params.push(format!("radius={}", set.spatial_radius));
-                    }
+                    param(
+                        &mut params,
+                        "k",
+                        set.spatial_neighbours,
+                        d.spatial_neighbours,
+                    );
+                    param(&mut params, "radius", set.spatial_radius, d.spatial_radius);
                 }
-                if set.m_cap != d.m_cap {
-                    params.push(format!("mcap={}", set.m_cap));
-                }
-                if set.temporal != d.temporal {
-                    params.push(format!("temporal={}", set.temporal as u32));
-                }
-                if set.jitter != d.jitter {
-                    params.push(format!("jitter={}", set.jitter as u32));
-                }
+                param(&mut params, "mcap", set.m_cap, d.m_cap);
+                param(
+                    &mut params,
+                    "temporal",
+                    set.temporal as u32,
+                    d.temporal as u32,
+                );
+                param(&mut params, "jitter", set.jitter as u32, d.jitter as u32);
                 if !params.is_empty() {
                     write!(f, ":{}", params.join(","))?;
                 }

@@ -31,10 +31,9 @@ use std::time::Instant;
 
 use glam::Vec3;
 use nrc_scene::{LightSample, Scene, light::Incident, sampling::luminance, spawn_ray};
-use rayon::prelude::*;
 
-use super::screen::{GBuffer, Phase, Primary, stream};
-use super::{FrameInput, PassOutput, PassSpec, PassStats, PhaseTimes, RenderPass};
+use super::screen::{GBuffer, Phase, Primary, par_map, stream};
+use super::{FrameInput, PassOutput, PassSpec, PhaseTimes, RenderPass};
 use crate::path_tracer::{PathStats, PathTracer};
 use crate::reservoir::Reservoir;
 use crate::sampler::PixelSampler;
@@ -85,10 +84,16 @@ impl RestirDiSettings {
             return Err("restir-di: at least one candidate (light or BSDF) is needed".into());
         }
         if !(self.spatial_radius >= 0.0 && self.spatial_radius.is_finite()) {
-            return Err(format!("restir-di: spatial radius must be finite and ≥ 0, got {}", self.spatial_radius));
+            return Err(format!(
+                "restir-di: spatial radius must be finite and ≥ 0, got {}",
+                self.spatial_radius
+            ));
         }
         if !(self.m_cap > 0.0 && self.m_cap.is_finite()) {
-            return Err(format!("restir-di: M-cap must be positive, got {}", self.m_cap));
+            return Err(format!(
+                "restir-di: M-cap must be positive, got {}",
+                self.m_cap
+            ));
         }
         Ok(())
     }
@@ -159,7 +164,11 @@ fn contribution(v: &Vertex, y: &LightSample) -> Option<Contribution> {
     if !(target > 0.0 && target.is_finite()) {
         return None;
     }
-    let p_bsdf = if inc.delta { 0.0 } else { v.bsdf.pdf(v.wo, wi) * g };
+    let p_bsdf = if inc.delta {
+        0.0
+    } else {
+        v.bsdf.pdf(v.wo, wi) * g
+    };
     Some(Contribution {
         c,
         target,
@@ -184,7 +193,13 @@ fn sees(scene: &Scene, v: &Vertex, y: &LightSample, inc: &Incident, stats: &mut 
 
 impl RestirDiPass {
     /// Step 1: RIS over the candidates, then visibility reuse.
-    fn candidates(&self, scene: &Scene, v: &Vertex, s: &mut PixelSampler, stats: &mut PathStats) -> DiReservoir {
+    fn candidates(
+        &self,
+        scene: &Scene,
+        v: &Vertex,
+        s: &mut PixelSampler,
+        stats: &mut PathStats,
+    ) -> DiReservoir {
         let set = &self.settings;
         let (ml, mb) = (set.light_candidates as f32, set.bsdf_candidates as f32);
         let mut r = DiReservoir::new();
@@ -206,19 +221,25 @@ impl RestirDiPass {
             let u_lobe = s.next_1d();
             let u_dir = s.next_2d();
             let u = s.next_1d();
-            let y = v.bsdf.sample(v.wo, u_dir, u_lobe).filter(|bs| !bs.delta).and_then(|bs| {
-                let ray = spawn_ray(v.si.p, v.si.ng, v.frame.to_world(bs.wi));
-                stats.closest_rays += 1;
-                match scene.intersect(&ray) {
-                    Some(hit) => scene.light_sample_at(&scene.interaction(&ray, &hit)),
-                    None => scene.environment_sample(ray.d.normalize()),
-                }
-            });
+            let y = v
+                .bsdf
+                .sample(v.wo, u_dir, u_lobe)
+                .filter(|bs| !bs.delta)
+                .and_then(|bs| {
+                    let ray = spawn_ray(v.si.p, v.si.ng, v.frame.to_world(bs.wi));
+                    stats.closest_rays += 1;
+                    match scene.intersect(&ray) {
+                        Some(hit) => scene.light_sample_at(&scene.interaction(&ray, &hit)),
+                        None => scene.environment_sample(ray.d.normalize()),
+                    }
+                });
             offer(&mut r, y, u);
         }
         r.finish_normalised();
         if let Some(y) = r.sample {
-            let inc = y.incident(v.si.p).expect("a selected sample lights its owner");
+            let inc = y
+                .incident(v.si.p)
+                .expect("a selected sample lights its owner");
             if !sees(scene, v, &y, &inc, stats) {
                 r.clear_sample();
             }
@@ -266,11 +287,6 @@ impl RestirDiPass {
     }
 }
 
-/// Per pixel sample: its reservoir after a step.
-fn par_map<T: Send>(n: usize, f: impl Fn(usize) -> T + Sync + Send) -> Vec<T> {
-    (0..n).into_par_iter().map(f).collect()
-}
-
 impl RenderPass for RestirDiPass {
     fn name(&self) -> String {
         PassSpec::RestirDi(self.settings).to_string()
@@ -285,7 +301,15 @@ impl RenderPass for RestirDiPass {
         let seed = input.seed;
         let mut times = PhaseTimes::default();
         let t = Instant::now();
-        let g = GBuffer::trace(scene, input.camera, input.width, input.height, input.spp, seed, self.settings.jitter);
+        let g = GBuffer::trace(
+            scene,
+            input.camera,
+            input.width,
+            input.height,
+            input.spp,
+            seed,
+            self.settings.jitter,
+        );
         let n = g.len();
         let direct = self.tracer.segment_limit() >= 2 && scene.light_count() > 0;
         fn usable(p: &Option<Primary>, direct: bool) -> Option<&Primary> {
@@ -296,7 +320,12 @@ impl RenderPass for RestirDiPass {
         let initial: Vec<(DiReservoir, PathStats)> = par_map(n, |i| {
             let mut stats = PathStats::default();
             let r = match usable(&g.primary[i], direct) {
-                Some(p) => self.candidates(scene, &p.v, &mut stream(seed, i, Phase::Candidates), &mut stats),
+                Some(p) => self.candidates(
+                    scene,
+                    &p.v,
+                    &mut stream(seed, i, Phase::Candidates),
+                    &mut stats,
+                ),
                 None => DiReservoir::new(),
             };
             (r, stats)
@@ -305,7 +334,8 @@ impl RenderPass for RestirDiPass {
 
         // 2. Temporal reuse.
         let t = Instant::now();
-        let cap = self.settings.m_cap * (self.settings.light_candidates + self.settings.bsdf_candidates) as f32;
+        let cap = self.settings.m_cap
+            * (self.settings.light_candidates + self.settings.bsdf_candidates) as f32;
         let history = self
             .history
             .take()
@@ -321,13 +351,19 @@ impl RenderPass for RestirDiPass {
             };
             let mut prev = h.res[j];
             prev.cap(cap);
-            let pv = &h.g.primary[j].as_ref().expect("reprojection finds a vertex").v;
+            let pv = &h.g.primary[j]
+                .as_ref()
+                .expect("reprojection finds a vertex")
+                .v;
             let mut s = stream(seed, i, Phase::Temporal);
-            let (mut r, is_own) = self.combine(scene, &p.v, &own, &[(prev, pv)], &mut s, &mut stats);
+            let (mut r, is_own) =
+                self.combine(scene, &p.v, &own, &[(prev, pv)], &mut s, &mut stats);
             // A sample taken from the history is tested here too, so that every reservoir
             // handed to the spatial step holds only samples its owner sees.
             if !is_own && let Some(y) = r.sample {
-                let inc = y.incident(p.v.si.p).expect("a selected sample lights its owner");
+                let inc = y
+                    .incident(p.v.si.p)
+                    .expect("a selected sample lights its owner");
                 if !sees(scene, &p.v, &y, &inc, &mut stats) {
                     r.clear_sample();
                 }
@@ -348,10 +384,22 @@ impl RenderPass for RestirDiPass {
             }
             let mut s = stream(seed, i, Phase::Spatial);
             let mut near = Vec::new();
-            g.neighbours(i, p, self.settings.spatial_neighbours, self.settings.spatial_radius, &mut s, &mut near);
+            g.neighbours(
+                i,
+                p,
+                self.settings.spatial_neighbours,
+                self.settings.spatial_radius,
+                &mut s,
+                &mut near,
+            );
             let others: Vec<(DiReservoir, &Vertex)> = near
                 .iter()
-                .map(|&q| (temporal[q].0, &g.primary[q].as_ref().expect("neighbours have vertices").v))
+                .map(|&q| {
+                    (
+                        temporal[q].0,
+                        &g.primary[q].as_ref().expect("neighbours have vertices").v,
+                    )
+                })
                 .collect();
             let (r, _) = self.combine(scene, &p.v, &own, &others, &mut s, &mut stats);
             (r, stats)
@@ -377,41 +425,18 @@ impl RenderPass for RestirDiPass {
                     l += self.tracer.indirect(scene, &p.v, 1, &mut s, &mut stats);
                 } else {
                     // Delta vertices (and depth 1): the path tracer's own estimate.
-                    l += self.tracer.reflected(scene, &p.v.si, p.v.wo_world, 1, &mut s, &mut stats);
+                    l += self
+                        .tracer
+                        .reflected(scene, &p.v.si, p.v.wo_world, 1, &mut s, &mut stats);
                 }
             }
             (l, r, stats)
         });
         times.shading_ms = t.elapsed().as_secs_f64() * 1e3;
 
-        let mut stats = PassStats {
-            paths: n as u64,
-            rays: g.rays,
-            phases: times,
-            ..Default::default()
-        };
-        let spp = g.spp as usize;
-        let mut image = vec![Vec3::ZERO; n / spp];
-        let mut res = Vec::with_capacity(n);
-        for (i, (l, r, ps)) in shaded.into_iter().enumerate() {
-            stats.rays += ps.rays();
-            let l = if l.is_finite() {
-                l
-            } else {
-                stats.invalid_samples += 1;
-                Vec3::ZERO
-            };
-            image[i / spp] += l / spp as f32;
-            res.push(r);
-        }
+        let (out, res) = super::screen::assemble(&g, input, shaded, times);
         self.history = Some(History { g, res });
-        self.frame = Some(PassOutput {
-            image: nrc_scene::Image::from_data(input.width as usize, input.height as usize, image)
-                .expect("one value per pixel"),
-            variance: None,
-            terminations: Vec::new(),
-            stats,
-        });
+        self.frame = Some(out);
         Vec::new()
     }
 

@@ -34,11 +34,10 @@ use std::time::Instant;
 
 use glam::Vec3;
 use nrc_scene::{Scene, sampling::luminance, spawn_ray};
-use rayon::prelude::*;
 
 use super::hash_grid::{CellRule, HashGrid};
-use super::screen::{GBuffer, Phase, Primary, stream, visible_between};
-use super::{FrameInput, PassOutput, PassSpec, PassStats, PhaseTimes, RenderPass};
+use super::screen::{GBuffer, Phase, Primary, par_map, stream, visible_between};
+use super::{FrameInput, PassOutput, PassSpec, PhaseTimes, RenderPass};
 use crate::nee::next_event;
 use crate::path_tracer::{PathStats, PathTracer};
 use crate::reservoir::Reservoir;
@@ -58,7 +57,11 @@ pub const JACOBIAN_MAX: f32 = 10.0;
 #[inline]
 fn bounded_jacobian(receiver: Vec3, donor: Vec3, y: &GiSample) -> f32 {
     let j = reconnection_jacobian(receiver, donor, y.x, y.n);
-    if (1.0 / JACOBIAN_MAX..=JACOBIAN_MAX).contains(&j) { j } else { 0.0 }
+    if (1.0 / JACOBIAN_MAX..=JACOBIAN_MAX).contains(&j) {
+        j
+    } else {
+        0.0
+    }
 }
 
 /// Cosine of the largest normal difference between a grid entry's owner and the receiver.
@@ -113,13 +116,19 @@ impl RestirGiSettings {
     pub fn validate(&self) -> Result<(), String> {
         let positive = |x: f32| x > 0.0 && x.is_finite();
         if !(self.spatial_radius >= 0.0 && self.spatial_radius.is_finite()) {
-            return Err(format!("spatial radius must be finite and ≥ 0, got {}", self.spatial_radius));
+            return Err(format!(
+                "spatial radius must be finite and ≥ 0, got {}",
+                self.spatial_radius
+            ));
         }
         if !positive(self.m_cap) {
             return Err(format!("M-cap must be positive, got {}", self.m_cap));
         }
         if !positive(self.cell_scale) || !positive(self.d_min) {
-            return Err(format!("cell scale and d_min must be positive, got {} and {}", self.cell_scale, self.d_min));
+            return Err(format!(
+                "cell scale and d_min must be positive, got {} and {}",
+                self.cell_scale, self.d_min
+            ));
         }
         Ok(())
     }
@@ -238,7 +247,14 @@ impl RestirGiPass {
 
     /// The trace phase of one pixel sample: the path to `x₁`, NEE there, the initial
     /// candidate and (traced tails) its radiance.
-    fn trace_one(&self, scene: &Scene, seed: u64, i: usize, p: Option<&Primary>, emitted: Vec3) -> Traced {
+    fn trace_one(
+        &self,
+        scene: &Scene,
+        seed: u64,
+        i: usize,
+        p: Option<&Primary>,
+        emitted: Vec3,
+    ) -> Traced {
         let mut out = Traced {
             radiance: emitted,
             ..Default::default()
@@ -250,7 +266,9 @@ impl RestirGiPass {
         let (mut v, mut throughput, mut segments) = (p.v, Vec3::ONE, 1u32);
         if !self.is_rough(&v) {
             if !self.settings.world {
-                out.radiance += self.tracer.reflected(scene, &v.si, v.wo_world, 1, &mut s, &mut out.stats);
+                out.radiance +=
+                    self.tracer
+                        .reflected(scene, &v.si, v.wo_world, 1, &mut s, &mut out.stats);
                 return out;
             }
             let mut walk = PathWalk::from_vertex(scene, &self.tracer, 1);
@@ -258,7 +276,8 @@ impl RestirGiPass {
                 if walk.at_depth_limit() {
                     return out;
                 }
-                out.radiance += walk.throughput() * walk.next_event(scene, &v, &mut s, &mut out.stats);
+                out.radiance +=
+                    walk.throughput() * walk.next_event(scene, &v, &mut s, &mut out.stats);
                 if walk.scatter(&v, &mut s).is_none() {
                     return out;
                 }
@@ -282,7 +301,16 @@ impl RestirGiPass {
         if segments >= limit {
             return out;
         }
-        let direct = next_event(scene, &v.si, &v.bsdf, &v.frame, v.wo, false, &mut s, &mut out.stats);
+        let direct = next_event(
+            scene,
+            &v.si,
+            &v.bsdf,
+            &v.frame,
+            v.wo,
+            false,
+            &mut s,
+            &mut out.stats,
+        );
         let mut shading = Shading {
             v,
             throughput,
@@ -297,7 +325,11 @@ impl RestirGiPass {
             let mut sc = stream(seed, i, Phase::Candidates);
             let u_lobe = sc.next_1d();
             let u_dir = sc.next_2d();
-            if let Some(bs) = v.bsdf.sample(v.wo, u_dir, u_lobe).filter(|b| !b.delta && b.pdf > 0.0) {
+            if let Some(bs) = v
+                .bsdf
+                .sample(v.wo, u_dir, u_lobe)
+                .filter(|b| !b.delta && b.pdf > 0.0)
+            {
                 let ray = spawn_ray(v.si.p, v.si.ng, v.frame.to_world(bs.wi));
                 out.stats.closest_rays += 1;
                 if let Some(hit) = scene.intersect(&ray) {
@@ -311,7 +343,8 @@ impl RestirGiPass {
                     if self.settings.cache {
                         shading.query = Some(y.query());
                     } else {
-                        let (l, second) = self.tail(scene, &y, segments + 1, &mut sc, &mut out.stats);
+                        let (l, second) =
+                            self.tail(scene, &y, segments + 1, &mut sc, &mut out.stats);
                         sample.l = l;
                         // x₂'s sample has one segment less left than x₁'s: reused at another
                         // x₁ it is right only when depth is unlimited (Russian roulette alone).
@@ -353,7 +386,14 @@ impl RestirGiPass {
         match walk.arrive(scene, stats) {
             Arrival::Escaped { le, mis } => (nee + bs.weight * le * mis, rough.then_some(None)),
             Arrival::Hit(h) => {
-                let l3 = self.tracer.reflected(scene, &h.vertex.si, h.vertex.wo_world, segments + 1, s, stats);
+                let l3 = self.tracer.reflected(
+                    scene,
+                    &h.vertex.si,
+                    h.vertex.wo_world,
+                    segments + 1,
+                    s,
+                    stats,
+                );
                 let l = nee + bs.weight * (h.le * h.mis + l3);
                 let sample = (!bs.delta && bs.pdf > 0.0).then_some((
                     GiSample {
@@ -411,10 +451,6 @@ impl RestirGiPass {
     }
 }
 
-fn par_map<T: Send>(n: usize, f: impl Fn(usize) -> T + Sync + Send) -> Vec<T> {
-    (0..n).into_par_iter().map(f).collect()
-}
-
 impl RenderPass for RestirGiPass {
     fn name(&self) -> String {
         PassSpec::RestirGi(self.settings).to_string()
@@ -427,9 +463,18 @@ impl RenderPass for RestirGiPass {
     fn trace(&mut self, input: &FrameInput) -> Vec<RadianceQuery> {
         let scene = input.scene;
         let t = Instant::now();
-        let g = GBuffer::trace(scene, input.camera, input.width, input.height, input.spp, input.seed, self.settings.jitter);
-        let mut traced: Vec<Traced> =
-            par_map(g.len(), |i| self.trace_one(scene, input.seed, i, g.primary[i].as_ref(), g.emitted[i]));
+        let g = GBuffer::trace(
+            scene,
+            input.camera,
+            input.width,
+            input.height,
+            input.spp,
+            input.seed,
+            self.settings.jitter,
+        );
+        let mut traced: Vec<Traced> = par_map(g.len(), |i| {
+            self.trace_one(scene, input.seed, i, g.primary[i].as_ref(), g.emitted[i])
+        });
         let mut queries = Vec::new();
         for t in traced.iter_mut() {
             if let Some(sh) = &mut t.shading
@@ -446,7 +491,10 @@ impl RenderPass for RestirGiPass {
     fn resolve(&mut self, input: &FrameInput, answers: &[Vec3]) -> PassOutput {
         if self.frame.is_none() {
             let q = self.trace(input);
-            assert!(q.is_empty(), "resolve without trace needs a pass that asks no source");
+            assert!(
+                q.is_empty(),
+                "resolve without trace needs a pass that asks no source"
+            );
         }
         let (g, traced, trace_ms) = self.frame.take().expect("just traced");
         let scene = input.scene;
@@ -470,7 +518,12 @@ impl RenderPass for RestirGiPass {
                             y.l = answers[q];
                         }
                         let target = target_at(&sh.v, &y);
-                        r.update(y, target / pdf, target, stream(seed, i, Phase::Extra).next_1d());
+                        r.update(
+                            y,
+                            target / pdf,
+                            target,
+                            stream(seed, i, Phase::Extra).next_1d(),
+                        );
                     }
                     None => r.m = 1.0,
                 }
@@ -484,20 +537,29 @@ impl RenderPass for RestirGiPass {
         let history = self.history.take().filter(|h| h.g.same_shape(&g));
         let temporal: Vec<(GiReservoir, PathStats)> = par_map(n, |i| {
             let (own, mut stats) = initial[i];
-            let (Some(sh), Some(h)) = (traced[i].shading.as_ref(), history.as_ref().filter(|_| set.temporal)) else {
+            let (Some(sh), Some(h)) = (
+                traced[i].shading.as_ref(),
+                history.as_ref().filter(|_| set.temporal),
+            ) else {
                 return (own, stats);
             };
             if !sh.primary {
                 return (own, stats);
             }
-            let Some(j) = h.g.reproject(sh.v.si.p, sh.v.si.ns, (i % g.spp as usize) as u32) else {
+            let Some(j) =
+                h.g.reproject(sh.v.si.p, sh.v.si.ns, (i % g.spp as usize) as u32)
+            else {
                 return (own, stats);
             };
             let mut prev = h.res[j];
             prev.cap(set.m_cap);
-            let pv = &h.g.primary[j].as_ref().expect("reprojection finds a vertex").v;
+            let pv = &h.g.primary[j]
+                .as_ref()
+                .expect("reprojection finds a vertex")
+                .v;
             let mut s = stream(seed, i, Phase::Temporal);
-            let (mut r, is_own) = self.combine(scene, &sh.v, &own, &[(prev, pv)], &mut s, &mut stats);
+            let (mut r, is_own) =
+                self.combine(scene, &sh.v, &own, &[(prev, pv)], &mut s, &mut stats);
             if !is_own
                 && let Some(y) = r.sample
                 && !visible_between(scene, sh.v.si.p, sh.v.si.ng, y.x, y.n, &mut stats)
@@ -520,7 +582,8 @@ impl RenderPass for RestirGiPass {
             let mut others: Vec<(GiReservoir, &Vertex)> = Vec::new();
             if set.world {
                 if let Some(h) = &history {
-                    let jitter = Vec3::new(s.next_1d(), s.next_1d(), s.next_1d()) - Vec3::splat(0.5);
+                    let jitter =
+                        Vec3::new(s.next_1d(), s.next_1d(), s.next_1d()) - Vec3::splat(0.5);
                     let cell = h.grid.find(h.rule.key(sh.v.si.p, sh.v.si.ns, jitter));
                     let count = cell.len();
                     if count > 0 && set.grid_samples > 0 {
@@ -541,7 +604,14 @@ impl RenderPass for RestirGiPass {
                 && let Some(p) = g.primary[i].as_ref().filter(|_| sh.primary)
             {
                 let mut near = Vec::new();
-                g.neighbours(i, p, set.spatial_neighbours, set.spatial_radius, &mut s, &mut near);
+                g.neighbours(
+                    i,
+                    p,
+                    set.spatial_neighbours,
+                    set.spatial_radius,
+                    &mut s,
+                    &mut near,
+                );
                 for q in near {
                     if let Some(qs) = traced[q].shading.as_ref().filter(|qs| qs.primary) {
                         others.push((temporal[q].0, &qs.v));
@@ -580,7 +650,14 @@ impl RenderPass for RestirGiPass {
         // The grid for the next frame: temporal reservoirs keyed at x₁, second samples at x₂
         // (its build is counted in the spatial phase).
         let t0 = Instant::now();
-        let rule = CellRule::new(input.camera, input.width, input.height, &scene.bounds(), set.cell_scale, set.d_min);
+        let rule = CellRule::new(
+            input.camera,
+            input.width,
+            input.height,
+            &scene.bounds(),
+            set.cell_scale,
+            set.d_min,
+        );
         let mut entries = Vec::new();
         // Empty reservoirs go in too: a donor that found nothing still counts in Z (leaving
         // them out made reuse select only lucky donors and brightened dark regions 2×).
@@ -611,30 +688,14 @@ impl RenderPass for RestirGiPass {
                 }
             }
         }
-        let keys: Vec<u64> = entries.iter().map(|e| rule.key(e.owner.si.p, e.owner.si.ns, Vec3::ZERO)).collect();
+        let keys: Vec<u64> = entries
+            .iter()
+            .map(|e| rule.key(e.owner.si.p, e.owner.si.ns, Vec3::ZERO))
+            .collect();
         let grid = HashGrid::build(&keys);
         times.spatial_ms += t0.elapsed().as_secs_f64() * 1e3;
 
-        let mut stats = PassStats {
-            paths: n as u64,
-            rays: g.rays,
-            phases: times,
-            ..Default::default()
-        };
-        let spp = g.spp as usize;
-        let mut image = vec![Vec3::ZERO; n / spp];
-        let mut res = Vec::with_capacity(n);
-        for (i, (l, r, ps)) in shaded.into_iter().enumerate() {
-            stats.rays += ps.rays();
-            let l = if l.is_finite() {
-                l
-            } else {
-                stats.invalid_samples += 1;
-                Vec3::ZERO
-            };
-            image[i / spp] += l / spp as f32;
-            res.push(r);
-        }
+        let (out, res) = super::screen::assemble(&g, input, shaded, times);
         self.history = Some(History {
             g,
             res,
@@ -642,12 +703,6 @@ impl RenderPass for RestirGiPass {
             entries,
             rule,
         });
-        PassOutput {
-            image: nrc_scene::Image::from_data(input.width as usize, input.height as usize, image)
-                .expect("one value per pixel"),
-            variance: None,
-            terminations: Vec::new(),
-            stats,
-        }
+        out
     }
 }

@@ -11,6 +11,7 @@ use glam::{Vec2, Vec3};
 use nrc_scene::{Camera, Ray, Scene};
 use rayon::prelude::*;
 
+use super::{FrameInput, PassOutput, PassStats, PhaseTimes};
 use crate::path_tracer::PathStats;
 use crate::sampler::PixelSampler;
 use crate::transport::Vertex;
@@ -68,14 +69,25 @@ impl GBuffer {
     /// Traces the camera rays of a `width × height × spp` frame: jittered in the pixel with
     /// the [`Phase::Camera`] stream, or through pixel centres without `jitter` (tests against
     /// a reference at fixed primary rays).
-    pub fn trace(scene: &Scene, camera: &Camera, width: u32, height: u32, spp: u32, seed: u64, jitter: bool) -> Self {
+    pub fn trace(
+        scene: &Scene,
+        camera: &Camera,
+        width: u32,
+        height: u32,
+        spp: u32,
+        seed: u64,
+        jitter: bool,
+    ) -> Self {
         let spp = spp.max(1);
         let n = width as usize * height as usize * spp as usize;
         let hits: Vec<(Option<Primary>, Vec3)> = (0..n)
             .into_par_iter()
             .map(|i| {
                 let pixel = i / spp as usize;
-                let (x, y) = ((pixel % width as usize) as f32, (pixel / width as usize) as f32);
+                let (x, y) = (
+                    (pixel % width as usize) as f32,
+                    (pixel / width as usize) as f32,
+                );
                 let offset = if jitter {
                     stream(seed, i, Phase::Camera).next_2d()
                 } else {
@@ -140,12 +152,18 @@ impl GBuffer {
         let spp = self.spp as usize;
         let pixel = i / spp;
         let s = i % spp;
-        let (x, y) = ((pixel % self.width as usize) as f32, (pixel / self.width as usize) as f32);
+        let (x, y) = (
+            (pixel % self.width as usize) as f32,
+            (pixel / self.width as usize) as f32,
+        );
         for _ in 0..k {
             let u = sampler.next_2d();
             let r = radius * u.x.sqrt();
             let phi = std::f32::consts::TAU * u.y;
-            let (nx, ny) = ((x + 0.5 + r * phi.cos()).floor(), (y + 0.5 + r * phi.sin()).floor());
+            let (nx, ny) = (
+                (x + 0.5 + r * phi.cos()).floor(),
+                (y + 0.5 + r * phi.sin()).floor(),
+            );
             if nx < 0.0 || ny < 0.0 || nx >= self.width as f32 || ny >= self.height as f32 {
                 continue;
             }
@@ -166,7 +184,8 @@ impl GBuffer {
 /// `depth`: normals within 25°, depths within 10 %.
 #[inline]
 pub fn similar(q: &Primary, n: Vec3, depth: f32) -> bool {
-    q.v.si.ns.dot(n) >= NORMAL_COS && (q.depth - depth).abs() <= DEPTH_TOLERANCE * depth.max(q.depth)
+    q.v.si.ns.dot(n) >= NORMAL_COS
+        && (q.depth - depth).abs() <= DEPTH_TOLERANCE * depth.max(q.depth)
 }
 
 /// The first hit of camera ray `ray` and the radiance it sees there directly.
@@ -189,7 +208,58 @@ fn primary_hit(scene: &Scene, ray: &Ray) -> (Option<Primary>, Vec3) {
 /// Whether the segment from `a` (a surface point with geometric normal `ng_a`) to `b` (with
 /// `ng_b`) is unoccluded; counts the shadow ray.
 #[inline]
-pub fn visible_between(scene: &Scene, a: Vec3, ng_a: Vec3, b: Vec3, ng_b: Vec3, stats: &mut PathStats) -> bool {
+pub fn visible_between(
+    scene: &Scene,
+    a: Vec3,
+    ng_a: Vec3,
+    b: Vec3,
+    ng_b: Vec3,
+    stats: &mut PathStats,
+) -> bool {
     stats.shadow_rays += 1;
     !scene.occluded(&nrc_scene::spawn_ray_between(a, ng_a, b, ng_b))
+}
+
+/// `f` over the pixel samples `0..n`, in parallel, results in order.
+pub fn par_map<T: Send>(n: usize, f: impl Fn(usize) -> T + Sync + Send) -> Vec<T> {
+    (0..n).into_par_iter().map(f).collect()
+}
+
+/// The frame from each pixel sample's radiance, state and counters: pixels average their
+/// samples (non-finite ones counted and zeroed), rays add up. Returns the output and the
+/// per-sample states (the next frame's history).
+pub fn assemble<R>(
+    g: &GBuffer,
+    input: &FrameInput,
+    shaded: Vec<(Vec3, R, PathStats)>,
+    phases: PhaseTimes,
+) -> (PassOutput, Vec<R>) {
+    let mut stats = PassStats {
+        paths: g.len() as u64,
+        rays: g.rays,
+        phases,
+        ..Default::default()
+    };
+    let spp = g.spp as usize;
+    let mut image = vec![Vec3::ZERO; g.len() / spp];
+    let mut states = Vec::with_capacity(g.len());
+    for (i, (l, r, ps)) in shaded.into_iter().enumerate() {
+        stats.rays += ps.rays();
+        let l = if l.is_finite() {
+            l
+        } else {
+            stats.invalid_samples += 1;
+            Vec3::ZERO
+        };
+        image[i / spp] += l / spp as f32;
+        states.push(r);
+    }
+    let out = PassOutput {
+        image: nrc_scene::Image::from_data(input.width as usize, input.height as usize, image)
+            .expect("one value per pixel"),
+        variance: None,
+        terminations: Vec::new(),
+        stats,
+    };
+    (out, states)
 }

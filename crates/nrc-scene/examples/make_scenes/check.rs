@@ -206,12 +206,17 @@ pub fn validate(dir: &Path, name: &str) -> Result<()> {
         }
         for (i, light) in lights.iter().enumerate() {
             let bad = |why: &str| in_doc(format!("KHR_lights_punctual light {i}: {why}"));
-            let intensity = light.get("intensity").and_then(Value::as_f64).unwrap_or(1.0);
+            let intensity = light
+                .get("intensity")
+                .and_then(Value::as_f64)
+                .unwrap_or(1.0);
             if !(intensity.is_finite() && intensity >= 0.0) {
                 return Err(bad("intensity not finite and non-negative"));
             }
             if let Some(c) = light.get("color").and_then(Value::as_array)
-                && (c.len() != 3 || c.iter().any(|c| !(0.0..=1.0).contains(&c.as_f64().unwrap_or(-1.0))))
+                && (c.len() != 3
+                    || c.iter()
+                        .any(|c| !(0.0..=1.0).contains(&c.as_f64().unwrap_or(-1.0))))
             {
                 return Err(bad("color not three values in [0, 1]"));
             }
@@ -219,7 +224,10 @@ pub fn validate(dir: &Path, name: &str) -> Result<()> {
                 Some("point" | "directional") => {}
                 Some("spot") => {
                     let spot = get(light, "spot").map_err(|e| bad(&e))?;
-                    let inner = spot.get("innerConeAngle").and_then(Value::as_f64).unwrap_or(0.0);
+                    let inner = spot
+                        .get("innerConeAngle")
+                        .and_then(Value::as_f64)
+                        .unwrap_or(0.0);
                     let outer = spot
                         .get("outerConeAngle")
                         .and_then(Value::as_f64)

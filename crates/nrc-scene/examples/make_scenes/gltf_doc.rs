@@ -186,7 +186,10 @@ impl Material {
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum LightKind {
     Point,
-    Spot { inner_cone_angle: f32, outer_cone_angle: f32 },
+    Spot {
+        inner_cone_angle: f32,
+        outer_cone_angle: f32,
+    },
     Directional,
 }
 

@@ -61,14 +61,23 @@ fn main() -> ExitCode {
         }
         println!(
             "{name:12} {:6} triangles, {:2} emissive, emitted power ({:.3}, {:.3}, {:.3}) W, {} punctual",
-            s.triangles, s.emissive_triangles, s.power.x, s.power.y, s.power.z, s.punctual.len()
+            s.triangles,
+            s.emissive_triangles,
+            s.power.x,
+            s.power.y,
+            s.power.z,
+            s.punctual.len()
         );
     }
     if let Err(e) = sun_spot_env::write_sky(&dir) {
         eprintln!("error: {e}");
         return ExitCode::FAILURE;
     }
-    println!("sky.exr      {}x{} equirectangular sky", sun_spot_env::SKY_SIZE.0, sun_spot_env::SKY_SIZE.1);
+    println!(
+        "sky.exr      {}x{} equirectangular sky",
+        sun_spot_env::SKY_SIZE.0,
+        sun_spot_env::SKY_SIZE.1
+    );
     ExitCode::SUCCESS
 }
 
@@ -109,10 +118,18 @@ fn check_loaded(dir: &std::path::Path, name: &str, stats: &gltf_doc::Stats) -> R
         let same = |l: &nrc_scene::light::PunctualLight| {
             let kind_ok = match (l.kind, kind) {
                 (nrc_scene::light::PunctualKind::Point, gltf_doc::LightKind::Point)
-                | (nrc_scene::light::PunctualKind::Directional, gltf_doc::LightKind::Directional) => true,
+                | (nrc_scene::light::PunctualKind::Directional, gltf_doc::LightKind::Directional) => {
+                    true
+                }
                 (
-                    nrc_scene::light::PunctualKind::Spot { cos_inner, cos_outer },
-                    gltf_doc::LightKind::Spot { inner_cone_angle, outer_cone_angle },
+                    nrc_scene::light::PunctualKind::Spot {
+                        cos_inner,
+                        cos_outer,
+                    },
+                    gltf_doc::LightKind::Spot {
+                        inner_cone_angle,
+                        outer_cone_angle,
+                    },
                 ) => {
                     (cos_inner - inner_cone_angle.cos()).abs() < 1e-6
                         && (cos_outer - outer_cone_angle.cos()).abs() < 1e-6
@@ -138,7 +155,10 @@ fn check_loaded(dir: &std::path::Path, name: &str, stats: &gltf_doc::Stats) -> R
     // punctual lights by their own power (checked against the written lights above).
     let radius = scene.bounding_sphere().1;
     let expected = nrc_scene::sampling::luminance(stats.power) as f64 / std::f64::consts::PI
-        + loaded.iter().map(|l| f64::from(l.power(radius))).sum::<f64>();
+        + loaded
+            .iter()
+            .map(|l| f64::from(l.power(radius)))
+            .sum::<f64>();
     let loaded = scene.lights().total_power();
     if ((loaded - expected) / expected).abs() > 1e-3 {
         return Err(format!(
