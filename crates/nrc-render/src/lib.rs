@@ -12,11 +12,14 @@
 //!   core), generic over the sample type.
 //! - [`passes`]: the inference passes, one file per technique, behind one trait
 //!   ([`RenderPass`]) and one spec enum ([`PassSpec`]).
+//! - [`ddgi`]: the DDGI probe volume (irradiance and distance moments in octahedral maps),
+//!   a radiance source.
 //! - [`emitters`]: the emitter-excluded image (pixels that see an emitter, and their
 //!   neighbours), for errors that the emitters' anti-aliasing would dominate;
 //! - [`spread`]: the area-spread heuristic of Müller et al. 2021 (termination of inference
 //!   paths and of training suffixes).
 
+pub mod ddgi;
 pub mod emitters;
 pub mod light_path;
 pub mod nee;
