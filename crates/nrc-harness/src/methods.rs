@@ -108,7 +108,7 @@ impl FromStr for MethodSpec {
         // The resampling passes by their pass names, at 1 sample per pixel.
         // `-nrc` variants read a cache trained online by `pt-sl` (other producers: the general
         // form, e.g. wsrestir-gi-nrc@1spp+bt).
-        if s.starts_with("restir-") || s.starts_with("wsrestir-") {
+        if s.starts_with("restir-") || s.starts_with("wsrestir-") || s.starts_with("ddgi-") {
             let pass: PassSpec = s.parse().map_err(|e: String| err(&e))?;
             let producer = pass.uses_source().then(|| {
                 DEFAULT_PASS_PRODUCER

@@ -119,7 +119,10 @@ impl OctMap {
     /// texels lie outside `[-1, 1]²`).
     fn coords(&self, x: usize, y: usize) -> Vec2 {
         let n = self.n as f32;
-        Vec2::new((x as f32 - 0.5) / n * 2.0 - 1.0, (y as f32 - 0.5) / n * 2.0 - 1.0)
+        Vec2::new(
+            (x as f32 - 0.5) / n * 2.0 - 1.0,
+            (y as f32 - 0.5) / n * 2.0 - 1.0,
+        )
     }
 
     /// The interior texel a border texel copies: the octahedral wrap mirrors a coordinate
@@ -217,24 +220,38 @@ impl ProbeVolume {
         if !(ext.is_finite() && ext.max_element() > 0.0) {
             return Err("ddgi: the scene box is empty or not finite".into());
         }
-        if settings.rays_per_probe == 0 || settings.irradiance_texels == 0 || settings.moment_texels == 0 {
+        if settings.rays_per_probe == 0
+            || settings.irradiance_texels == 0
+            || settings.moment_texels == 0
+        {
             return Err("ddgi: rays per probe and texels per side must be at least 1".into());
         }
         if !(0.0..1.0).contains(&settings.hysteresis) {
-            return Err(format!("ddgi: hysteresis must be in [0, 1), got {}", settings.hysteresis));
+            return Err(format!(
+                "ddgi: hysteresis must be in [0, 1), got {}",
+                settings.hysteresis
+            ));
         }
         let counts = settings.counts.unwrap_or_else(|| {
             let longest = ext.max_element();
             let c = (ext / longest * 8.0).round();
             UVec3::new(c.x as u32, c.y as u32, c.z as u32).max(UVec3::splat(2))
         });
-        if counts.min_element() == 0 || counts.x as u64 * counts.y as u64 * counts.z as u64 > 1 << 20 {
-            return Err(format!("ddgi: probe counts {counts} must be at least 1 and at most 2^20 in all"));
+        if counts.min_element() == 0
+            || counts.x as u64 * counts.y as u64 * counts.z as u64 > 1 << 20
+        {
+            return Err(format!(
+                "ddgi: probe counts {counts} must be at least 1 and at most 2^20 in all"
+            ));
         }
         let spacing = ext / counts.as_vec3();
         let n = (counts.x * counts.y * counts.z) as usize;
-        let irradiance_map = OctMap { n: settings.irradiance_texels };
-        let moment_map = OctMap { n: settings.moment_texels };
+        let irradiance_map = OctMap {
+            n: settings.irradiance_texels,
+        };
+        let moment_map = OctMap {
+            n: settings.moment_texels,
+        };
         Ok(Self {
             settings,
             counts,
@@ -264,7 +281,11 @@ impl ProbeVolume {
 
     fn coords_of(&self, p: usize) -> UVec3 {
         let (cx, cy) = (self.counts.x as usize, self.counts.y as usize);
-        UVec3::new((p % cx) as u32, ((p / cx) % cy) as u32, (p / (cx * cy)) as u32)
+        UVec3::new(
+            (p % cx) as u32,
+            ((p / cx) % cy) as u32,
+            (p / (cx * cy)) as u32,
+        )
     }
 
     /// Probe `p`'s irradiance texels (bordered layout).
@@ -296,11 +317,18 @@ impl ProbeVolume {
         let check = |map: OctMap, len: usize, eq: &dyn Fn(usize, usize) -> bool| {
             (0..self.probe_count()).all(|p| {
                 let s = map.side();
-                (0..s).all(|y| (0..s).all(|x| !map.is_border(x, y) || eq(p * len + y * s + x, p * len + map.wrapped(x, y))))
+                (0..s).all(|y| {
+                    (0..s).all(|x| {
+                        !map.is_border(x, y) || eq(p * len + y * s + x, p * len + map.wrapped(x, y))
+                    })
+                })
             })
         };
-        check(self.irradiance_map, self.irradiance_map.len(), &|a, b| self.irradiance[a] == self.irradiance[b])
-            && check(self.moment_map, self.moment_map.len(), &|a, b| self.moments[a] == self.moments[b])
+        check(self.irradiance_map, self.irradiance_map.len(), &|a, b| {
+            self.irradiance[a] == self.irradiance[b]
+        }) && check(self.moment_map, self.moment_map.len(), &|a, b| {
+            self.moments[a] == self.moments[b]
+        })
     }
 
     /// The query point offset off the surface (§3.5): along the normal and toward the viewer.
@@ -313,8 +341,12 @@ impl ProbeVolume {
     /// (trilinear × wrap shading × Chebyshev visibility).
     pub fn probe_weights(&self, x: Vec3, n: Vec3, wo: Vec3) -> Vec<(usize, f32)> {
         let q = self.biased_point(x, n, wo);
-        let g = ((q - self.origin) / self.spacing - Vec3::splat(0.5)).clamp(Vec3::ZERO, (self.counts - UVec3::ONE).as_vec3());
-        let base = g.floor().min((self.counts.saturating_sub(UVec3::splat(2))).as_vec3()).max(Vec3::ZERO);
+        let g = ((q - self.origin) / self.spacing - Vec3::splat(0.5))
+            .clamp(Vec3::ZERO, (self.counts - UVec3::ONE).as_vec3());
+        let base = g
+            .floor()
+            .min((self.counts.saturating_sub(UVec3::splat(2))).as_vec3())
+            .max(Vec3::ZERO);
         let alpha = (g - base).clamp(Vec3::ZERO, Vec3::ONE);
         let base = base.as_uvec3();
         let mut out = Vec::with_capacity(8);
@@ -330,7 +362,9 @@ impl ProbeVolume {
             let trilinear = tri.x * tri.y * tri.z;
             let wrap = (0.5 * (1.0 + dir.dot(n))).powi(2) + 0.2;
             let l = self.moment_map.len();
-            let m = self.moment_map.lookup(&self.moments[p * l..(p + 1) * l], -dir);
+            let m = self
+                .moment_map
+                .lookup(&self.moments[p * l..(p + 1) * l], -dir);
             let mut visibility = 1.0;
             if dist > m.x && self.frames > 0 {
                 let var = (m.y - m.x * m.x).abs().max(1e-8);
@@ -395,10 +429,15 @@ impl ProbeVolume {
                         };
                         let si = scene.interaction(&ray, &hit);
                         let v = Vertex::new(scene, &si, si.wo);
-                        let back_face = si.ng.dot(si.wo) < 0.0 && !scene.materials()[si.material as usize].double_sided;
+                        let back_face = si.ng.dot(si.wo) < 0.0
+                            && !scene.materials()[si.material as usize].double_sided;
                         let l = this.ray_radiance(scene, &v, radiance, &mut s, &mut stats);
                         // Back faces (inside geometry) shorten the distance (RTXGI).
-                        let dist = if back_face { 0.2 * hit.t } else { hit.t.min(max_dist) };
+                        let dist = if back_face {
+                            0.2 * hit.t
+                        } else {
+                            hit.t.min(max_dist)
+                        };
                         (d, l, dist)
                     })
                     .collect();
@@ -407,7 +446,11 @@ impl ProbeVolume {
             .collect();
         let mut stats = PathStats::default();
         let (im, mm) = (self.irradiance_map, self.moment_map);
-        let h = if self.frames == 0 { 0.0 } else { self.settings.hysteresis };
+        let h = if self.frames == 0 {
+            0.0
+        } else {
+            self.settings.hysteresis
+        };
         let sharp = self.settings.depth_sharpness;
         for (p, (rays, st)) in traced.iter().enumerate() {
             stats.add(st);

@@ -45,6 +45,10 @@ pub enum Termination {
     /// direction of `ωo` (the lobe's peak): a Lambertian vertex ends with probability
     /// `K²/(K²+1)`, a sharp glossy one almost never. `K` = 4 by default.
     Balanced { k: f32 },
+    /// At the secondary vertex (the first bounce's hit) unless it is a delta: the primary
+    /// vertex's direct light by NEE and BSDF sampling, the rest from the source (DDGI
+    /// resampling's "+Secondary DDGI").
+    Secondary,
 }
 
 impl Default for Termination {
@@ -54,8 +58,7 @@ impl Default for Termination {
 }
 
 /// The grammar of termination names.
-pub const TERMINATION_NAMES: &str =
-    "first, diffuse[:ROUGHNESS] (default 0.3), spread[:C] (default 0.01), bth[:K] (default 4)";
+pub const TERMINATION_NAMES: &str = "first, secondary, diffuse[:ROUGHNESS] (default 0.3), spread[:C] (default 0.01), bth[:K] (default 4)";
 
 impl FromStr for Termination {
     type Err = String;
@@ -78,6 +81,7 @@ impl FromStr for Termination {
         };
         Ok(match name {
             "first" if param.is_none() => Self::FirstVertex,
+            "secondary" if param.is_none() => Self::Secondary,
             "diffuse" => Self::FirstDiffuse {
                 roughness: value(0.3)?,
             },
@@ -96,6 +100,7 @@ impl fmt::Display for Termination {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match *self {
             Self::FirstVertex => write!(f, "first"),
+            Self::Secondary => write!(f, "secondary"),
             Self::FirstDiffuse { roughness: 0.3 } => write!(f, "diffuse"),
             Self::FirstDiffuse { roughness } => write!(f, "diffuse:{roughness}"),
             Self::SpreadAngle { c: 0.01 } => write!(f, "spread"),
@@ -151,9 +156,11 @@ impl CacheTerminatedPass {
         }
     }
 
-    /// Whether the path ends in the source at a vertex with `bsdf`, given the spread so far.
+    /// Whether the path ends in the source at its `vertex`-th vertex (1: primary) with `bsdf`,
+    /// given the spread so far.
     fn ends_here(
         &self,
+        vertex: u32,
         bsdf: &Bsdf,
         wo: Vec3,
         arrival: Option<bool>,
@@ -161,6 +168,7 @@ impl CacheTerminatedPass {
     ) -> bool {
         match self.termination {
             Termination::FirstVertex => true,
+            Termination::Secondary => vertex >= 2 && !bsdf.is_delta(),
             Termination::FirstDiffuse { roughness } => {
                 !bsdf.is_delta() && bsdf.roughness() >= roughness
             }
@@ -208,7 +216,9 @@ impl CacheTerminatedPass {
             Termination::SpreadAngle { c } => Some(Spread::new(c)),
             _ => None,
         };
+        let mut vertex = 0;
         loop {
+            vertex += 1;
             let h = match walk.arrive(scene, &mut stats) {
                 Arrival::Escaped { le, mis } => {
                     out.prefix += walk.throughput() * le * mis;
@@ -223,7 +233,7 @@ impl CacheTerminatedPass {
             let arrival = spread
                 .as_mut()
                 .map(|s| s.arrive(h.dist * h.dist, h.prev_pdf, v.si.ng.dot(v.si.wo)));
-            if self.ends_here(&v.bsdf, v.wo, arrival, sampler) {
+            if self.ends_here(vertex, &v.bsdf, v.wo, arrival, sampler) {
                 out.throughput = walk.throughput();
                 out.end = Some((
                     v.query(),

@@ -17,6 +17,7 @@
 //! Passes know nothing of burn: the cache reaches them as a [`RadianceSource`].
 
 pub mod cache_terminated;
+pub mod ddgi_terminated;
 pub mod hash_grid;
 pub mod path_traced;
 pub mod restir_di;
@@ -33,6 +34,7 @@ use nrc_scene::{Camera, Image, Scene};
 use crate::path_tracer::{LightStrategy, PathTracer};
 use crate::source::{RadianceQuery, RadianceSource};
 pub use cache_terminated::{CacheTerminatedPass, TERMINATION_NAMES, Termination, TerminationPoint};
+pub use ddgi_terminated::DdgiTerminatedPass;
 pub use path_traced::PathTracedPass;
 pub use restir_di::{RestirDiPass, RestirDiSettings};
 pub use restir_gi::{RestirGiPass, RestirGiSettings};
@@ -158,6 +160,13 @@ pub enum PassSpec {
     /// with `-biased` and `-nrc` (the reconnection vertex's radiance from the radiance source),
     /// parameters after a colon (see [`RestirGiSettings`]), e.g. `wsrestir-gi-nrc:cell=0.05`.
     RestirGi(RestirGiSettings),
+    /// Camera paths ending in a DDGI probe volume the pass updates each frame:
+    /// `ddgi-TERMINATION[:probes=N,rays=R,hysteresis=H,radiance=full|indirect]`, e.g.
+    /// `ddgi-secondary`, `ddgi-first:probes=16`.
+    DdgiTerminated {
+        termination: Termination,
+        settings: crate::ddgi::DdgiSettings,
+    },
 }
 
 impl Default for PassSpec {
@@ -178,7 +187,9 @@ pub fn pass_names() -> String {
          defaults light=32,bsdf=1,k=5,radius=30,mcap=20,temporal=1); \
          restir-gi[-biased][-nrc][:k=N,radius=PX,mcap=X,temporal=0|1,jitter=0|1] (screen-space ReSTIR GI, defaults k=3,radius=30,mcap=30); \
          wsrestir-gi[-biased][-nrc][:samples=N,cell=S,dmin=F,mcap=X,temporal=0|1,jitter=0|1] (world-space ReSTIR GI, defaults samples=3,cell=0.1,dmin=0.01,mcap=30); \
-         -nrc: the reconnection vertex's radiance from the cache"
+         -nrc: the reconnection vertex's radiance from the cache; \
+         ddgi-TERMINATION[:probes=N,rays=R,hysteresis=H,radiance=full|indirect] (paths ending in a DDGI probe volume \
+         updated every frame, e.g. ddgi-secondary; probes: per axis, default 8 along the longest)"
     )
 }
 
@@ -283,6 +294,47 @@ impl FromStr for PassSpec {
             }
             set.validate().map_err(|e| format!("pass `{s}`: {e}"))?;
             return Ok(Self::RestirDi(set));
+        }
+        if let Some(rest) = s.strip_prefix("ddgi-") {
+            let (term, params) = rest.split_once(':').unwrap_or((rest, ""));
+            // `diffuse:R` style terminations take no parameters here (their defaults).
+            let termination = term
+                .parse::<Termination>()
+                .map_err(|e| format!("pass `{s}`: {e}"))?;
+            let mut settings = crate::ddgi::DdgiSettings::default();
+            for param in pass_params(s, params) {
+                let p = param?;
+                match p.key {
+                    "probes" => {
+                        let n = p.count()?;
+                        settings.counts = Some(glam::UVec3::splat(n));
+                    }
+                    "rays" => settings.rays_per_probe = p.count()?,
+                    "hysteresis" => settings.hysteresis = p.real()?,
+                    "radiance" => {
+                        settings.radiance = match p.value {
+                            "full" => crate::ddgi::ProbeRadiance::Full,
+                            "indirect" => crate::ddgi::ProbeRadiance::Indirect,
+                            _ => return Err(p.bad()),
+                        }
+                    }
+                    k => {
+                        return Err(format!(
+                            "pass `{s}`: unknown parameter `{k}` (known: probes, rays, hysteresis, radiance)"
+                        ));
+                    }
+                }
+            }
+            let unit = nrc_scene::Aabb {
+                min: glam::Vec3::ZERO,
+                max: glam::Vec3::ONE,
+            };
+            crate::ddgi::ProbeVolume::new(&unit, settings)
+                .map_err(|e| format!("pass `{s}`: {e}"))?;
+            return Ok(Self::DdgiTerminated {
+                termination,
+                settings,
+            });
         }
         for (prefix, world) in [("wsrestir-gi", true), ("restir-gi", false)] {
             let Some(rest) = s.strip_prefix(prefix) else {
@@ -400,6 +452,31 @@ impl fmt::Display for PassSpec {
                 }
                 Ok(())
             }
+            Self::DdgiTerminated {
+                termination,
+                settings,
+            } => {
+                write!(f, "ddgi-{termination}")?;
+                let d = crate::ddgi::DdgiSettings::default();
+                let mut params = Vec::new();
+                if let Some(c) = settings.counts {
+                    params.push(format!("probes={}", c.x));
+                }
+                param(
+                    &mut params,
+                    "rays",
+                    settings.rays_per_probe,
+                    d.rays_per_probe,
+                );
+                param(&mut params, "hysteresis", settings.hysteresis, d.hysteresis);
+                if settings.radiance != d.radiance {
+                    params.push("radiance=indirect".into());
+                }
+                if !params.is_empty() {
+                    write!(f, ":{}", params.join(","))?;
+                }
+                Ok(())
+            }
             Self::RestirGi(set) => {
                 f.write_str(if set.world {
                     "wsrestir-gi"
@@ -461,7 +538,10 @@ impl PassSpec {
     /// Whether the pass keeps state across frames (history, reservoirs): such passes get
     /// warm-up frames and a [`RenderPass::reset`] per independent run.
     pub fn is_stateful(&self) -> bool {
-        matches!(self, Self::RestirDi(_) | Self::RestirGi(_))
+        matches!(
+            self,
+            Self::RestirDi(_) | Self::RestirGi(_) | Self::DdgiTerminated { .. }
+        )
     }
 
     /// Whether the pass asks a radiance source anything.
@@ -485,6 +565,10 @@ impl PassSpec {
             }
             Self::RestirDi(set) => Box::new(RestirDiPass::new(set, tracer)),
             Self::RestirGi(set) => Box::new(RestirGiPass::new(set, tracer)),
+            Self::DdgiTerminated {
+                termination,
+                settings,
+            } => Box::new(DdgiTerminatedPass::new(termination, settings, tracer)),
         }
     }
 }
@@ -516,6 +600,9 @@ mod tests {
             "wsrestir-gi",
             "wsrestir-gi-nrc",
             "wsrestir-gi-biased:samples=5,cell=0.05,dmin=0.02,mcap=10,temporal=0,jitter=0",
+            "cache-secondary",
+            "ddgi-secondary",
+            "ddgi-first:probes=4,rays=64,hysteresis=0.9,radiance=indirect",
         ] {
             let spec: PassSpec = name.parse().unwrap();
             assert_eq!(spec.to_string(), name);
@@ -544,6 +631,10 @@ mod tests {
             "restir-gi:samples=3",
             "wsrestir-gi:k=3",
             "wsrestir-gi:cell=0",
+            "ddgi-",
+            "ddgi-secondary:probes=0",
+            "ddgi-secondary:hysteresis=1",
+            "ddgi-secondary:radiance=x",
         ] {
             let e = bad.parse::<PassSpec>().unwrap_err();
             assert!(e.contains("pass"), "{bad}: {e}");
