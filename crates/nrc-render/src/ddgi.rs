@@ -452,43 +452,59 @@ impl ProbeVolume {
             self.settings.hysteresis
         };
         let sharp = self.settings.depth_sharpness;
-        for (p, (rays, st)) in traced.iter().enumerate() {
+        // An integral exponent (the default 50) as a chain of multiplications.
+        let sharp_int = sharp.fract() == 0.0 && sharp.abs() < 1024.0;
+        for (_, st) in &traced {
             stats.add(st);
-            let irr = &mut self.irradiance[p * im.len()..(p + 1) * im.len()];
-            for y in 1..=im.n as usize {
-                for x in 1..=im.n as usize {
-                    let nt = oct_decode(im.coords(x, y));
-                    let (mut sum, mut wsum) = (Vec3::ZERO, 0.0);
-                    for (d, l, _) in rays {
-                        let w = nt.dot(*d).max(0.0);
-                        sum += *l * w;
-                        wsum += w;
-                    }
-                    if wsum > 0.0 {
-                        let i = y * im.side() + x;
-                        irr[i] = irr[i] * h + (sum / wsum * PI) * (1.0 - h);
-                    }
-                }
-            }
-            im.fill_border(irr);
-            let mom = &mut self.moments[p * mm.len()..(p + 1) * mm.len()];
-            for y in 1..=mm.n as usize {
-                for x in 1..=mm.n as usize {
-                    let nt = oct_decode(mm.coords(x, y));
-                    let (mut sum, mut wsum) = (Vec2::ZERO, 0.0);
-                    for (d, _, dist) in rays {
-                        let w = nt.dot(*d).max(0.0).powf(sharp);
-                        sum += Vec2::new(*dist, dist * dist) * w;
-                        wsum += w;
-                    }
-                    if wsum > 0.0 {
-                        let i = y * mm.side() + x;
-                        mom[i] = mom[i] * h + (sum / wsum) * (1.0 - h);
-                    }
-                }
-            }
-            mm.fill_border(mom);
         }
+        // Per probe, in parallel (each probe's texels are its own).
+        self.irradiance
+            .par_chunks_mut(im.len())
+            .zip(self.moments.par_chunks_mut(mm.len()))
+            .zip(traced.par_iter())
+            .for_each(|((irr, mom), (rays, _))| {
+                for y in 1..=im.n as usize {
+                    for x in 1..=im.n as usize {
+                        let nt = oct_decode(im.coords(x, y));
+                        let (mut sum, mut wsum) = (Vec3::ZERO, 0.0);
+                        for (d, l, _) in rays {
+                            let w = nt.dot(*d);
+                            if w > 0.0 {
+                                sum += *l * w;
+                                wsum += w;
+                            }
+                        }
+                        if wsum > 0.0 {
+                            let i = y * im.side() + x;
+                            irr[i] = irr[i] * h + (sum / wsum * PI) * (1.0 - h);
+                        }
+                    }
+                }
+                im.fill_border(irr);
+                for y in 1..=mm.n as usize {
+                    for x in 1..=mm.n as usize {
+                        let nt = oct_decode(mm.coords(x, y));
+                        let (mut sum, mut wsum) = (Vec2::ZERO, 0.0);
+                        for (d, _, dist) in rays {
+                            let c = nt.dot(*d);
+                            if c > 0.0 {
+                                let w = if sharp_int {
+                                    c.powi(sharp as i32)
+                                } else {
+                                    c.powf(sharp)
+                                };
+                                sum += Vec2::new(*dist, dist * dist) * w;
+                                wsum += w;
+                            }
+                        }
+                        if wsum > 0.0 {
+                            let i = y * mm.side() + x;
+                            mom[i] = mom[i] * h + (sum / wsum) * (1.0 - h);
+                        }
+                    }
+                }
+                mm.fill_border(mom);
+            });
         self.frames += 1;
         stats
     }
