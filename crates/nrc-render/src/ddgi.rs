@@ -226,6 +226,11 @@ impl ProbeVolume {
         {
             return Err("ddgi: rays per probe and texels per side must be at least 1".into());
         }
+        if settings.rays_per_probe > 1 << 14
+            || settings.irradiance_texels.max(settings.moment_texels) > 64
+        {
+            return Err("ddgi: at most 16384 rays per probe and 64 texels per side".into());
+        }
         if !(0.0..1.0).contains(&settings.hysteresis) {
             return Err(format!(
                 "ddgi: hysteresis must be in [0, 1), got {}",
@@ -238,10 +243,11 @@ impl ProbeVolume {
             UVec3::new(c.x as u32, c.y as u32, c.z as u32).max(UVec3::splat(2))
         });
         if counts.min_element() == 0
-            || counts.x as u64 * counts.y as u64 * counts.z as u64 > 1 << 20
+            || counts.x as u64 * counts.y as u64 * counts.z as u64 > 1 << 16
         {
+            // 2^16 probes of the default maps hold about 280 MB.
             return Err(format!(
-                "ddgi: probe counts {counts} must be at least 1 and at most 2^20 in all"
+                "ddgi: probe counts {counts} must be at least 1 and at most 65536 in all"
             ));
         }
         let spacing = ext / counts.as_vec3();

@@ -367,13 +367,14 @@ impl FromStr for PassSpec {
                     ("mcap", _) => set.m_cap = p.real()?,
                     ("temporal", _) => set.temporal = p.flag()?,
                     ("jitter", _) => set.jitter = p.flag()?,
+                    ("jacobian", _) => set.jacobian = p.flag()?,
                     (k, _) => {
                         return Err(format!(
                             "pass `{s}`: unknown parameter `{k}` (known: {})",
                             if world {
-                                "samples, cell, dmin, mcap, temporal, jitter"
+                                "samples, cell, dmin, mcap, temporal, jitter, jacobian"
                             } else {
-                                "k, radius, mcap, temporal, jitter"
+                                "k, radius, mcap, temporal, jitter, jacobian"
                             }
                         ));
                     }
@@ -511,6 +512,12 @@ impl fmt::Display for PassSpec {
                     set.temporal as u32,
                     d.temporal as u32,
                 );
+                param(
+                    &mut params,
+                    "jacobian",
+                    set.jacobian as u32,
+                    d.jacobian as u32,
+                );
                 param(&mut params, "jitter", set.jitter as u32, d.jitter as u32);
                 if !params.is_empty() {
                     write!(f, ":{}", params.join(","))?;
@@ -599,7 +606,7 @@ mod tests {
             "restir-gi-biased-nrc:k=5,radius=12",
             "wsrestir-gi",
             "wsrestir-gi-nrc",
-            "wsrestir-gi-biased:samples=5,cell=0.05,dmin=0.02,mcap=10,temporal=0,jitter=0",
+            "wsrestir-gi-biased:samples=5,cell=0.05,dmin=0.02,mcap=10,temporal=0,jacobian=0,jitter=0",
             "cache-secondary",
             "ddgi-secondary",
             "ddgi-first:probes=4,rays=64,hysteresis=0.9,radiance=indirect",
@@ -627,6 +634,13 @@ mod tests {
             "restir-di:nope=1",
             "restir-di:light=0,bsdf=0",
             "restir-di:mcap=-1",
+            "restir-di:light=4294967295,bsdf=1",
+            "restir-di:k=100000",
+            "restir-gi:k=4000000000",
+            "wsrestir-gi:samples=100000",
+            "ddgi-secondary:probes=100",
+            "ddgi-secondary:rays=1000000000",
+            "restir-di:radius=nan",
             "restir-gi-nrc-biased",
             "restir-gi:samples=3",
             "wsrestir-gi:k=3",

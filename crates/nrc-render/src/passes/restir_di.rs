@@ -40,6 +40,9 @@ use crate::sampler::PixelSampler;
 use crate::source::RadianceQuery;
 use crate::transport::Vertex;
 
+/// The largest candidate or neighbour count a resampling pass accepts.
+pub const MAX_COUNT: u32 = 1024;
+
 /// ReSTIR DI's parameters (defaults: Bitterli et al. 2020's interactive settings).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct RestirDiSettings {
@@ -80,6 +83,15 @@ impl Default for RestirDiSettings {
 impl RestirDiSettings {
     /// Errors for settings that cannot work.
     pub fn validate(&self) -> Result<(), String> {
+        // Bounds against absurd values: each one is a loop per pixel.
+        if self.light_candidates > MAX_COUNT
+            || self.bsdf_candidates > MAX_COUNT
+            || self.spatial_neighbours > MAX_COUNT
+        {
+            return Err(format!(
+                "restir-di: candidate and neighbour counts must be at most {MAX_COUNT}"
+            ));
+        }
         if self.light_candidates + self.bsdf_candidates == 0 {
             return Err("restir-di: at least one candidate (light or BSDF) is needed".into());
         }

@@ -91,6 +91,9 @@ pub struct RestirGiSettings {
     pub m_cap: f32,
     /// Jitter camera rays in the pixel.
     pub jitter: bool,
+    /// Carry `W` across a shift with the reconnection Jacobian (off: the biased shortcut of
+    /// reusing `W` unchanged; an ablation and the tests' negative control).
+    pub jacobian: bool,
 }
 
 impl Default for RestirGiSettings {
@@ -107,6 +110,7 @@ impl Default for RestirGiSettings {
             d_min: 0.01,
             m_cap: 30.0,
             jitter: true,
+            jacobian: true,
         }
     }
 }
@@ -115,6 +119,10 @@ impl RestirGiSettings {
     /// Errors for settings that cannot work.
     pub fn validate(&self) -> Result<(), String> {
         let positive = |x: f32| x > 0.0 && x.is_finite();
+        let max = super::restir_di::MAX_COUNT;
+        if self.spatial_neighbours > max || self.grid_samples > max {
+            return Err(format!("neighbour and sample counts must be at most {max}"));
+        }
         if !(self.spatial_radius >= 0.0 && self.spatial_radius.is_finite()) {
             return Err(format!(
                 "spatial radius must be finite and ≥ 0, got {}",
@@ -237,6 +245,16 @@ impl RestirGiPass {
             tracer: *tracer,
             history: None,
             frame: None,
+        }
+    }
+
+    /// The factor carrying a donor's `W` to the receiver: the bounded reconnection Jacobian, or
+    /// 1 with the Jacobian switched off.
+    fn shift_jacobian(&self, receiver: Vec3, donor: Vec3, y: &GiSample) -> f32 {
+        if self.settings.jacobian {
+            bounded_jacobian(receiver, donor, y)
+        } else {
+            1.0
         }
     }
 
@@ -424,7 +442,7 @@ impl RestirGiPass {
         let mut is_own = out.merge(own, own.target, s.next_1d());
         for (o, ov) in others {
             let (t, j) = match o.sample {
-                Some(y) => (target_at(v, &y), bounded_jacobian(v.si.p, ov.si.p, &y)),
+                Some(y) => (target_at(v, &y), self.shift_jacobian(v.si.p, ov.si.p, &y)),
                 None => (0.0, 0.0),
             };
             if out.merge_shifted(o, t, j, s.next_1d()) {
@@ -435,7 +453,7 @@ impl RestirGiPass {
             Some(y) if !self.settings.biased => {
                 let mut z = own.m;
                 for (o, ov) in others {
-                    if bounded_jacobian(v.si.p, ov.si.p, &y) > 0.0
+                    if self.shift_jacobian(v.si.p, ov.si.p, &y) > 0.0
                         && target_at(ov, &y) > 0.0
                         && visible_between(scene, ov.si.p, ov.si.ng, y.x, y.n, stats)
                     {
