@@ -166,6 +166,41 @@ impl OctMap {
             + (at(x0, y1) * ((1.0 - fx) * fy) + at(x1, y1) * (fx * fy))
     }
 
+    /// Blends one frame's rays `(direction, radiance, distance)` into every interior texel of
+    /// `texels` with history weight `h`: the texel gets `Σ w value / Σ w` over the rays, `w` the
+    /// `weight` of the cosine between the texel's direction and the ray (rays behind it skip);
+    /// then the border is filled.
+    fn blend<T>(
+        &self,
+        texels: &mut [T],
+        rays: &[(Vec3, Vec3, f32)],
+        h: f32,
+        weight: impl Fn(f32) -> f32,
+        value: impl Fn(Vec3, Vec3, f32) -> T,
+    ) where
+        T: Copy + Default + std::ops::Mul<f32, Output = T> + std::ops::Add<Output = T>,
+    {
+        for y in 1..=self.n as usize {
+            for x in 1..=self.n as usize {
+                let nt = oct_decode(self.coords(x, y));
+                let (mut sum, mut wsum) = (T::default(), 0.0);
+                for &(d, l, dist) in rays {
+                    let c = nt.dot(d);
+                    if c > 0.0 {
+                        let w = weight(c);
+                        sum = sum + value(d, l, dist) * w;
+                        wsum += w;
+                    }
+                }
+                if wsum > 0.0 {
+                    let i = y * self.side() + x;
+                    texels[i] = texels[i] * h + sum * ((1.0 - h) / wsum);
+                }
+            }
+        }
+        self.fill_border(texels);
+    }
+
     /// Copies every border texel from the interior texel it wraps to.
     fn fill_border<T: Copy>(&self, texels: &mut [T]) {
         let s = self.side();
@@ -469,47 +504,15 @@ impl ProbeVolume {
             .zip(self.moments.par_chunks_mut(mm.len()))
             .zip(traced.par_iter())
             .for_each(|((irr, mom), (rays, _))| {
-                for y in 1..=im.n as usize {
-                    for x in 1..=im.n as usize {
-                        let nt = oct_decode(im.coords(x, y));
-                        let (mut sum, mut wsum) = (Vec3::ZERO, 0.0);
-                        for (d, l, _) in rays {
-                            let w = nt.dot(*d);
-                            if w > 0.0 {
-                                sum += *l * w;
-                                wsum += w;
-                            }
-                        }
-                        if wsum > 0.0 {
-                            let i = y * im.side() + x;
-                            irr[i] = irr[i] * h + (sum / wsum * PI) * (1.0 - h);
-                        }
+                im.blend(irr, rays, h, |c| c, |_, l, _| l * PI);
+                let w = |c: f32| {
+                    if sharp_int {
+                        c.powi(sharp as i32)
+                    } else {
+                        c.powf(sharp)
                     }
-                }
-                im.fill_border(irr);
-                for y in 1..=mm.n as usize {
-                    for x in 1..=mm.n as usize {
-                        let nt = oct_decode(mm.coords(x, y));
-                        let (mut sum, mut wsum) = (Vec2::ZERO, 0.0);
-                        for (d, _, dist) in rays {
-                            let c = nt.dot(*d);
-                            if c > 0.0 {
-                                let w = if sharp_int {
-                                    c.powi(sharp as i32)
-                                } else {
-                                    c.powf(sharp)
-                                };
-                                sum += Vec2::new(*dist, dist * dist) * w;
-                                wsum += w;
-                            }
-                        }
-                        if wsum > 0.0 {
-                            let i = y * mm.side() + x;
-                            mom[i] = mom[i] * h + (sum / wsum) * (1.0 - h);
-                        }
-                    }
-                }
-                mm.fill_border(mom);
+                };
+                mm.blend(mom, rays, h, w, |_, _, d| Vec2::new(d, d * d));
             });
         self.frames += 1;
         stats
