@@ -75,6 +75,19 @@ pub struct CompareArgs {
     #[arg(long, default_value_t = 5)]
     pub sweep_steps: u32,
 
+    /// Frames to equal error (the DDGI-resampling paper's Table 1): after its runs, each method
+    /// renders up to this many consecutive frames from one state (after the untimed warm-up),
+    /// averaged progressively; the report gives the frames and milliseconds each needs for its
+    /// mean to reach the MAPE of `--converge-target`'s first frame, and `frames-to-error.png`
+    /// plots the curves. List the target first: the methods after it stop at twice the frames
+    /// they needed.
+    #[arg(long, value_name = "FRAMES")]
+    pub converge: Option<u32>,
+
+    /// The method whose first frame sets the error of `--converge` (default: the first).
+    #[arg(long, value_name = "METHOD", requires = "converge")]
+    pub converge_target: Option<MethodSpec>,
+
     /// Skip HDR-FLIP (the costliest metric).
     #[arg(long)]
     pub no_flip: bool,
@@ -138,6 +151,18 @@ fn validate(args: &CompareArgs) -> Result<Budget> {
         "--sweep-steps must be between 1 and 16, got {}",
         args.sweep_steps
     );
+    if let Some(f) = args.converge {
+        ensure!(
+            (1..=1_000_000).contains(&f),
+            "--converge must be between 1 and 1000000 frames, got {f}"
+        );
+    }
+    if let Some(t) = &args.converge_target {
+        ensure!(
+            args.methods.contains(t),
+            "--converge-target {t} is not one of --methods"
+        );
+    }
     let mut seen = std::collections::HashSet::new();
     for m in &args.methods {
         ensure!(seen.insert(m.to_string()), "method {m} is listed twice");
@@ -196,6 +221,14 @@ fn run_comparison(args: &CompareArgs, budget: Budget, scene: &Scene) -> Result<(
         height: h,
         runs: args.runs,
         sweep_steps: args.sweep.then_some(args.sweep_steps),
+        converge: args.converge.map(|frames| nrc_harness::compare::Converge {
+            frames,
+            target: args
+                .converge_target
+                .as_ref()
+                .unwrap_or(&args.methods[0])
+                .to_string(),
+        }),
         flip: !args.no_flip,
         out: args.out.clone(),
         seed: args.seed,

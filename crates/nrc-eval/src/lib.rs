@@ -7,6 +7,8 @@
 //! - [`bias_variance`](mod@bias_variance): bias² and variance from R independent renders;
 //! - [`temporal`]: frame-to-frame change and the error measures |E|, |E′|;
 //! - [`sweep`]: error against time, "time to reach the error of X";
+//! - [`convergence`]: frames to equal error (progressive frames of one state, the
+//!   DDGI-resampling paper's Table 1);
 //! - [`report`], [`plot`], [`png_output`]: `report.md` / `report.json`, error-against-time
 //!   plots (PNG and SVG), false-colour error images; every file written atomically ([`atomic`]).
 //!
@@ -30,6 +32,7 @@
 
 pub mod atomic;
 pub mod bias_variance;
+pub mod convergence;
 pub mod error;
 pub mod flip;
 mod flip_color;

@@ -10,6 +10,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::atomic::atomic_write;
 use crate::bias_variance::BiasVariance;
+use crate::convergence::{ConvergenceSeries, FramesToErrorTable, FramesToReach};
 use crate::error::{EvalError, Result};
 use crate::metrics::{ErrorMetrics, MAPE_EPSILON, REL_MSE_EPSILON};
 use crate::sweep::{SweepSeries, TimeToErrorTable, TimeToReach};
@@ -53,6 +54,11 @@ pub struct Report {
     pub sweeps: Vec<SweepSeries>,
     #[serde(default)]
     pub time_to_error: Vec<TimeToErrorTable>,
+    /// Progressive frames of each method (running-mean error after each frame).
+    #[serde(default)]
+    pub convergence: Vec<ConvergenceSeries>,
+    #[serde(default)]
+    pub frames_to_error: Vec<FramesToErrorTable>,
 }
 
 impl Report {
@@ -70,6 +76,8 @@ impl Report {
             rows: Vec::new(),
             sweeps: Vec::new(),
             time_to_error: Vec::new(),
+            convergence: Vec::new(),
+            frames_to_error: Vec::new(),
         }
     }
 
@@ -95,6 +103,9 @@ impl Report {
         }
         for t in &self.time_to_error {
             time_to_error_markdown(t, &mut md);
+        }
+        for t in &self.frames_to_error {
+            frames_to_error_markdown(t, &mut md);
         }
         if !self.sweeps.is_empty() {
             self.sweep_table(&mut md);
@@ -266,6 +277,57 @@ fn time_to_error_markdown(t: &TimeToErrorTable, md: &mut String) {
         );
     }
     md.push('\n');
+}
+
+fn frames_to_error_markdown(t: &FramesToErrorTable, md: &mut String) {
+    let _ = writeln!(
+        md,
+        "## Frames to reach the {} of {}'s first frame ({})\n",
+        t.metric.label(),
+        t.target_method,
+        fmt_num(t.target_error)
+    );
+    let _ = writeln!(
+        md,
+        "| method | frames | time (ms) | × {}'s time | ms per frame | frames run | {} of their mean |\n|---|---:|---:|---:|---:|---:|---:|",
+        t.target_method,
+        t.metric.label()
+    );
+    for r in &t.rows {
+        let (frames, time) = match r.reach {
+            FramesToReach::Reached { frames, time_ms } => (frames.to_string(), fmt_num(time_ms)),
+            FramesToReach::Extrapolated {
+                frames,
+                time_ms,
+                slope,
+            } => (
+                format!(
+                    "≈ {} (extrapolated, slope {slope:.2})",
+                    fmt_num(frames.round())
+                ),
+                format!("≈ {}", fmt_num(time_ms)),
+            ),
+            FramesToReach::NotReached => ("not reached".into(), "–".into()),
+        };
+        let _ = writeln!(
+            md,
+            "| {} | {frames} | {time} | {} | {} | {} | {} |",
+            r.method,
+            r.time_ratio
+                .map_or("–".to_string(), |x| format!("{}×", fmt_num(x))),
+            fmt_num(r.frame_ms),
+            r.frames_run,
+            fmt_num(r.last_error)
+        );
+    }
+    let _ = writeln!(
+        md,
+        "\nEach method renders consecutive frames of the static view from one state after its untimed warm-up, averaged \
+         progressively; \"frames\" is the first count whose mean is at or below the target, \"time\" their timed milliseconds. \
+         A method still above the target is extrapolated along the power law of its curve's second half when that still \
+         falls faster than frames^{}, else \"not reached\" (its bias).\n",
+        crate::convergence::PLATEAU_SLOPE
+    );
 }
 
 /// Four significant digits; scientific notation outside [1e-3, 1e5).

@@ -16,6 +16,7 @@
 use std::path::PathBuf;
 
 use anyhow::{Context, Result};
+use nrc_eval::convergence::{ConvergencePoint, ConvergenceSeries, frames_to_error_table};
 use nrc_eval::metrics::{MAPE_EPSILON, Metric, REL_MSE_EPSILON, mape, mse, rel_mse, rel_mse_map};
 use nrc_eval::plot::plot_error_vs_time;
 use nrc_eval::png_output::{ColorMap, Scale, write_false_color_png};
@@ -58,9 +59,23 @@ pub struct Comparison {
     pub tracer: PathTracer,
     /// How cache methods are set up.
     pub cache: CacheMethodSettings,
+    /// Frames to equal error (progressive frames of one state), if measured.
+    pub converge: Option<Converge>,
     /// The scene's name (titles) and path (the report).
     pub scene_name: String,
     pub scene_path: String,
+}
+
+/// The frames-to-equal-error measurement (the DDGI-resampling paper's Table 1 protocol, see
+/// `nrc_eval::convergence`): after its runs, each method restarts (untimed warm-up, as for a
+/// run) and renders up to `frames` consecutive frames at the comparison's budget; the error
+/// of their running mean (MAPE, ε = 0.01) after each frame, against the target: the MAPE of
+/// `target`'s first frame. Methods after the target in the list stop at twice the frames
+/// they needed to reach it.
+#[derive(Clone, Debug)]
+pub struct Converge {
+    pub frames: u32,
+    pub target: String,
 }
 
 /// What the comparison loop reports as it goes.
@@ -74,7 +89,9 @@ pub enum Progress<'a> {
 
 /// Frames the comparison renders in all (for progress bars).
 pub fn total_frames(c: &Comparison) -> u64 {
-    c.methods.len() as u64 * (c.runs + c.sweep_steps.unwrap_or(1) - 1) as u64
+    c.methods.len() as u64
+        * (c.runs + c.sweep_steps.unwrap_or(1) - 1 + c.converge.as_ref().map_or(0, |v| v.frames))
+            as u64
 }
 
 /// One rendered frame, as recorded in `runs.json`.
@@ -243,6 +260,7 @@ pub fn compare(
     });
     let mut runs = Vec::new();
     let mut plot_series = Vec::new();
+    let mut target_error: Option<f64> = None;
 
     for spec in &c.methods {
         let mut method = spec.build(&c.tracer, &c.cache);
@@ -356,6 +374,72 @@ pub fn compare(
                 .collect();
         }
         plot_series.push(series);
+
+        if let Some(cv) = &c.converge {
+            method
+                .restart(scene, &scene.camera, w, h, c.runs, base ^ 0xC0_4E26E)
+                .map_err(|e| anyhow::anyhow!("{name}: {e}"))?;
+            // f64 sums: thousands of frames.
+            let mut sum = vec![glam::DVec3::ZERO; (w * h) as usize];
+            let mut curve = ConvergenceSeries {
+                method: name.clone(),
+                points: Vec::new(),
+            };
+            let mut time_ms = 0.0;
+            let mut stop_at = cv.frames;
+            for f in 1..=cv.frames {
+                let seed = pass_seed(base ^ 0xC0_4E26E_C0_4E26E, f);
+                let (frame, _, _) = measure(method.as_mut(), seed, budget)?;
+                time_ms += frame.elapsed.as_secs_f64() * 1e3;
+                for (s, x) in sum.iter_mut().zip(&frame.image.data) {
+                    *s += x.as_dvec3();
+                }
+                let mean = Image::from_data(
+                    w as usize,
+                    h as usize,
+                    sum.iter().map(|s| (*s / f as f64).as_vec3()).collect(),
+                )
+                .expect("the frame's size");
+                let (m, _) = errors(&mean, &ref_view, false, &name)?;
+                curve.points.push(ConvergencePoint {
+                    frames: f,
+                    time_ms,
+                    metrics: m,
+                });
+                progress(Progress::Frame);
+                if f == 1 && name == cv.target {
+                    target_error = Some(m.mape);
+                }
+                if stop_at == cv.frames
+                    && let Some(t) = target_error
+                    && m.mape <= t
+                {
+                    stop_at = (2 * f).min(cv.frames);
+                }
+                if f >= stop_at {
+                    break;
+                }
+            }
+            report.convergence.push(curve);
+        }
+    }
+    if let Some(cv) = &c.converge {
+        let table = frames_to_error_table(&report.convergence, Metric::Mape, &cv.target)
+            .with_context(|| format!("frames to equal error (target {})", cv.target))?;
+        report.frames_to_error.push(table);
+        let title = format!(
+            "MAPE of the running mean against accumulated time: {}, {}x{}",
+            c.scene_name, w, h
+        );
+        let curves: Vec<SweepSeries> = report.convergence.iter().map(|s| s.as_sweep()).collect();
+        plot_error_vs_time(
+            &curves,
+            Metric::Mape,
+            &title,
+            &c.out.join("frames-to-error.png"),
+            &c.out.join("frames-to-error.svg"),
+        )
+        .context("cannot draw the frames-to-error plot")?;
     }
 
     if c.sweep_steps.is_some() {

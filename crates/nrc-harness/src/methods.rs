@@ -36,7 +36,8 @@ pub fn method_names() -> String {
          pt-<N>spp-nonee (the same with next-event estimation off: BSDF sampling only), \
          nrc-<producer>[-<termination>] (a cache trained online, 1 spp; producers: {PRODUCER_NAMES}; terminations: {TERMINATION_NAMES}), \
          restir-di[-biased][:PARAMS], restir-gi[-biased][-nrc][:PARAMS], wsrestir-gi[-biased][-nrc][:PARAMS] \
-         (the resampling passes at 1 spp, see `--pass`; -nrc reads a cache trained online by pt-sl), \
+         ddgi-TERMINATION[:PARAMS], ddgi-restir, nrc-restir, ddgi-nrc-restir [:PARAMS] \
+         (the resampling and probe passes at 1 spp, see `--pass`; -nrc and nrc-restir read a cache trained online by pt-sl), \
          or in general <pass>@<N>spp[+<producer>] (any pass of `--pass`, e.g. pt-light@4spp, cache-first-nonee@2spp+pt-sl)"
     )
 }
@@ -108,7 +109,12 @@ impl FromStr for MethodSpec {
         // The resampling passes by their pass names, at 1 sample per pixel.
         // `-nrc` variants read a cache trained online by `pt-sl` (other producers: the general
         // form, e.g. wsrestir-gi-nrc@1spp+bt).
-        if s.starts_with("restir-") || s.starts_with("wsrestir-") || s.starts_with("ddgi-") {
+        if s.starts_with("restir-")
+            || s.starts_with("wsrestir-")
+            || s.starts_with("ddgi-")
+            || s == "nrc-restir"
+            || s.starts_with("nrc-restir:")
+        {
             let pass: PassSpec = s.parse().map_err(|e: String| err(&e))?;
             let producer = pass.uses_source().then(|| {
                 DEFAULT_PASS_PRODUCER
@@ -547,6 +553,12 @@ mod tests {
             "restir-gi-nrc",
             "wsrestir-gi-nrc@1spp+bt",
             "restir-di@4spp",
+            "ddgi-secondary",
+            "ddgi-restir",
+            "nrc-restir",
+            "nrc-restir:clamp=0.05",
+            "ddgi-nrc-restir",
+            "nrc-restir@1spp+bt",
         ] {
             let spec: MethodSpec = name.parse().unwrap();
             assert_eq!(spec.to_string(), name);

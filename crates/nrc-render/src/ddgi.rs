@@ -37,6 +37,20 @@ pub enum ProbeRadiance {
     /// Eq. 5 (DDGI+): emission at the hit plus the volume's own radiance there; the probes
     /// converge to the full irradiance.
     Full,
+    /// Beyond the paper: emission at the hit plus a radiance source's answer there (the
+    /// neural cache feeding the probes, `ddgi-nrc-*`).
+    Source,
+}
+
+/// A frame's probe rays between [`ProbeVolume::trace_rays`] and [`ProbeVolume::blend`].
+#[derive(Clone, Debug, Default)]
+pub struct ProbeRays {
+    /// Per probe, per ray: direction, radiance so far, hit distance.
+    rays: Vec<Vec<(Vec3, Vec3, f32)>>,
+    /// The queries a radiance source must answer, and the (probe, ray) each belongs to.
+    pub queries: Vec<RadianceQuery>,
+    slots: Vec<(u32, u32)>,
+    pub stats: PathStats,
 }
 
 /// The volume's parameters (defaults: RTXGI's and the paper's).
@@ -441,13 +455,27 @@ impl ProbeVolume {
 
     /// One update: every probe traces its rays and blends them in. `seed` chooses the frame's
     /// rotations and light samples; the result does not depend on the thread count. Returns
-    /// the rays traced.
+    /// the rays traced. With [`ProbeRadiance::Source`] nothing answers the rays' queries here
+    /// (they bring back emission only): use [`ProbeVolume::trace_rays`] and
+    /// [`ProbeVolume::blend`] with a radiance source between them.
     pub fn update(&mut self, scene: &Scene, seed: u64) -> PathStats {
+        let rays = self.trace_rays(scene, seed);
+        let stats = rays.stats;
+        let answers = vec![Vec3::ZERO; rays.queries.len()];
+        self.blend(rays, &answers);
+        stats
+    }
+
+    /// The first half of an update: every probe's rays traced and their radiance found, except
+    /// (for [`ProbeRadiance::Source`]) the reflected radiance at the hits, left as queries for
+    /// a radiance source.
+    pub fn trace_rays(&self, scene: &Scene, seed: u64) -> ProbeRays {
         let n_rays = self.settings.rays_per_probe;
         let radiance = self.settings.radiance;
-        let this = &*self;
-        // Per probe: each ray's direction, radiance and hit distance.
-        let traced: Vec<(Vec<(Vec3, Vec3, f32)>, PathStats)> = (0..self.probe_count())
+        let this = self;
+        // Per probe: each ray's direction, radiance and hit distance, and its query if any.
+        type Traced = (Vec<(Vec3, Vec3, f32)>, Vec<(u32, RadianceQuery)>, PathStats);
+        let traced: Vec<Traced> = (0..self.probe_count())
             .into_par_iter()
             .map(|p| {
                 let mut s = PixelSampler::new(seed, p as u64, 0);
@@ -455,16 +483,17 @@ impl ProbeVolume {
                 let origin = this.probe_position(this.coords_of(p));
                 let max_dist = 1.5 * this.spacing.length();
                 let mut stats = PathStats::default();
+                let mut queries = Vec::new();
                 let rays = (0..n_rays)
                     .map(|r| {
                         let d = rot * fibonacci(r, n_rays);
                         let ray = Ray::new(origin, d);
                         stats.closest_rays += 1;
                         let Some(hit) = scene.intersect(&ray) else {
-                            let le = if radiance == ProbeRadiance::Full {
-                                scene.environment().radiance(d)
-                            } else {
+                            let le = if radiance == ProbeRadiance::Indirect {
                                 Vec3::ZERO
+                            } else {
+                                scene.environment().radiance(d)
                             };
                             return (d, le, max_dist);
                         };
@@ -472,7 +501,13 @@ impl ProbeVolume {
                         let v = Vertex::new(scene, &si, si.wo);
                         let back_face = si.ng.dot(si.wo) < 0.0
                             && !scene.materials()[si.material as usize].double_sided;
-                        let l = this.ray_radiance(scene, &v, radiance, &mut s, &mut stats);
+                        let l = match radiance {
+                            ProbeRadiance::Source => {
+                                queries.push((r, v.query()));
+                                scene.emission(&si)
+                            }
+                            _ => this.ray_radiance(scene, &v, radiance, &mut s, &mut stats),
+                        };
                         // Back faces (inside geometry) shorten the distance (RTXGI).
                         let dist = if back_face {
                             0.2 * hit.t
@@ -482,10 +517,35 @@ impl ProbeVolume {
                         (d, l, dist)
                     })
                     .collect();
-                (rays, stats)
+                (rays, queries, stats)
             })
             .collect();
-        let mut stats = PathStats::default();
+        let mut out = ProbeRays::default();
+        for (p, (rays, queries, st)) in traced.into_iter().enumerate() {
+            out.stats.add(&st);
+            for (r, q) in queries {
+                out.slots.push((p as u32, r));
+                out.queries.push(q);
+            }
+            out.rays.push(rays);
+        }
+        out
+    }
+
+    /// The second half of an update: `answers` (one per query of `rays`, the reflected
+    /// radiance at each hit) added to their rays' radiance, and every probe's rays blended into
+    /// its maps with the hysteresis.
+    pub fn blend(&mut self, mut rays: ProbeRays, answers: &[Vec3]) {
+        assert_eq!(
+            answers.len(),
+            rays.slots.len(),
+            "one answer per probe query"
+        );
+        for (&(p, r), a) in rays.slots.iter().zip(answers) {
+            if a.is_finite() {
+                rays.rays[p as usize][r as usize].1 += *a;
+            }
+        }
         let (im, mm) = (self.irradiance_map, self.moment_map);
         let h = if self.frames == 0 {
             0.0
@@ -495,15 +555,12 @@ impl ProbeVolume {
         let sharp = self.settings.depth_sharpness;
         // An integral exponent (the default 50) as a chain of multiplications.
         let sharp_int = sharp.fract() == 0.0 && sharp.abs() < 1024.0;
-        for (_, st) in &traced {
-            stats.add(st);
-        }
         // Per probe, in parallel (each probe's texels are its own).
         self.irradiance
             .par_chunks_mut(im.len())
             .zip(self.moments.par_chunks_mut(mm.len()))
-            .zip(traced.par_iter())
-            .for_each(|((irr, mom), (rays, _))| {
+            .zip(rays.rays.par_iter())
+            .for_each(|((irr, mom), rays)| {
                 im.blend(irr, rays, h, |c| c, |_, l, _| l * PI);
                 let w = |c: f32| {
                     if sharp_int {
@@ -515,7 +572,6 @@ impl ProbeVolume {
                 mm.blend(mom, rays, h, w, |_, _, d| Vec2::new(d, d * d));
             });
         self.frames += 1;
-        stats
     }
 
     /// The radiance a probe ray brings back from vertex `v` (eq. 4 or eq. 5).
@@ -530,7 +586,8 @@ impl ProbeVolume {
         let rho = v.bsdf.diffuse_reflectance();
         let volume = rho / PI * self.irradiance(v.si.p, v.si.ns, v.wo_world);
         match radiance {
-            ProbeRadiance::Full => scene.emission(&v.si) + volume,
+            // (`Source` rays take their radiance from the source, never from here.)
+            ProbeRadiance::Full | ProbeRadiance::Source => scene.emission(&v.si) + volume,
             ProbeRadiance::Indirect => {
                 // T_{f_d} L_e: the direct light reflected by the hit's diffuse part, by NEE
                 // and BSDF sampling combined by MIS (NEE alone has unbounded variance where

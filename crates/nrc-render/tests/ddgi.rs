@@ -55,19 +55,6 @@ fn octahedral_mapping_round_trips_and_borders_copy_their_wrapped_neighbours() {
     }
 }
 
-/// The emissive enclosure `[-1, 1]³`: every wall emits 1 and reflects diffusely with albedo ½.
-fn enclosure() -> nrc_scene::Scene {
-    let mut b = SceneBuilder::new();
-    let m = b.material(mat::emissive(Vec3::splat(0.5), Vec3::ONE, false));
-    b.mesh(
-        &Mesh::cuboid(Vec3::splat(-1.0), Vec3::splat(1.0), true),
-        m,
-        false,
-    )
-    .camera(Vec3::ZERO, Vec3::X, 60.0);
-    b.build()
-}
-
 /// Mean and largest relative deviation from `expect` over every interior texel of every probe.
 fn texel_stats(v: &ProbeVolume, expect: f32) -> (f32, f32) {
     let (mut sum, mut worst, mut n) = (0.0, 0.0f32, 0);
@@ -92,7 +79,7 @@ fn texel_stats(v: &ProbeVolume, expect: f32) -> (f32, f32) {
 /// 5 % (eq. 4's one-sample NEE at each hit is the noise).
 #[test]
 fn enclosure_probes_converge_at_the_rate_the_hysteresis_predicts() {
-    let scene = enclosure();
+    let scene = common::enclosure(Vec3::X);
     let rho = 0.5f32;
     for (radiance, limit, first) in [
         (ProbeRadiance::Full, 2.0 * PI, PI),
@@ -265,7 +252,7 @@ fn render_frames(
 /// radiance is exact, so the image is `L_e / (1 − ρ) = 2` everywhere (mean within 1 %).
 #[test]
 fn ddgi_secondary_renders_the_enclosure_exactly() {
-    let scene = enclosure();
+    let scene = common::enclosure(Vec3::X);
     let img = render_frames(&scene, "ddgi-secondary:probes=3,hysteresis=0.5", 16, 16, 20);
     let mean = img.data.iter().map(|p| p.x as f64).sum::<f64>() / img.data.len() as f64;
     println!("ddgi-secondary in the enclosure: mean {mean:.4} (exact 2)");

@@ -504,6 +504,29 @@ impl Scene {
         }
     }
 
+    /// The surface description at point `p` of triangle `tri` (a light sample's point), seen
+    /// from direction `wo` (unit, pointing away from the surface): what a ray arriving along
+    /// `-wo` would report there. `p` is projected onto the triangle's plane by barycentrics.
+    pub fn interaction_at(&self, tri: u32, p: Vec3, wo: Vec3) -> SurfaceInteraction {
+        let [a, b, c] = self.triangle_vertices(tri);
+        let (e1, e2, d) = (b - a, c - a, p - a);
+        let (d11, d12, d22) = (e1.dot(e1), e1.dot(e2), e2.dot(e2));
+        let (d1, d2) = (d.dot(e1), d.dot(e2));
+        let den = d11 * d22 - d12 * d12;
+        let (b1, b2) = if den > 0.0 {
+            ((d22 * d1 - d12 * d2) / den, (d11 * d2 - d12 * d1) / den)
+        } else {
+            (0.0, 0.0)
+        };
+        let hit = Hit {
+            t: 0.0,
+            tri,
+            b1: b1.clamp(0.0, 1.0),
+            b2: b2.clamp(0.0, 1.0),
+        };
+        self.interaction(&Ray::new(p + wo, -wo), &hit)
+    }
+
     /// Material parameters at a surface point, textures applied.
     #[inline]
     pub fn pbr(&self, si: &SurfaceInteraction) -> PbrParams {

@@ -8,7 +8,7 @@ use glam::Vec3;
 
 use super::cache_terminated::{CacheTerminatedPass, Termination};
 use super::{FrameInput, PassOutput, PassSpec, RenderPass};
-use crate::ddgi::{DdgiSettings, ProbeVolume};
+use crate::ddgi::{DdgiSettings, ProbeRadiance, ProbeRays, ProbeVolume};
 use crate::path_tracer::PathTracer;
 use crate::source::{RadianceQuery, RadianceSource};
 
@@ -19,6 +19,8 @@ pub struct DdgiTerminatedPass {
     inner: CacheTerminatedPass,
     volume: Option<ProbeVolume>,
     queries: Vec<RadianceQuery>,
+    /// `radiance=nrc`: this frame's probe rays, waiting for the source's answers.
+    rays: Option<ProbeRays>,
     /// Milliseconds of the last probe update.
     pub update_ms: f64,
 }
@@ -30,6 +32,7 @@ impl DdgiTerminatedPass {
             inner: CacheTerminatedPass::new(termination, true, tracer),
             volume: None,
             queries: Vec::new(),
+            rays: None,
             update_ms: 0.0,
         }
     }
@@ -61,17 +64,29 @@ impl RenderPass for DdgiTerminatedPass {
             self.volume = ProbeVolume::new(&input.scene.bounds(), self.settings).ok();
         }
         if let Some(v) = &mut self.volume {
-            v.update(input.scene, input.seed ^ 0xDD61);
+            if self.settings.radiance == ProbeRadiance::Source {
+                // The rays' queries go to the source with the frame's batch (`trace`).
+                self.rays = Some(v.trace_rays(input.scene, input.seed ^ 0xDD61));
+            } else {
+                v.update(input.scene, input.seed ^ 0xDD61);
+            }
         }
         self.update_ms = t.elapsed().as_secs_f64() * 1e3;
     }
 
     fn trace(&mut self, input: &FrameInput) -> Vec<RadianceQuery> {
         self.queries = self.inner.trace(input);
-        Vec::new()
+        self.rays
+            .as_ref()
+            .map_or_else(Vec::new, |r| r.queries.clone())
     }
 
-    fn resolve(&mut self, input: &FrameInput, _answers: &[Vec3]) -> PassOutput {
+    fn resolve(&mut self, input: &FrameInput, answers: &[Vec3]) -> PassOutput {
+        let t = std::time::Instant::now();
+        if let (Some(v), Some(r)) = (&mut self.volume, self.rays.take()) {
+            v.blend(r, answers);
+        }
+        self.update_ms += t.elapsed().as_secs_f64() * 1e3;
         let answers = match &self.volume {
             Some(v) => v.radiance(&self.queries),
             None => vec![Vec3::ZERO; self.queries.len()],

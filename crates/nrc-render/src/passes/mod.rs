@@ -17,6 +17,7 @@
 //! Passes know nothing of burn: the cache reaches them as a [`RadianceSource`].
 
 pub mod cache_terminated;
+pub mod ddgi_restir;
 pub mod ddgi_terminated;
 pub mod hash_grid;
 pub mod path_traced;
@@ -34,6 +35,7 @@ use nrc_scene::{Camera, Image, Scene};
 use crate::path_tracer::{LightStrategy, PathTracer};
 use crate::source::{RadianceQuery, RadianceSource};
 pub use cache_terminated::{CacheTerminatedPass, TERMINATION_NAMES, Termination, TerminationPoint};
+pub use ddgi_restir::{DdgiRestirPass, DdgiRestirSettings, SurfaceLight};
 pub use ddgi_terminated::DdgiTerminatedPass;
 pub use path_traced::PathTracedPass;
 pub use restir_di::{RestirDiPass, RestirDiSettings};
@@ -167,6 +169,11 @@ pub enum PassSpec {
         termination: Termination,
         settings: crate::ddgi::DdgiSettings,
     },
+    /// DDGI resampling: the scene's surfaces as the light of ReSTIR at the primary vertex,
+    /// shining with their emission plus probes' (`ddgi-restir`), the cache's (`nrc-restir`) or
+    /// cache-fed probes' (`ddgi-nrc-restir`) radiance; parameters after a colon (see
+    /// [`DdgiRestirSettings`]), e.g. `nrc-restir:clamp=0.05`.
+    DdgiRestir(DdgiRestirSettings),
 }
 
 impl Default for PassSpec {
@@ -189,7 +196,11 @@ pub fn pass_names() -> String {
          wsrestir-gi[-biased][-nrc][:samples=N,cell=S,dmin=F,mcap=X,temporal=0|1,jitter=0|1] (world-space ReSTIR GI, defaults samples=3,cell=0.1,dmin=0.01,mcap=30); \
          -nrc: the reconnection vertex's radiance from the cache; \
          ddgi-TERMINATION[:probes=N,rays=R,hysteresis=H,radiance=full|indirect] (paths ending in a DDGI probe volume \
-         updated every frame, e.g. ddgi-secondary; probes: per axis, default 8 along the longest)"
+         updated every frame, e.g. ddgi-secondary; probes: per axis, default 8 along the longest; radiance=nrc: \
+         the probe rays' radiance from the cache); \
+         ddgi-restir, nrc-restir, ddgi-nrc-restir[:light=N,bsdf=N,k=N,radius=PX,mcap=X,temporal=0|1,clamp=F,residual=0|1,\
+         requery=0|1,jitter=0|1,probes=N,rays=R,hysteresis=H] (DDGI resampling: every surface a light, lit by probes, \
+         the cache or cache-fed probes; defaults light=8,bsdf=1,k=3,radius=30,mcap=20,clamp=0.1 (G_max = 1/(clamp·diagonal)²))"
     )
 }
 
@@ -295,6 +306,61 @@ impl FromStr for PassSpec {
             set.validate().map_err(|e| format!("pass `{s}`: {e}"))?;
             return Ok(Self::RestirDi(set));
         }
+        for (prefix, light) in [
+            ("ddgi-nrc-restir", SurfaceLight::CacheProbes),
+            ("ddgi-restir", SurfaceLight::Probes),
+            ("nrc-restir", SurfaceLight::Cache),
+        ] {
+            let Some(rest) = s.strip_prefix(prefix) else {
+                continue;
+            };
+            let params = match rest.strip_prefix(':') {
+                Some(p) => p,
+                None if rest.is_empty() => "",
+                None => return Err(err()),
+            };
+            let mut set = DdgiRestirSettings {
+                light,
+                ..Default::default()
+            };
+            for param in pass_params(s, params) {
+                let p = param?;
+                match p.key {
+                    "light" => set.light_candidates = p.count()?,
+                    "bsdf" => set.bsdf_candidates = p.count()?,
+                    "k" => set.spatial_neighbours = p.count()?,
+                    "radius" => set.spatial_radius = p.real()?,
+                    "mcap" => set.m_cap = p.real()?,
+                    "temporal" => set.temporal = p.flag()?,
+                    "clamp" => set.clamp = p.real()?,
+                    "residual" => set.residual = p.flag()?,
+                    "requery" => set.requery = p.flag()?,
+                    "jitter" => set.jitter = p.flag()?,
+                    "probes" if light != SurfaceLight::Cache => {
+                        set.ddgi.counts = Some(glam::UVec3::splat(p.count()?))
+                    }
+                    "rays" if light != SurfaceLight::Cache => {
+                        set.ddgi.rays_per_probe = p.count()?
+                    }
+                    "hysteresis" if light != SurfaceLight::Cache => {
+                        set.ddgi.hysteresis = p.real()?
+                    }
+                    k => {
+                        return Err(format!(
+                            "pass `{s}`: unknown parameter `{k}` (known: light, bsdf, k, radius, mcap, temporal, \
+                             clamp, residual, requery, jitter{})",
+                            if light == SurfaceLight::Cache {
+                                ""
+                            } else {
+                                ", probes, rays, hysteresis"
+                            }
+                        ));
+                    }
+                }
+            }
+            set.validate().map_err(|e| format!("pass `{s}`: {e}"))?;
+            return Ok(Self::DdgiRestir(set));
+        }
         if let Some(rest) = s.strip_prefix("ddgi-") {
             let (term, params) = rest.split_once(':').unwrap_or((rest, ""));
             // `diffuse:R` style terminations take no parameters here (their defaults).
@@ -315,6 +381,7 @@ impl FromStr for PassSpec {
                         settings.radiance = match p.value {
                             "full" => crate::ddgi::ProbeRadiance::Full,
                             "indirect" => crate::ddgi::ProbeRadiance::Indirect,
+                            "nrc" => crate::ddgi::ProbeRadiance::Source,
                             _ => return Err(p.bad()),
                         }
                     }
@@ -470,9 +537,69 @@ impl fmt::Display for PassSpec {
                     d.rays_per_probe,
                 );
                 param(&mut params, "hysteresis", settings.hysteresis, d.hysteresis);
-                if settings.radiance != d.radiance {
-                    params.push("radiance=indirect".into());
+                match settings.radiance {
+                    crate::ddgi::ProbeRadiance::Full => {}
+                    crate::ddgi::ProbeRadiance::Indirect => params.push("radiance=indirect".into()),
+                    crate::ddgi::ProbeRadiance::Source => params.push("radiance=nrc".into()),
                 }
+                if !params.is_empty() {
+                    write!(f, ":{}", params.join(","))?;
+                }
+                Ok(())
+            }
+            Self::DdgiRestir(set) => {
+                f.write_str(match set.light {
+                    SurfaceLight::Probes => "ddgi-restir",
+                    SurfaceLight::Cache => "nrc-restir",
+                    SurfaceLight::CacheProbes => "ddgi-nrc-restir",
+                })?;
+                let d = DdgiRestirSettings::default();
+                let mut params = Vec::new();
+                param(
+                    &mut params,
+                    "light",
+                    set.light_candidates,
+                    d.light_candidates,
+                );
+                param(&mut params, "bsdf", set.bsdf_candidates, d.bsdf_candidates);
+                param(
+                    &mut params,
+                    "k",
+                    set.spatial_neighbours,
+                    d.spatial_neighbours,
+                );
+                param(&mut params, "radius", set.spatial_radius, d.spatial_radius);
+                param(&mut params, "mcap", set.m_cap, d.m_cap);
+                param(
+                    &mut params,
+                    "temporal",
+                    set.temporal as u32,
+                    d.temporal as u32,
+                );
+                param(&mut params, "clamp", set.clamp, d.clamp);
+                param(
+                    &mut params,
+                    "residual",
+                    set.residual as u32,
+                    d.residual as u32,
+                );
+                param(&mut params, "requery", set.requery as u32, d.requery as u32);
+                param(&mut params, "jitter", set.jitter as u32, d.jitter as u32);
+                if let Some(c) = set.ddgi.counts {
+                    params.push(format!("probes={}", c.x));
+                }
+                param(
+                    &mut params,
+                    "rays",
+                    set.ddgi.rays_per_probe,
+                    d.ddgi.rays_per_probe,
+                );
+                param(
+                    &mut params,
+                    "hysteresis",
+                    set.ddgi.hysteresis,
+                    d.ddgi.hysteresis,
+                );
                 if !params.is_empty() {
                     write!(f, ":{}", params.join(","))?;
                 }
@@ -547,7 +674,10 @@ impl PassSpec {
     pub fn is_stateful(&self) -> bool {
         matches!(
             self,
-            Self::RestirDi(_) | Self::RestirGi(_) | Self::DdgiTerminated { .. }
+            Self::RestirDi(_)
+                | Self::RestirGi(_)
+                | Self::DdgiTerminated { .. }
+                | Self::DdgiRestir(_)
         )
     }
 
@@ -555,8 +685,16 @@ impl PassSpec {
     pub fn uses_source(&self) -> bool {
         matches!(
             self,
-            Self::CacheTerminated { .. } | Self::RestirGi(RestirGiSettings { cache: true, .. })
-        )
+            Self::CacheTerminated { .. }
+                | Self::RestirGi(RestirGiSettings { cache: true, .. })
+                | Self::DdgiTerminated {
+                    settings: crate::ddgi::DdgiSettings {
+                        radiance: crate::ddgi::ProbeRadiance::Source,
+                        ..
+                    },
+                    ..
+                }
+        ) || matches!(self, Self::DdgiRestir(s) if s.light != SurfaceLight::Probes)
     }
 
     /// The pass's state, with `tracer`'s depth limit and Russian roulette (its light strategy
@@ -576,6 +714,7 @@ impl PassSpec {
                 termination,
                 settings,
             } => Box::new(DdgiTerminatedPass::new(termination, settings, tracer)),
+            Self::DdgiRestir(set) => Box::new(DdgiRestirPass::new(set, tracer)),
         }
     }
 }
@@ -610,6 +749,12 @@ mod tests {
             "cache-secondary",
             "ddgi-secondary",
             "ddgi-first:probes=4,rays=64,hysteresis=0.9,radiance=indirect",
+            "ddgi-secondary:radiance=nrc",
+            "ddgi-restir",
+            "nrc-restir",
+            "ddgi-nrc-restir",
+            "ddgi-restir:light=4,bsdf=2,k=0,radius=10,mcap=5,temporal=0,clamp=0,residual=0,requery=1,jitter=0,probes=4,rays=64,hysteresis=0.9",
+            "nrc-restir:clamp=0.05",
         ] {
             let spec: PassSpec = name.parse().unwrap();
             assert_eq!(spec.to_string(), name);
@@ -649,6 +794,13 @@ mod tests {
             "ddgi-secondary:probes=0",
             "ddgi-secondary:hysteresis=1",
             "ddgi-secondary:radiance=x",
+            "ddgi-restirx",
+            "nrc-restir:probes=4",
+            "nrc-restir:requery=1",
+            "ddgi-restir:bsdf=0",
+            "ddgi-restir:clamp=-1",
+            "ddgi-restir:clamp=nan",
+            "ddgi-nrc-restir:probes=0",
         ] {
             let e = bad.parse::<PassSpec>().unwrap_err();
             assert!(e.contains("pass"), "{bad}: {e}");

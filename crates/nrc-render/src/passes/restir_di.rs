@@ -151,20 +151,20 @@ fn own_pdf(y: &LightSample) -> f32 {
 
 /// What light sample `y` brings to vertex `v`, unshadowed.
 #[derive(Clone, Copy, Debug)]
-struct Contribution {
+pub(super) struct Contribution {
     /// `f · L · |cos θ|` per unit of the sample's own measure (`G` included for area lights).
-    c: Vec3,
+    pub c: Vec3,
     /// `p̂`: the luminance of `c`.
-    target: f32,
+    pub target: f32,
     /// Density of the light sampler drawing `y`, own measure.
-    p_light: f32,
+    pub p_light: f32,
     /// Density of BSDF sampling at `v` reaching `y`, own measure (0 for delta lights).
-    p_bsdf: f32,
-    inc: Incident,
+    pub p_bsdf: f32,
+    pub inc: Incident,
 }
 
 #[inline]
-fn contribution(v: &Vertex, y: &LightSample) -> Option<Contribution> {
+pub(super) fn contribution(v: &Vertex, y: &LightSample) -> Option<Contribution> {
     let inc = y.incident(v.si.p)?;
     let wi = v.frame.to_local(inc.wi);
     let f = v.bsdf.eval(v.wo, wi) * wi.z.abs();
@@ -198,7 +198,13 @@ fn target_at(v: &Vertex, y: &LightSample) -> f32 {
 
 /// Whether `v` sees the light of `y` (arriving as `inc`); counts the ray.
 #[inline]
-fn sees(scene: &Scene, v: &Vertex, y: &LightSample, inc: &Incident, stats: &mut PathStats) -> bool {
+pub(super) fn sees(
+    scene: &Scene,
+    v: &Vertex,
+    y: &LightSample,
+    inc: &Incident,
+    stats: &mut PathStats,
+) -> bool {
     stats.shadow_rays += 1;
     !scene.occluded(&y.shadow_ray(v.si.p, v.si.ng, inc))
 }
@@ -260,8 +266,9 @@ impl RestirDiPass {
     }
 
     /// Steps 2–3: merges `others` (reservoirs with their owners' vertices) into `own` (the
-    /// reservoir of `v`), finishing with the unbiased or the biased `Z`. Returns the merged
-    /// reservoir and whether its sample is `own`'s.
+    /// reservoir of `v`), finishing with the unbiased or the biased `Z`
+    /// ([`super::screen::combine`]). Returns the merged reservoir and whether its sample is
+    /// `own`'s.
     fn combine(
         &self,
         scene: &Scene,
@@ -271,31 +278,15 @@ impl RestirDiPass {
         s: &mut PixelSampler,
         stats: &mut PathStats,
     ) -> (DiReservoir, bool) {
-        let mut out = DiReservoir::new();
-        let mut is_own = out.merge(own, own.target, s.next_1d());
-        for (o, _) in others {
-            let t = o.sample.map_or(0.0, |y| target_at(v, &y));
-            if out.merge(o, t, s.next_1d()) {
-                is_own = false;
-            }
-        }
-        let z = match out.sample {
-            None => out.m,
-            Some(_) if self.settings.biased => out.m,
-            Some(y) => {
-                let mut z = own.m;
-                for (o, ov) in others {
-                    if let Some(c) = contribution(ov, &y)
-                        && sees(scene, ov, &y, &c.inc, stats)
-                    {
-                        z += o.m;
-                    }
-                }
-                z
-            }
-        };
-        out.finish(z);
-        (out, is_own)
+        super::screen::combine(
+            v,
+            own,
+            others,
+            self.settings.biased,
+            s,
+            target_at,
+            |ov, y| contribution(ov, y).is_some_and(|c| sees(scene, ov, y, &c.inc, stats)),
+        )
     }
 }
 
@@ -357,16 +348,11 @@ impl RenderPass for RestirDiPass {
             let (Some(p), Some(h)) = (usable(&g.primary[i], direct), history.as_ref()) else {
                 return (own, stats);
             };
-            let s_chain = (i % g.spp as usize) as u32;
-            let Some(j) = h.g.reproject(p.v.si.p, p.v.si.ns, s_chain) else {
+            let Some((j, pv)) = h.g.temporal_neighbour(&p.v, i) else {
                 return (own, stats);
             };
             let mut prev = h.res[j];
             prev.cap(cap);
-            let pv = &h.g.primary[j]
-                .as_ref()
-                .expect("reprojection finds a vertex")
-                .v;
             let mut s = stream(seed, i, Phase::Temporal);
             let (mut r, is_own) =
                 self.combine(scene, &p.v, &own, &[(prev, pv)], &mut s, &mut stats);

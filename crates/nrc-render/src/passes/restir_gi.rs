@@ -564,17 +564,11 @@ impl RenderPass for RestirGiPass {
             if !sh.primary {
                 return (own, stats);
             }
-            let Some(j) =
-                h.g.reproject(sh.v.si.p, sh.v.si.ns, (i % g.spp as usize) as u32)
-            else {
+            let Some((j, pv)) = h.g.temporal_neighbour(&sh.v, i) else {
                 return (own, stats);
             };
             let mut prev = h.res[j];
             prev.cap(set.m_cap);
-            let pv = &h.g.primary[j]
-                .as_ref()
-                .expect("reprojection finds a vertex")
-                .v;
             let mut s = stream(seed, i, Phase::Temporal);
             let (mut r, is_own) =
                 self.combine(scene, &sh.v, &own, &[(prev, pv)], &mut s, &mut stats);

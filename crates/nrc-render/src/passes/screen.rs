@@ -13,6 +13,7 @@ use rayon::prelude::*;
 
 use super::{FrameInput, PassOutput, PassStats, PhaseTimes};
 use crate::path_tracer::PathStats;
+use crate::reservoir::Reservoir;
 use crate::sampler::PixelSampler;
 use crate::transport::Vertex;
 
@@ -136,6 +137,13 @@ impl GBuffer {
         similar(q, n, depth).then_some(j)
     }
 
+    /// The temporal neighbour in this (previous) frame of the current frame's pixel sample `i`
+    /// with vertex `v`: its index and vertex (see [`GBuffer::reproject`]).
+    pub fn temporal_neighbour(&self, v: &Vertex, i: usize) -> Option<(usize, &Vertex)> {
+        let j = self.reproject(v.si.p, v.si.ns, (i % self.spp as usize) as u32)?;
+        Some((j, &self.primary[j].as_ref()?.v))
+    }
+
     /// Up to `k` spatial neighbours of pixel sample `i` (chain `s`): pixels uniform in a disc
     /// of `radius` pixels, kept where their vertex is similar to `me` (Bitterli et al. 2020:
     /// rejected candidates are not replaced).
@@ -218,6 +226,45 @@ pub fn visible_between(
 ) -> bool {
     stats.shadow_rays += 1;
     !scene.occluded(&nrc_scene::spawn_ray_between(a, ng_a, b, ng_b))
+}
+
+/// Merges `others` (finished reservoirs with their owners' vertices) into `own` (the reservoir
+/// of `v`) for a sample type whose target at a vertex is `target` (the same measure at every
+/// vertex: no shift Jacobian), finishing with the unbiased `Z` (Bitterli et al. 2020, Alg. 6:
+/// the `M` of the inputs whose owner has `p̂ > 0` for the chosen `y` and, by `sees`, sees it)
+/// or, `biased`, `Z = Σ M`. Returns the merged reservoir and whether its sample is `own`'s.
+pub fn combine<T: Copy>(
+    v: &Vertex,
+    own: &Reservoir<T>,
+    others: &[(Reservoir<T>, &Vertex)],
+    biased: bool,
+    u: &mut PixelSampler,
+    target: impl Fn(&Vertex, &T) -> f32,
+    mut sees: impl FnMut(&Vertex, &T) -> bool,
+) -> (Reservoir<T>, bool) {
+    let mut out = Reservoir::new();
+    let mut is_own = out.merge(own, own.target, u.next_1d());
+    for (o, _) in others {
+        let t = o.sample.map_or(0.0, |y| target(v, &y));
+        if out.merge(o, t, u.next_1d()) {
+            is_own = false;
+        }
+    }
+    let z = match out.sample {
+        None => out.m,
+        Some(_) if biased => out.m,
+        Some(y) => {
+            let mut z = own.m;
+            for (o, ov) in others {
+                if target(ov, &y) > 0.0 && sees(ov, &y) {
+                    z += o.m;
+                }
+            }
+            z
+        }
+    };
+    out.finish(z);
+    (out, is_own)
 }
 
 /// `f` over the pixel samples `0..n`, in parallel, results in order.

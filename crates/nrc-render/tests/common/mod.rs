@@ -4,7 +4,10 @@
 #![allow(dead_code)]
 
 use glam::Vec3;
-use nrc_render::{PathTracer, RenderOutput, RenderSettings, render};
+use nrc_render::passes::{self, FrameInput, PassSpec};
+use nrc_render::{
+    PathTracer, PixelSampler, RadianceSource, RenderOutput, RenderSettings, ZeroSource, render,
+};
 use nrc_scene::{Camera, Image, Scene, SceneDescription};
 use std::path::PathBuf;
 
@@ -331,4 +334,153 @@ pub fn test_sky(n: usize) -> nrc_scene::Environment {
     nrc_scene::Environment::from_texels(std::path::Path::new("<test sky>"), w, h, texels, 1.0, 30.0)
         .unwrap()
         .0
+}
+
+/// The last of `frames` frames of `spec` (state restarted first), seed `seed`.
+pub fn last_frame(
+    scene: &Scene,
+    spec: &PassSpec,
+    tracer: &PathTracer,
+    w: u32,
+    h: u32,
+    frames: u32,
+    seed: u64,
+) -> Image {
+    last_frame_with(scene, spec, tracer, w, h, frames, seed, &ZeroSource)
+}
+
+/// [`last_frame`] with the queries answered by `source`.
+#[allow(clippy::too_many_arguments)]
+pub fn last_frame_with(
+    scene: &Scene,
+    spec: &PassSpec,
+    tracer: &PathTracer,
+    w: u32,
+    h: u32,
+    frames: u32,
+    seed: u64,
+    source: &dyn RadianceSource,
+) -> Image {
+    let mut pass = spec.build(tracer);
+    pass.reset();
+    let mut image = None;
+    for f in 0..frames {
+        let input = FrameInput {
+            scene,
+            camera: &scene.camera,
+            width: w,
+            height: h,
+            spp: 1,
+            seed: nrc_render::pass_seed(seed, f),
+        };
+        image = Some(passes::run(pass.as_mut(), &input, source).image);
+    }
+    image.unwrap()
+}
+
+/// Per pixel and channel: the mean of `runs` against the reference (its variance of one
+/// sample `ref_var` over `ref_spp`), as the largest |z| and the count of pixel channels
+/// beyond the Bonferroni bound for a family-wise false alarm of 10⁻³.
+pub fn per_pixel_z(
+    runs: &[Image],
+    reference: &Image,
+    ref_var: &Image,
+    ref_spp: u32,
+) -> (f64, usize, f64) {
+    let n = runs.len() as f64;
+    let cells = reference.data.len() * 3;
+    let bound = z_two_sided(1e-3 / cells as f64);
+    let (mut worst, mut beyond) = (0.0f64, 0);
+    for p in 0..reference.data.len() {
+        for c in 0..3 {
+            let xs: Vec<f64> = runs.iter().map(|r| r.data[p][c] as f64).collect();
+            let mean = xs.iter().sum::<f64>() / n;
+            let var = xs.iter().map(|x| (x - mean) * (x - mean)).sum::<f64>() / (n - 1.0);
+            let se2 = var / n + ref_var.data[p][c] as f64 / ref_spp as f64;
+            if se2 <= 0.0 {
+                assert!(
+                    (mean - reference.data[p][c] as f64).abs() < 1e-6,
+                    "pixel {p}: {mean} with no variance"
+                );
+                continue;
+            }
+            let z = (mean - reference.data[p][c] as f64) / se2.sqrt();
+            worst = worst.max(z.abs());
+            if z.abs() > bound && std::env::var("DIAG").is_ok() {
+                eprintln!(
+                    "pixel ({}, {}) channel {c}: mean {mean:.4} ref {:.4} z {z:.1}",
+                    p % 24,
+                    p / 24,
+                    reference.data[p][c]
+                );
+            }
+            if z.abs() > bound {
+                beyond += 1;
+            }
+        }
+    }
+    (worst, beyond, bound)
+}
+
+/// The path-traced radiance through each pixel's centre (`spp` samples): the mean and the
+/// variance of one sample.
+pub fn reference_at_centres(
+    scene: &Scene,
+    tracer: &PathTracer,
+    w: u32,
+    h: u32,
+    spp: u32,
+) -> (Image, Image) {
+    reference_at_centres_from(scene, &scene.camera, tracer, w, h, spp)
+}
+
+/// [`reference_at_centres`] from another camera.
+pub fn reference_at_centres_from(
+    scene: &Scene,
+    camera: &nrc_scene::Camera,
+    tracer: &PathTracer,
+    w: u32,
+    h: u32,
+    spp: u32,
+) -> (Image, Image) {
+    let pixels: Vec<(glam::Vec3, glam::Vec3)> = (0..w * h)
+        .map(|p| {
+            let (x, y) = ((p % w) as f32 + 0.5, (p / w) as f32 + 0.5);
+            let ray = camera.generate_ray(glam::Vec2::new(x, y), w, h);
+            let (mut sum, mut sum2) = (glam::DVec3::ZERO, glam::DVec3::ZERO);
+            let mut stats = nrc_render::PathStats::default();
+            for s in 0..spp {
+                let mut sampler = PixelSampler::new(77, p as u64, s as u64);
+                let l = tracer
+                    .radiance(scene, ray, &mut sampler, &mut stats)
+                    .as_dvec3();
+                sum += l;
+                sum2 += l * l;
+            }
+            let n = spp as f64;
+            let mean = sum / n;
+            (
+                (mean).as_vec3(),
+                ((sum2 / n - mean * mean) * (n / (n - 1.0))).as_vec3(),
+            )
+        })
+        .collect();
+    let image = |f: fn(&(glam::Vec3, glam::Vec3)) -> glam::Vec3| {
+        Image::from_data(w as usize, h as usize, pixels.iter().map(f).collect()).unwrap()
+    };
+    (image(|p| p.0), image(|p| p.1))
+}
+
+/// The emissive enclosure `[-1, 1]³`: every wall emits 1 and reflects diffusely with albedo ½
+/// (radiance `L_e / (1 − ρ) = 2` everywhere); the camera at the centre looks at `target`.
+pub fn enclosure(target: Vec3) -> Scene {
+    let mut b = SceneBuilder::new();
+    let m = b.material(mat::emissive(Vec3::splat(0.5), Vec3::ONE, false));
+    b.mesh(
+        &Mesh::cuboid(Vec3::splat(-1.0), Vec3::splat(1.0), true),
+        m,
+        false,
+    )
+    .camera(Vec3::ZERO, target, 60.0);
+    b.build()
 }

@@ -1,0 +1,869 @@
+//! DDGI resampling (the seed paper `ddgi-resampling.txt`, §3.2–3.7): the whole scene surface
+//! as the light of ReSTIR at the primary vertex, each surface point shining with its emission
+//! plus a radiance source's estimate of the light it reflects. Three passes share this file:
+//!
+//! - `ddgi-restir` (the paper's method): the source is a DDGI probe volume the pass keeps and
+//!   updates every frame (eq. 5 probes), answering `L_DDGI+` of eq. 6 (the diffuse `ρ/π E`
+//!   plus one sample of the glossy integral);
+//! - `nrc-restir` (beyond the paper): the neural cache, trained online by the harness, as the
+//!   light: it answers the reflected radiance in every direction, where the probes hold only
+//!   irradiance;
+//! - `ddgi-nrc-restir`: probes whose rays take their radiance from the cache at their hits.
+//!
+//! Per frame and pixel sample at the primary vertex `x` (non-delta; delta primaries are path
+//! traced):
+//!
+//! 1. **Candidates** (§3.2 step 1): `light` points from the light sampler and `bsdf` BSDF
+//!    samples, each ray's first hit a candidate wherever it lands (an escaped ray: the
+//!    environment). A surface candidate `y` carries its emission and the source's radiance
+//!    `L_src(y → x)`; its target is `p̂(y) = lum(f · (L_e + L_src) · min(G, G_max))` in area
+//!    measure, with the balance-heuristic RIS weight `p̂ / (M_l p_l + M_b p_b)` (`p_l` the light
+//!    sampler's area density, zero off emitters; `p_b` the BSDF density converted to area).
+//!    Punctual and environment samples enter in their own measures, unclamped, as in ReSTIR DI.
+//! 2. **Spatial then temporal reuse** (§3.2 step 2): `k` screen neighbours' initial
+//!    reservoirs, then the previous frame's final one at the reprojected pixel (`M` capped);
+//!    each merge finishes with the unbiased `Z` (owners that see `y`, one shadow ray each).
+//!    A reused sample keeps the source radiance its finder stored (§3.7's query reuse: the
+//!    target is approximate, the estimator stays unbiased for its integrand because the BSDF
+//!    candidates cover every direction); `requery=1` (probes only) evaluates `L_DDGI+` toward
+//!    each receiver instead.
+//! 3. **Shading** (§3.2 steps 3–4): one shadow ray to the chosen sample, `f · L · G_c · W`.
+//! 4. **Residual** (§3.6, eq. 9): the clamped-away part `max(0, 1 − G_max/G)` of the
+//!    first BSDF candidate's own estimate `f cos / p · L`, which needs no extra ray (the
+//!    paper's auxiliary BSDF sample is that candidate). A delta lobe of a mixed BSDF, which
+//!    the reservoir cannot hold, is estimated the same way, whole.
+//!
+//! `G_max = 1 / (clamp · diagonal)²`: the paper's `G_max = 1 m⁻²` is absolute, which in a
+//! small box clamps almost every pair of points (`../shared/PASSES.md`); relative to the
+//! scene's extent, `clamp = 0.1` clamps pairs closer than a tenth of the diagonal (about the
+//! paper's metre in its rooms). `clamp=0` turns the clamp off; `residual=0` drops the residual
+//! (biased: the negative control of the unbiasedness test).
+//!
+//! What the estimator converges to is `L_e(x) + T(L_e + L_src)`: exact where the source is
+//! exact, and, with probes or a cache, biased by the source's error one bounce away from the
+//! camera (the paper's premise: the error is hidden behind a scattering event). Not built:
+//! the near-specular recursion by footprint of eqs. 7–8 (glossy secondary vertices use the
+//! source's answer directly) and §3.3's attenuation of `L_e` in the probe update.
+
+use std::f32::consts::PI;
+use std::time::Instant;
+
+use glam::Vec3;
+use nrc_scene::{LightSample, Scene, sampling::luminance, spawn_ray};
+
+use super::restir_di::{self, MAX_COUNT};
+use super::screen::{GBuffer, Phase, Primary, combine, par_map, stream, visible_between};
+use super::{FrameInput, PassOutput, PassSpec, PhaseTimes, RenderPass};
+use crate::ddgi::{DdgiSettings, ProbeRadiance, ProbeRays, ProbeVolume};
+use crate::path_tracer::{PathStats, PathTracer};
+use crate::reservoir::Reservoir;
+use crate::sampler::PixelSampler;
+use crate::source::RadianceQuery;
+use crate::transport::Vertex;
+use rayon::prelude::*;
+
+/// What lights the scene's surfaces in the resampling.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SurfaceLight {
+    /// A DDGI volume with eq. 5 probes (`ddgi-restir`).
+    Probes,
+    /// The radiance source (the neural cache; `nrc-restir`).
+    Cache,
+    /// A DDGI volume whose rays ask the radiance source at their hits (`ddgi-nrc-restir`).
+    CacheProbes,
+}
+
+/// DDGI resampling's parameters.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct DdgiRestirSettings {
+    pub light: SurfaceLight,
+    /// Light-sampler candidates per pixel sample ("a small number", §3.2).
+    pub light_candidates: u32,
+    /// BSDF-sampled candidates (a ray each); the first also estimates the residual.
+    pub bsdf_candidates: u32,
+    /// Spatial neighbours (the paper: 3) and their disc's radius in pixels.
+    pub spatial_neighbours: u32,
+    pub spatial_radius: f32,
+    /// Reuse the previous frame's reservoir (the paper: 1 temporal candidate).
+    pub temporal: bool,
+    /// The history's `M` is capped at this multiple of the candidate count.
+    pub m_cap: f32,
+    /// `G_max = 1/(clamp · diagonal)²`; 0: no clamp.
+    pub clamp: f32,
+    /// Estimate the clamped-away transport (eq. 9); off: biased.
+    pub residual: bool,
+    /// Probes: evaluate `L_DDGI+` toward each receiver instead of reusing the finder's (§3.7).
+    pub requery: bool,
+    /// Jitter camera rays in the pixel.
+    pub jitter: bool,
+    /// The probe volume (probe modes).
+    pub ddgi: DdgiSettings,
+}
+
+impl Default for DdgiRestirSettings {
+    fn default() -> Self {
+        Self {
+            light: SurfaceLight::Probes,
+            light_candidates: 8,
+            bsdf_candidates: 1,
+            spatial_neighbours: 3,
+            spatial_radius: 30.0,
+            temporal: true,
+            m_cap: 20.0,
+            clamp: 0.1,
+            residual: true,
+            requery: false,
+            jitter: true,
+            ddgi: DdgiSettings::default(),
+        }
+    }
+}
+
+impl DdgiRestirSettings {
+    /// Errors for settings that cannot work.
+    pub fn validate(&self) -> Result<(), String> {
+        if self.light_candidates > MAX_COUNT
+            || self.bsdf_candidates > MAX_COUNT
+            || self.spatial_neighbours > MAX_COUNT
+        {
+            return Err(format!(
+                "candidate and neighbour counts must be at most {MAX_COUNT}"
+            ));
+        }
+        if self.bsdf_candidates == 0 {
+            return Err("at least one BSDF candidate is needed (it covers every surface)".into());
+        }
+        if !(self.spatial_radius >= 0.0 && self.spatial_radius.is_finite()) {
+            return Err(format!(
+                "spatial radius must be finite and ≥ 0, got {}",
+                self.spatial_radius
+            ));
+        }
+        if !(self.m_cap > 0.0 && self.m_cap.is_finite()) {
+            return Err(format!("M-cap must be positive, got {}", self.m_cap));
+        }
+        if !(self.clamp >= 0.0 && self.clamp <= 10.0) {
+            return Err(format!("clamp must lie in [0, 10], got {}", self.clamp));
+        }
+        if self.requery && self.light == SurfaceLight::Cache {
+            return Err("requery needs probes (the cache is asked once per frame)".into());
+        }
+        let unit = nrc_scene::Aabb {
+            min: Vec3::ZERO,
+            max: Vec3::ONE,
+        };
+        ProbeVolume::new(&unit, self.ddgi).map(|_| ())
+    }
+
+    fn uses_probes(&self) -> bool {
+        self.light != SurfaceLight::Cache
+    }
+}
+
+/// A surface point as a light: what it emits and what the source says it reflects toward the
+/// vertex that found it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SurfacePoint {
+    pub x: Vec3,
+    /// Geometric normal.
+    pub ng: Vec3,
+    /// Emission of the front face (`ng`'s side), and whether the back face emits too.
+    pub le: Vec3,
+    pub two_sided: bool,
+    /// The source's reflected radiance toward the finder, valid on the finder's side.
+    pub l: Vec3,
+    /// Sign of `ng · (finder − x)`.
+    pub side: f32,
+    /// The light sampler's area density at `x` (zero off emitters).
+    pub pdf_light: f32,
+    /// Its triangle (to find the surface again when the history's radiance is refreshed).
+    pub tri: u32,
+    /// Diffuse reflectance (for `requery`).
+    pub rho: Vec3,
+}
+
+/// A resampled light: a surface point, or a punctual or environment light sample.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum DdgiSample {
+    Surface(SurfacePoint),
+    Light(LightSample),
+}
+
+pub type DdgiReservoir = Reservoir<DdgiSample>;
+
+/// What a sample brings to a vertex, unshadowed.
+#[derive(Clone, Copy, Debug)]
+struct Contribution {
+    /// Per unit of the sample's measure: `f · L · min(G, G_max)` for surfaces.
+    c: Vec3,
+    target: f32,
+    p_light: f32,
+    p_bsdf: f32,
+}
+
+/// The constants a frame's contributions need.
+#[derive(Clone, Copy)]
+struct Ctx<'a> {
+    g_max: f32,
+    /// `requery`: the volume that answers toward every receiver.
+    requery: Option<&'a ProbeVolume>,
+}
+
+#[inline]
+fn contribution(ctx: &Ctx, v: &Vertex, y: &DdgiSample) -> Option<Contribution> {
+    match y {
+        DdgiSample::Light(ls) => {
+            let c = restir_di::contribution(v, ls)?;
+            Some(Contribution {
+                c: c.c,
+                target: c.target,
+                p_light: c.p_light,
+                p_bsdf: c.p_bsdf,
+            })
+        }
+        DdgiSample::Surface(y) => {
+            let a = arriving(ctx, y, v.si.p)?;
+            let wl = v.frame.to_local(a.wi);
+            let f = v.bsdf.eval(v.wo, wl);
+            let g = wl.z.abs() * a.cos_y / a.dist2;
+            let c = f * a.li * g.min(ctx.g_max);
+            let target = luminance(c);
+            if !(target > 0.0 && target.is_finite()) {
+                return None;
+            }
+            Some(Contribution {
+                c,
+                target,
+                p_light: y.pdf_light,
+                p_bsdf: v.bsdf.pdf(v.wo, wl) * a.cos_y / a.dist2,
+            })
+        }
+    }
+}
+
+/// The light of surface point `y` arriving at point `p`.
+struct Arriving {
+    /// Unit direction from `p` to `y`.
+    wi: Vec3,
+    dist2: f32,
+    /// `|cos|` at `y`.
+    cos_y: f32,
+    /// `L_e + L_src` from `y` toward `p`.
+    li: Vec3,
+}
+
+#[inline]
+fn arriving(ctx: &Ctx, y: &SurfacePoint, p: Vec3) -> Option<Arriving> {
+    let d = y.x - p;
+    let dist2 = d.length_squared();
+    let wi = d / dist2.sqrt();
+    if !(dist2 > 0.0 && wi.is_finite()) {
+        return None;
+    }
+    // Where the receiver lies seen from y.
+    let side = -y.ng.dot(wi);
+    let mut li = if y.two_sided || side > 0.0 {
+        y.le
+    } else {
+        Vec3::ZERO
+    };
+    if side * y.side > 0.0 {
+        li += match ctx.requery {
+            Some(vol) => y.rho / PI * vol.irradiance(y.x, y.ng * side.signum(), -wi),
+            None => y.l,
+        };
+    }
+    Some(Arriving {
+        wi,
+        dist2,
+        cos_y: side.abs(),
+        li,
+    })
+}
+
+/// Whether `v` sees sample `y`; counts the ray.
+fn sees(scene: &Scene, v: &Vertex, y: &DdgiSample, stats: &mut PathStats) -> bool {
+    match y {
+        DdgiSample::Light(ls) => ls
+            .incident(v.si.p)
+            .is_some_and(|inc| restir_di::sees(scene, v, ls, &inc, stats)),
+        DdgiSample::Surface(s) => visible_between(scene, v.si.p, v.si.ng, s.x, s.ng, stats),
+    }
+}
+
+/// A candidate before its source radiance is known: the sample, and the vertex at a surface
+/// point (asked for its radiance toward the finder).
+#[derive(Clone, Copy, Debug)]
+struct Candidate {
+    y: DdgiSample,
+    at: Option<Vertex>,
+    from_bsdf: bool,
+}
+
+/// The first BSDF candidate's own estimate: its weight `f cos / p` and whether it was a delta
+/// lobe's (the residual of eq. 9, or the whole delta lobe).
+#[derive(Clone, Copy, Debug)]
+struct Aux {
+    candidate: usize,
+    weight: Vec3,
+    delta: bool,
+}
+
+/// A pixel sample after the trace phase.
+#[derive(Clone, Debug, Default)]
+struct Traced {
+    candidates: Vec<Candidate>,
+    aux: Option<Aux>,
+    stats: PathStats,
+}
+
+struct History {
+    g: GBuffer,
+    res: Vec<DdgiReservoir>,
+}
+
+/// A frame between trace and resolve.
+struct Frame {
+    g: GBuffer,
+    traced: Vec<Traced>,
+    /// `ddgi-nrc-restir`: the probe rays waiting for the source.
+    rays: Option<ProbeRays>,
+    /// The history's surface samples to refresh: reservoir index and the vertex at the
+    /// sample, asked toward the reservoir's owner.
+    refresh: Vec<(usize, Vertex)>,
+    trace_ms: f64,
+}
+
+/// The pass and its state: the probe volume (probe modes) and the previous frame.
+pub struct DdgiRestirPass {
+    pub settings: DdgiRestirSettings,
+    tracer: PathTracer,
+    volume: Option<ProbeVolume>,
+    history: Option<History>,
+    frame: Option<Frame>,
+    /// Milliseconds of the last probe update.
+    pub update_ms: f64,
+}
+
+impl DdgiRestirPass {
+    pub fn new(settings: DdgiRestirSettings, tracer: &PathTracer) -> Self {
+        Self {
+            settings,
+            tracer: *tracer,
+            volume: None,
+            history: None,
+            frame: None,
+            update_ms: 0.0,
+        }
+    }
+
+    /// The volume, once a frame has built it (probe modes).
+    pub fn volume(&self) -> Option<&ProbeVolume> {
+        self.volume.as_ref()
+    }
+
+    /// The candidates of vertex `v` (step 1, before the source answers).
+    fn candidates(&self, scene: &Scene, v: &Vertex, s: &mut PixelSampler) -> Traced {
+        let set = &self.settings;
+        let mut t = Traced::default();
+        let surface = |si: &nrc_scene::SurfaceInteraction, at: Vertex| {
+            let m = &scene.materials()[si.material as usize];
+            let emits = m.is_emissive();
+            DdgiSample::Surface(SurfacePoint {
+                x: si.p,
+                ng: si.ng,
+                le: if emits {
+                    m.emission(scene.textures(), &si.uv)
+                } else {
+                    Vec3::ZERO
+                },
+                two_sided: m.double_sided,
+                l: Vec3::ZERO,
+                side: si.ng.dot(si.wo).signum(),
+                tri: si.tri,
+                pdf_light: if emits {
+                    scene.light_pdf_area(si.tri)
+                } else {
+                    0.0
+                },
+                rho: at.bsdf.diffuse_reflectance(),
+            })
+        };
+        for _ in 0..set.light_candidates {
+            let u_select = s.next_1d();
+            let u_point = s.next_2d();
+            let c = match scene.sample_light(u_select, u_point) {
+                Some(LightSample::Surface(ls)) => {
+                    let wo = (v.si.p - ls.p).normalize_or_zero();
+                    let si = scene.interaction_at(ls.tri, ls.p, wo);
+                    let at = Vertex::new(scene, &si, wo);
+                    Some(Candidate {
+                        y: surface(&si, at),
+                        at: Some(at),
+                        from_bsdf: false,
+                    })
+                }
+                Some(ls) => Some(Candidate {
+                    y: DdgiSample::Light(ls),
+                    at: None,
+                    from_bsdf: false,
+                }),
+                None => None,
+            };
+            t.candidates.extend(c);
+        }
+        for k in 0..set.bsdf_candidates {
+            let u_lobe = s.next_1d();
+            let u_dir = s.next_2d();
+            let Some(bs) = v.bsdf.sample(v.wo, u_dir, u_lobe) else {
+                continue;
+            };
+            let ray = spawn_ray(v.si.p, v.si.ng, v.frame.to_world(bs.wi));
+            t.stats.closest_rays += 1;
+            let c = match scene.intersect(&ray) {
+                Some(hit) => {
+                    let si = scene.interaction(&ray, &hit);
+                    let at = Vertex::new(scene, &si, si.wo);
+                    Some(Candidate {
+                        y: surface(&si, at),
+                        at: Some(at),
+                        from_bsdf: true,
+                    })
+                }
+                None => scene
+                    .environment_sample(ray.d.normalize())
+                    .map(|ls| Candidate {
+                        y: DdgiSample::Light(ls),
+                        at: None,
+                        from_bsdf: true,
+                    }),
+            };
+            let Some(c) = c else { continue };
+            if bs.delta {
+                // A delta lobe's sample cannot enter the reservoir (no density to weigh it):
+                // the first BSDF candidate's estimates it whole, the others are dropped.
+                if k == 0 {
+                    t.aux = Some(Aux {
+                        candidate: t.candidates.len(),
+                        weight: bs.weight,
+                        delta: true,
+                    });
+                    t.candidates.push(Candidate {
+                        from_bsdf: false,
+                        ..c
+                    });
+                }
+                continue;
+            }
+            if k == 0 && set.residual {
+                t.aux = Some(Aux {
+                    candidate: t.candidates.len(),
+                    weight: bs.weight,
+                    delta: false,
+                });
+            }
+            t.candidates.push(c);
+        }
+        t
+    }
+
+    /// `L_DDGI+` (eq. 6) leaving `at` toward its `wo`: `ρ/π E(x, n)` plus one sample of the
+    /// glossy integral `∫ E(x, ω) / π · f_g cos dω`, drawn from the whole BSDF with
+    /// `f_g = max(0, f − ρ/π)` (zero for a Lambertian surface). The paper divides `E(x, ω)` by
+    /// `2π`; `π` is the cosine lobe's mass over the hemisphere (a uniform field of radiance
+    /// `L` has `E = πL`), so `1/π` is what makes a glossy surface in a uniform field reflect
+    /// its albedo.
+    fn ddgi_plus(vol: &ProbeVolume, at: &Vertex, s: &mut PixelSampler) -> Vec3 {
+        let rho = at.bsdf.diffuse_reflectance();
+        let mut l = rho / PI * vol.irradiance(at.si.p, at.si.ns, at.wo_world);
+        if matches!(at.bsdf, nrc_scene::bsdf::Bsdf::Diffuse { .. }) {
+            return l;
+        }
+        let (u_lobe, u_dir) = (s.next_1d(), s.next_2d());
+        if let Some(bs) = at.bsdf.sample(at.wo, u_dir, u_lobe) {
+            let w = if bs.delta {
+                bs.weight
+            } else {
+                let f = (at.bsdf.eval(at.wo, bs.wi) - rho / PI).max(Vec3::ZERO);
+                f * bs.wi.z.abs() / bs.pdf
+            };
+            if w.is_finite() && w != Vec3::ZERO {
+                let wi = at.frame.to_world(bs.wi);
+                l += w / PI * vol.irradiance(at.si.p, wi, at.wo_world);
+            }
+        }
+        l
+    }
+}
+
+impl RenderPass for DdgiRestirPass {
+    fn name(&self) -> String {
+        PassSpec::DdgiRestir(self.settings).to_string()
+    }
+
+    fn reset(&mut self) {
+        self.history = None;
+        self.volume = None;
+    }
+
+    fn prepare(&mut self, input: &FrameInput) {
+        if !self.settings.uses_probes() {
+            return;
+        }
+        let t = Instant::now();
+        if self.volume.is_none() {
+            let mut ddgi = self.settings.ddgi;
+            if self.settings.light == SurfaceLight::CacheProbes {
+                ddgi.radiance = ProbeRadiance::Source;
+            }
+            self.volume = ProbeVolume::new(&input.scene.bounds(), ddgi).ok();
+        }
+        // Probes fed by the cache blend in `resolve`, once the source has answered.
+        if self.settings.light == SurfaceLight::Probes
+            && let Some(v) = &mut self.volume
+        {
+            v.update(input.scene, input.seed ^ 0xDD61);
+        }
+        self.update_ms = t.elapsed().as_secs_f64() * 1e3;
+    }
+
+    fn trace(&mut self, input: &FrameInput) -> Vec<RadianceQuery> {
+        let scene = input.scene;
+        let seed = input.seed;
+        let t = Instant::now();
+        let g = GBuffer::trace(
+            scene,
+            input.camera,
+            input.width,
+            input.height,
+            input.spp,
+            seed,
+            self.settings.jitter,
+        );
+        let traced: Vec<Traced> = par_map(g.len(), |i| match usable(&g.primary[i]) {
+            Some(p) => self.candidates(scene, &p.v, &mut stream(seed, i, Phase::Candidates)),
+            None => Traced::default(),
+        });
+        let mut queries = Vec::new();
+        let mut rays = None;
+        match self.settings.light {
+            SurfaceLight::Probes => {}
+            SurfaceLight::Cache => {
+                for t in &traced {
+                    queries.extend(t.candidates.iter().filter_map(|c| c.at.map(|a| a.query())));
+                }
+            }
+            SurfaceLight::CacheProbes => {
+                let t = Instant::now();
+                if let Some(v) = &self.volume {
+                    let r = v.trace_rays(scene, seed ^ 0xDD61);
+                    queries = r.queries.clone();
+                    rays = Some(r);
+                }
+                self.update_ms += t.elapsed().as_secs_f64() * 1e3;
+            }
+        }
+        // The history's samples carry the radiance their finders stored, possibly frames ago;
+        // the source has changed since (probes blend, the cache trains), so each is asked
+        // again toward its owner. (The paper's §3.7 reuse assumes a static source: without
+        // this, a converging source leaves the image dark by the stale values, -1.7 % in the
+        // enclosure test.)
+        let refresh: Vec<(usize, Vertex)> =
+            match self.history.as_ref().filter(|_| self.settings.temporal) {
+                Some(h) => h
+                    .res
+                    .par_iter()
+                    .enumerate()
+                    .filter_map(|(j, r)| {
+                        let Some(DdgiSample::Surface(y)) = r.sample else {
+                            return None;
+                        };
+                        let owner = h.g.primary[j].as_ref()?.v.si.p;
+                        let wo = (owner - y.x).normalize_or_zero();
+                        let si = scene.interaction_at(y.tri, y.x, wo);
+                        Some((j, Vertex::new(scene, &si, wo)))
+                    })
+                    .collect(),
+                None => Vec::new(),
+            };
+        if self.settings.light == SurfaceLight::Cache {
+            queries.extend(refresh.iter().map(|(_, v)| v.query()));
+        }
+        self.frame = Some(Frame {
+            g,
+            traced,
+            rays,
+            refresh,
+            trace_ms: t.elapsed().as_secs_f64() * 1e3,
+        });
+        queries
+    }
+
+    fn resolve(&mut self, input: &FrameInput, answers: &[Vec3]) -> PassOutput {
+        if self.frame.is_none() {
+            let q = self.trace(input);
+            assert!(
+                q.is_empty(),
+                "resolve without trace needs a pass that asks no source"
+            );
+        }
+        let Frame {
+            g,
+            mut traced,
+            rays,
+            refresh,
+            trace_ms,
+        } = self.frame.take().expect("just traced");
+        let mut history = self
+            .history
+            .take()
+            .filter(|h| self.settings.temporal && h.g.same_shape(&g));
+        let scene = input.scene;
+        let seed = input.seed;
+        let set = self.settings;
+        let n = g.len();
+        let mut times = PhaseTimes {
+            candidates_ms: trace_ms,
+            ..Default::default()
+        };
+
+        // The surface candidates' source radiance.
+        let t = Instant::now();
+        match set.light {
+            SurfaceLight::Cache => {
+                let mut k = 0;
+                for tr in &mut traced {
+                    for c in &mut tr.candidates {
+                        if let (DdgiSample::Surface(y), Some(_)) = (&mut c.y, c.at) {
+                            let a = answers[k];
+                            y.l = if a.is_finite() {
+                                a.max(Vec3::ZERO)
+                            } else {
+                                Vec3::ZERO
+                            };
+                            k += 1;
+                        }
+                    }
+                }
+                let fresh: Vec<Vec3> = answers[k..].to_vec();
+                if let Some(h) = &mut history {
+                    refresh_history(h, &refresh, &fresh);
+                }
+            }
+            SurfaceLight::CacheProbes => {
+                let tu = Instant::now();
+                if let (Some(v), Some(r)) = (&mut self.volume, rays) {
+                    v.blend(r, answers);
+                }
+                self.update_ms += tu.elapsed().as_secs_f64() * 1e3;
+            }
+            SurfaceLight::Probes => {}
+        }
+        if let Some(vol) = self.volume.as_ref().filter(|_| set.uses_probes()) {
+            traced.par_iter_mut().enumerate().for_each(|(i, tr)| {
+                let mut s = stream(seed, i, Phase::Extra);
+                for c in &mut tr.candidates {
+                    if let (DdgiSample::Surface(y), Some(at)) = (&mut c.y, &c.at) {
+                        y.l = Self::ddgi_plus(vol, at, &mut s);
+                    }
+                }
+            });
+            if let Some(h) = &mut history {
+                let fresh: Vec<Vec3> = refresh
+                    .par_iter()
+                    .map(|(j, at)| {
+                        let mut s = stream(seed ^ 0x5EED, *j, Phase::Extra);
+                        Self::ddgi_plus(vol, at, &mut s)
+                    })
+                    .collect();
+                refresh_history(h, &refresh, &fresh);
+            }
+        }
+        times.candidates_ms += t.elapsed().as_secs_f64() * 1e3;
+
+        let b = scene.bounds();
+        let diag = (b.max - b.min).length();
+        let ctx = Ctx {
+            g_max: if set.clamp > 0.0 {
+                1.0 / (set.clamp * diag).powi(2)
+            } else {
+                f32::INFINITY
+            },
+            requery: self.volume.as_ref().filter(|_| set.requery),
+        };
+        let (ml, mb) = (set.light_candidates as f32, set.bsdf_candidates as f32);
+
+        // 1. Initial reservoirs (RIS, visibility reuse) and the aux estimates.
+        let t = Instant::now();
+        let initial: Vec<(DdgiReservoir, Vec3, PathStats)> = par_map(n, |i| {
+            let tr = &traced[i];
+            let mut stats = tr.stats;
+            let mut r = DdgiReservoir::new();
+            let mut aux = Vec3::ZERO;
+            let Some(p) = usable(&g.primary[i]) else {
+                return (r, aux, stats);
+            };
+            let v = &p.v;
+            let mut s = stream(seed, i, Phase::Temporal);
+            let mut chosen_bsdf = false;
+            for (k, c) in tr.candidates.iter().enumerate() {
+                if tr.aux.is_some_and(|a| a.delta && a.candidate == k) {
+                    continue;
+                }
+                let u = s.next_1d();
+                if let Some(con) = contribution(&ctx, v, &c.y) {
+                    let w = con.target / (ml * con.p_light + mb * con.p_bsdf);
+                    if r.update(c.y, w, con.target, u) {
+                        chosen_bsdf = c.from_bsdf;
+                    }
+                }
+            }
+            // Unsampled candidates (missed lights, absorbed BSDF samples) are in M's counts.
+            r.m = ml + mb;
+            r.finish_normalised();
+            if let Some(y) = r.sample
+                && !chosen_bsdf
+                && !sees(scene, v, &y, &mut stats)
+            {
+                r.clear_sample();
+            }
+            if let Some(a) = tr.aux {
+                let y = &tr.candidates[a.candidate].y;
+                aux = match y {
+                    // The ray found y (no shadow ray): its own estimate f cos / p · L, of which
+                    // the residual keeps the part the clamp took away.
+                    DdgiSample::Surface(sp) => {
+                        arriving(&ctx, sp, v.si.p).map_or(Vec3::ZERO, |arr| {
+                            let frac = if a.delta {
+                                1.0
+                            } else {
+                                let cos_x = v.si.ns.dot(arr.wi).abs();
+                                let g = cos_x * arr.cos_y / arr.dist2;
+                                (1.0 - ctx.g_max / g).max(0.0)
+                            };
+                            a.weight * arr.li * frac
+                        })
+                    }
+                    DdgiSample::Light(LightSample::Environment { le, .. }) if a.delta => {
+                        a.weight * *le
+                    }
+                    DdgiSample::Light(_) => Vec3::ZERO,
+                };
+            }
+            (r, aux, stats)
+        });
+
+        // 2. Spatial reuse from the initial buffer.
+        let spatial: Vec<(DdgiReservoir, PathStats)> = par_map(n, |i| {
+            let own = initial[i].0;
+            let mut stats = PathStats::default();
+            let Some(p) = usable(&g.primary[i]) else {
+                return (own, stats);
+            };
+            if set.spatial_neighbours == 0 {
+                return (own, stats);
+            }
+            let mut s = stream(seed, i, Phase::Spatial);
+            let mut near = Vec::new();
+            g.neighbours(
+                i,
+                p,
+                set.spatial_neighbours,
+                set.spatial_radius,
+                &mut s,
+                &mut near,
+            );
+            let others: Vec<(DdgiReservoir, &Vertex)> = near
+                .iter()
+                .map(|&q| {
+                    (
+                        initial[q].0,
+                        &g.primary[q].as_ref().expect("neighbours have vertices").v,
+                    )
+                })
+                .collect();
+            let target =
+                |v: &Vertex, y: &DdgiSample| contribution(&ctx, v, y).map_or(0.0, |c| c.target);
+            let (r, _) = combine(&p.v, &own, &others, false, &mut s, target, |ov, y| {
+                sees(scene, ov, y, &mut stats)
+            });
+            (r, stats)
+        });
+        times.spatial_ms = t.elapsed().as_secs_f64() * 1e3;
+
+        // 3. Temporal reuse.
+        let t = Instant::now();
+        let cap = set.m_cap * (ml + mb);
+        let temporal: Vec<(DdgiReservoir, PathStats)> = par_map(n, |i| {
+            let (own, mut stats) = spatial[i];
+            let (Some(p), Some(h)) = (usable(&g.primary[i]), history.as_ref()) else {
+                return (own, stats);
+            };
+            let Some((j, pv)) = h.g.temporal_neighbour(&p.v, i) else {
+                return (own, stats);
+            };
+            let mut prev = h.res[j];
+            prev.cap(cap);
+            let mut s = stream(seed, i, Phase::Shading);
+            let target =
+                |v: &Vertex, y: &DdgiSample| contribution(&ctx, v, y).map_or(0.0, |c| c.target);
+            let (r, _) = combine(&p.v, &own, &[(prev, pv)], false, &mut s, target, |ov, y| {
+                sees(scene, ov, y, &mut stats)
+            });
+            (r, stats)
+        });
+        times.temporal_ms = t.elapsed().as_secs_f64() * 1e3;
+
+        // 4. Shading: one shadow ray.
+        let t = Instant::now();
+        let shaded: Vec<(Vec3, DdgiReservoir, PathStats)> = par_map(n, |i| {
+            let (mut r, mut stats) = temporal[i];
+            let (_, aux, st0) = initial[i];
+            stats.add(&st0);
+            let mut l = g.emitted[i];
+            if let Some(p) = &g.primary[i] {
+                if usable(&g.primary[i]).is_some() {
+                    l += aux;
+                    if let Some(y) = r.sample {
+                        match contribution(&ctx, &p.v, &y) {
+                            Some(c) if sees(scene, &p.v, &y, &mut stats) => l += c.c * r.w,
+                            _ => r.clear_sample(),
+                        }
+                    }
+                } else {
+                    let mut s = stream(seed, i, Phase::Path);
+                    l += self
+                        .tracer
+                        .reflected(scene, &p.v.si, p.v.wo_world, 1, &mut s, &mut stats);
+                }
+            }
+            (l, r, stats)
+        });
+        times.shading_ms = t.elapsed().as_secs_f64() * 1e3;
+        times.candidates_ms += self.update_ms;
+
+        let (out, res) = super::screen::assemble(&g, input, shaded, times);
+        self.history = Some(History { g, res });
+        out
+    }
+}
+
+/// Puts the source's current radiance `fresh` into the history's surface samples listed in
+/// `refresh` (reservoir index, vertex at the sample asked toward the reservoir's owner).
+fn refresh_history(h: &mut History, refresh: &[(usize, Vertex)], fresh: &[Vec3]) {
+    for (&(j, at), l) in refresh.iter().zip(fresh) {
+        if let Some(DdgiSample::Surface(y)) = &mut h.res[j].sample {
+            y.l = if l.is_finite() {
+                l.max(Vec3::ZERO)
+            } else {
+                Vec3::ZERO
+            };
+            y.side = y.ng.dot(at.wo_world).signum();
+        }
+    }
+}
+
+/// The primary vertex where the resampling applies (non-delta BSDF).
+fn usable(p: &Option<Primary>) -> Option<&Primary> {
+    p.as_ref().filter(|p| !p.v.bsdf.is_delta())
+}
