@@ -6,10 +6,10 @@ use std::path::PathBuf;
 
 use anyhow::{Context, Result, ensure};
 use indicatif::{ProgressBar, ProgressStyle};
-use nrc_harness::MethodSpec;
 use nrc_harness::budget::Budget;
 use nrc_harness::compare::{Comparison, Progress, compare, total_frames};
 use nrc_harness::reference::{self, ReferenceRequest};
+use nrc_harness::{MethodList, MethodSpec};
 use nrc_scene::Scene;
 
 use nrc_harness::options::CacheArgs;
@@ -32,8 +32,10 @@ pub struct CompareArgs {
     /// pass, NEE and BSDF sampling by MIS), pt-<N>spp-nonee (BSDF sampling only), or
     /// nrc-<producer>[-<termination>] (a cache trained online by pt, pt-sl, bt, lt or sppc,
     /// rendered at 1 spp with paths ending in it: first, diffuse, spread (default), bth).
-    #[arg(long, value_delimiter = ',', required = true)]
-    pub methods: Vec<MethodSpec>,
+    /// A `key=value` item continues the previous method's parameters
+    /// (`ddgi-restir:rays=64,k=0,restir-di` is two methods).
+    #[arg(long, required = true)]
+    pub methods: Vec<MethodList>,
 
     /// Equal time: each frame renders passes of its method until this many milliseconds are
     /// used (the frame ends within one pass of the budget, typically half a pass).
@@ -133,6 +135,16 @@ pub struct CompareArgs {
     pub threads: Option<usize>,
 }
 
+impl CompareArgs {
+    /// The methods of every `--methods`, in order.
+    pub fn methods(&self) -> Vec<MethodSpec> {
+        self.methods
+            .iter()
+            .flat_map(|l| l.0.iter().cloned())
+            .collect()
+    }
+}
+
 /// Checks the arguments before any work.
 fn validate(args: &CompareArgs) -> Result<Budget> {
     ensure!(
@@ -159,12 +171,12 @@ fn validate(args: &CompareArgs) -> Result<Budget> {
     }
     if let Some(t) = &args.converge_target {
         ensure!(
-            args.methods.contains(t),
+            args.methods().contains(t),
             "--converge-target {t} is not one of --methods"
         );
     }
     let mut seen = std::collections::HashSet::new();
-    for m in &args.methods {
+    for m in &args.methods() {
         ensure!(seen.insert(m.to_string()), "method {m} is listed twice");
     }
     Budget::from_limits(args.equal_time, args.equal_spp).map_err(anyhow::Error::msg)
@@ -209,13 +221,14 @@ fn run_comparison(args: &CompareArgs, budget: Budget, scene: &Scene) -> Result<(
         },
         reference.location.display()
     );
-    let any_cache = args.methods.iter().any(|m| m.producer.is_some());
+    let methods = args.methods();
+    let any_cache = methods.iter().any(|m| m.producer.is_some());
     let mut cache_settings = args
         .model
         .method_settings(args.train_frames, args.seed, any_cache)?;
     cache_settings.online = !args.frozen;
     let c = Comparison {
-        methods: args.methods.clone(),
+        methods: methods.clone(),
         budget,
         width: w,
         height: h,
@@ -226,7 +239,7 @@ fn run_comparison(args: &CompareArgs, budget: Budget, scene: &Scene) -> Result<(
             target: args
                 .converge_target
                 .as_ref()
-                .unwrap_or(&args.methods[0])
+                .unwrap_or(&methods[0])
                 .to_string(),
         }),
         flip: !args.no_flip,

@@ -260,10 +260,12 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         String::new()
     };
     let ph = &s.phases;
-    let phases = if ph.candidates_ms + ph.temporal_ms + ph.spatial_ms + ph.shading_ms > 0.0 {
+    let phases = if ph.probes_ms + ph.candidates_ms + ph.temporal_ms + ph.spatial_ms + ph.shading_ms
+        > 0.0
+    {
         format!(
-            "; phases: candidates {:.1} ms, temporal {:.1} ms, spatial {:.1} ms, shading {:.1} ms",
-            ph.candidates_ms, ph.temporal_ms, ph.spatial_ms, ph.shading_ms
+            "; phases: probes {:.1} ms, candidates {:.1} ms, temporal {:.1} ms, spatial {:.1} ms, shading {:.1} ms",
+            ph.probes_ms, ph.candidates_ms, ph.temporal_ms, ph.spatial_ms, ph.shading_ms
         )
     } else {
         String::new()

@@ -619,3 +619,71 @@ fn run_files_describe_a_comparison_and_list_flags_override_them() {
         ["pt-2spp"]
     );
 }
+
+/// `--converge` (the DDGI-resampling paper's Table 1 protocol): progressive frames from one
+/// state. `pt-1spp` averaged over k frames is `pt-{k}spp`, so it reaches the MAPE of
+/// `pt-16spp`'s first frame after about 16 frames (the bound allows for the noise of both
+/// MAPEs at 32²: 8 to 40 frames), and, listed after its target, stops at twice that; the
+/// target reaches its own error in one frame. A target that is not a listed method is one
+/// clear error.
+#[test]
+fn converge_counts_frames_to_the_targets_first_frame_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let (cache, out) = (dir.path().join("cache"), dir.path().join("out"));
+    let args = |target: &str| {
+        vec![
+            "compare".to_string(),
+            "--scene".into(),
+            cornell(),
+            "--methods".into(),
+            "pt-16spp,pt-1spp".into(),
+            "--equal-spp".into(),
+            "1".into(),
+            "--width".into(),
+            "32".into(),
+            "--height".into(),
+            "32".into(),
+            "--reference-spp".into(),
+            "512".into(),
+            "--no-flip".into(),
+            "--converge".into(),
+            "200".into(),
+            "--converge-target".into(),
+            target.into(),
+            "--cache-dir".into(),
+            cache.to_str().unwrap().into(),
+            "--out".into(),
+            out.to_str().unwrap().into(),
+        ]
+    };
+    let run = |a: Vec<String>| nrc(&a.iter().map(String::as_str).collect::<Vec<_>>());
+    let o = run(args("pt-16spp"));
+    assert_ok(&o);
+    let report = nrc_eval::report::read_report_json(&out.join("report.json")).unwrap();
+    let t = &report.frames_to_error[0];
+    assert_eq!(t.target_method, "pt-16spp");
+    assert_eq!(t.target_error, report.convergence[0].points[0].metrics.mape);
+    use nrc_eval::convergence::FramesToReach;
+    assert!(
+        matches!(t.rows[0].reach, FramesToReach::Reached { frames: 1, .. }),
+        "{:?}",
+        t.rows[0]
+    );
+    let FramesToReach::Reached { frames, time_ms } = t.rows[1].reach else {
+        panic!("pt-1spp did not reach pt-16spp's error: {:?}", t.rows[1]);
+    };
+    assert!((8..=40).contains(&frames), "pt-1spp needed {frames} frames");
+    assert_eq!(t.rows[1].frames_run, 2 * frames);
+    assert!(time_ms > 0.0 && t.rows[1].time_ratio.is_some());
+    // The running mean's error falls: the last point is below the first.
+    let c = &report.convergence[1].points;
+    assert!(c.last().unwrap().metrics.mape < c[0].metrics.mape);
+    assert!(is_png(&out.join("frames-to-error.png")));
+    let md = std::fs::read_to_string(out.join("report.md")).unwrap();
+    assert!(
+        md.contains("## Frames to reach the MAPE of pt-16spp's first frame"),
+        "{md}"
+    );
+
+    assert_clean_error(&run(args("pt-4spp")), &["--converge-target", "pt-4spp"]);
+}

@@ -258,6 +258,11 @@ pub fn compare(
         Some(m) => format!("{} ({})", m.describe(), ref_location.display()),
         None => format!("{} (no variance)", ref_location.display()),
     });
+    if let Some(v) = &ref_var_view {
+        report
+            .notes
+            .push(reference_error_note(&ref_view, v, emitter_mask.as_deref()));
+    }
     let mut runs = Vec::new();
     let mut plot_series = Vec::new();
     let mut target_error: Option<f64> = None;
@@ -499,6 +504,37 @@ pub fn compare(
     nrc_eval::atomic::atomic_write(&c.out.join("runs.json"), json.as_bytes())?;
     let files = write_report(&c.out, &report)?;
     Ok((report, files.markdown))
+}
+
+/// The reference's own expected error, from its variance of the mean σ² per pixel channel (over
+/// all pixels, the excluded ones at zero as in the metrics): MSE ≈ mean σ², relMSE ≈ mean σ²/(y² + ε), and MAPE ≈ mean
+/// σ·√(2/π)/(y + ε) (the mean absolute deviation of a normal error).
+fn reference_error_note(
+    reference: &ImageView<'_>,
+    variance: &ImageView<'_>,
+    excluded: Option<&[bool]>,
+) -> String {
+    let (mut mse, mut rel, mut mape, mut n) = (0.0, 0.0, 0.0, 0.0f64);
+    for (i, (y, v)) in reference.pixels().iter().zip(variance.pixels()).enumerate() {
+        if excluded.is_some_and(|m| m[i]) {
+            n += 3.0; // zero error, as in the metrics
+            continue;
+        }
+        for c in 0..3 {
+            let (y, v) = (y[c] as f64, (v[c] as f64).max(0.0));
+            mse += v;
+            rel += v / (y * y + REL_MSE_EPSILON);
+            mape += v.sqrt() * (2.0 / std::f64::consts::PI).sqrt() / (y.abs() + MAPE_EPSILON);
+            n += 1.0;
+        }
+    }
+    let n = n.max(1.0);
+    format!(
+        "The reference's own expected error (from its variance of the mean): MSE {}, relMSE {}, MAPE {}.",
+        nrc_eval::report::fmt_num(mse / n),
+        nrc_eval::report::fmt_num(rel / n),
+        nrc_eval::report::fmt_num(mape / n)
+    )
 }
 
 /// The rendered frame (EXR and PNG preview) and its false-colour error maps.

@@ -28,4 +28,4 @@ pub mod reference;
 pub mod run;
 
 pub use budget::{Budget, Estimate, Frame, FrameRequest, Method, render_frame};
-pub use methods::{CacheMethodSettings, MethodSpec};
+pub use methods::{CacheMethodSettings, MethodList, MethodSpec};

@@ -72,6 +72,35 @@ impl fmt::Display for ParseMethodError {
 
 impl std::error::Error for ParseMethodError {}
 
+/// Methods separated by commas, as `nrc compare --methods` takes them: an item `key=value`
+/// (no `:`, no `@`) continues the parameters of the method before it, so
+/// `ddgi-restir:rays=64,k=0,restir-di` is two methods.
+#[derive(Clone, Debug, PartialEq)]
+pub struct MethodList(pub Vec<MethodSpec>);
+
+impl FromStr for MethodList {
+    type Err = ParseMethodError;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        let mut items: Vec<String> = Vec::new();
+        for part in s.split(',') {
+            let continues = part.contains('=') && !part.contains(':') && !part.contains('@');
+            match items.last_mut() {
+                Some(last) if continues => {
+                    last.push(',');
+                    last.push_str(part);
+                }
+                _ => items.push(part.to_string()),
+            }
+        }
+        items
+            .iter()
+            .map(|m| m.parse())
+            .collect::<Result<_, _>>()
+            .map(Self)
+    }
+}
+
 impl FromStr for MethodSpec {
     type Err = ParseMethodError;
 
@@ -614,5 +643,24 @@ mod tests {
                 "{bad}: {e}"
             );
         }
+    }
+
+    #[test]
+    fn method_lists_keep_parameters_with_their_method() {
+        let l: MethodList =
+            "ddgi-restir:rays=64,k=0,restir-di,pt-1spp,wsrestir-gi:samples=5,cell=0.05"
+                .parse()
+                .unwrap();
+        let names: Vec<String> = l.0.iter().map(|m| m.to_string()).collect();
+        assert_eq!(
+            names,
+            [
+                "ddgi-restir:k=0,rays=64",
+                "restir-di",
+                "pt-1spp",
+                "wsrestir-gi:samples=5,cell=0.05"
+            ]
+        );
+        assert!("k=0,pt-1spp".parse::<MethodList>().is_err());
     }
 }

@@ -16,6 +16,17 @@
 //!   weights crushed), normalised. As a [`RadianceSource`] the volume answers `ρ/π · E`.
 //!
 //! Probes sit at cell centres (`origin + (i + ½) · spacing`), so none lies on the box's faces.
+//!
+//! Two options of the DDGI paper's successors (RTXGI), off by default (`../shared/PASSES.md`:
+//! the seed paper cites them, it does not specify them):
+//! - **relocation** moves a probe out of geometry (more than a quarter of its rays hit back
+//!   faces: it steps through the closest one, plus half the minimum front-face distance) or
+//!   away from a front face closer than a tenth of the smallest spacing, at most 0.45 of a
+//!   cell from its grid point; the rays trace from the moved probe and queries use its place.
+//! - **classification** switches off a probe that sits inside geometry or whose rays find no
+//!   front face inside its eight cells (no shading point there can need it): it is not
+//!   blended, queries skip it (unless all eight are off), and it traces an eighth of the rays,
+//!   enough to switch it back on.
 
 use std::f32::consts::PI;
 
@@ -50,8 +61,43 @@ pub struct ProbeRays {
     /// The queries a radiance source must answer, and the (probe, ray) each belongs to.
     pub queries: Vec<RadianceQuery>,
     slots: Vec<(u32, u32)>,
+    /// Per probe, what its rays found (relocation and classification).
+    geometry: Vec<ProbeGeometry>,
     pub stats: PathStats,
 }
+
+/// What one probe's rays found around it.
+#[derive(Clone, Copy, Debug)]
+struct ProbeGeometry {
+    rays: u32,
+    back_faces: u32,
+    /// Distance and direction of the closest back-face and front-face hits.
+    closest_back: (f32, Vec3),
+    closest_front: (f32, Vec3),
+    /// A front face inside the probe's eight cells.
+    front_in_cells: bool,
+}
+
+impl Default for ProbeGeometry {
+    fn default() -> Self {
+        Self {
+            rays: 0,
+            back_faces: 0,
+            closest_back: (f32::INFINITY, Vec3::ZERO),
+            closest_front: (f32::INFINITY, Vec3::ZERO),
+            front_in_cells: false,
+        }
+    }
+}
+
+impl ProbeGeometry {
+    fn back_fraction(&self) -> f32 {
+        self.back_faces as f32 / self.rays.max(1) as f32
+    }
+}
+
+/// Above this fraction of back-face hits a probe is inside geometry (RTXGI's threshold).
+const INSIDE_FRACTION: f32 = 0.25;
 
 /// The volume's parameters (defaults: RTXGI's and the paper's).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -70,6 +116,13 @@ pub struct DdgiSettings {
     pub normal_bias: f32,
     pub view_bias: f32,
     pub radiance: ProbeRadiance,
+    /// Probe relocation (see the module's notes).
+    pub relocate: bool,
+    /// Probe classification (see the module's notes).
+    pub classify: bool,
+    /// §3.3's attenuation of the emission probe rays find (the paper's slider `s`; 0: off):
+    /// see [`ProbeVolume::emission_attenuation`].
+    pub attenuation: f32,
 }
 
 impl Default for DdgiSettings {
@@ -84,6 +137,9 @@ impl Default for DdgiSettings {
             normal_bias: 0.1,
             view_bias: 0.1,
             radiance: ProbeRadiance::Full,
+            relocate: false,
+            classify: false,
+            attenuation: 0.0,
         }
     }
 }
@@ -241,8 +297,15 @@ pub struct ProbeVolume {
     irradiance: Vec<Vec3>,
     /// Per probe, `(m + 2)²` texels of (mean distance, mean squared distance).
     moments: Vec<Vec2>,
-    /// Frames blended in so far (the first replaces the empty history).
+    /// Frames blended in so far.
     pub frames: u32,
+    /// Per probe: its relocation offset from its grid point, whether it is on, whether it has
+    /// a history (its first blend replaces the empty one), and the back-face fraction of its
+    /// last rays.
+    offsets: Vec<Vec3>,
+    active: Vec<bool>,
+    blended: Vec<bool>,
+    back_fraction: Vec<f32>,
 }
 
 /// A sphere point of the spherical Fibonacci set of `n` points.
@@ -286,6 +349,12 @@ impl ProbeVolume {
                 settings.hysteresis
             ));
         }
+        if !(settings.attenuation >= 0.0 && settings.attenuation <= 100.0) {
+            return Err(format!(
+                "ddgi: attenuation must lie in [0, 100], got {}",
+                settings.attenuation
+            ));
+        }
         let counts = settings.counts.unwrap_or_else(|| {
             let longest = ext.max_element();
             let c = (ext / longest * 8.0).round();
@@ -317,6 +386,10 @@ impl ProbeVolume {
             irradiance: vec![Vec3::ZERO; n * irradiance_map.len()],
             moments: vec![Vec2::ZERO; n * moment_map.len()],
             frames: 0,
+            offsets: vec![Vec3::ZERO; n],
+            active: vec![true; n],
+            blended: vec![false; n],
+            back_fraction: vec![0.0; n],
         })
     }
 
@@ -328,6 +401,21 @@ impl ProbeVolume {
     /// Position of probe `(i, j, k)`.
     pub fn probe_position(&self, c: UVec3) -> Vec3 {
         self.origin + (c.as_vec3() + Vec3::splat(0.5)) * self.spacing
+    }
+
+    /// Where probe `p` is: its grid point plus its relocation offset.
+    pub fn probe_origin(&self, p: usize) -> Vec3 {
+        self.probe_position(self.coords_of(p)) + self.offsets[p]
+    }
+
+    /// Whether probe `p` is on (always, without classification).
+    pub fn probe_active(&self, p: usize) -> bool {
+        self.active[p]
+    }
+
+    /// The fraction of probe `p`'s last rays that hit back faces.
+    pub fn probe_back_fraction(&self, p: usize) -> f32 {
+        self.back_fraction[p]
     }
 
     fn index(&self, c: UVec3) -> usize {
@@ -406,11 +494,19 @@ impl ProbeVolume {
         let base = base.as_uvec3();
         let mut out = Vec::with_capacity(8);
         let mut total = 0.0;
+        // Classification: the probes that are off count only where all eight are.
+        let all_off = (0..8u32).all(|corner| {
+            let off = UVec3::new(corner & 1, (corner >> 1) & 1, (corner >> 2) & 1);
+            !self.active[self.index((base + off).min(self.counts - UVec3::ONE))]
+        });
         for corner in 0..8u32 {
             let off = UVec3::new(corner & 1, (corner >> 1) & 1, (corner >> 2) & 1);
             let c = (base + off).min(self.counts - UVec3::ONE);
             let p = self.index(c);
-            let to_probe = self.probe_position(c) - q;
+            if !self.active[p] && !all_off {
+                continue;
+            }
+            let to_probe = self.probe_origin(p) - q;
             let dist = to_probe.length().max(1e-6);
             let dir = to_probe / dist;
             let tri = Vec3::select(off.cmpeq(UVec3::ONE), alpha, Vec3::ONE - alpha);
@@ -474,16 +570,32 @@ impl ProbeVolume {
         let radiance = self.settings.radiance;
         let this = self;
         // Per probe: each ray's direction, radiance and hit distance, and its query if any.
-        type Traced = (Vec<(Vec3, Vec3, f32)>, Vec<(u32, RadianceQuery)>, PathStats);
+        type Traced = (
+            Vec<(Vec3, Vec3, f32)>,
+            Vec<(u32, RadianceQuery)>,
+            ProbeGeometry,
+            PathStats,
+        );
         let traced: Vec<Traced> = (0..self.probe_count())
             .into_par_iter()
             .map(|p| {
                 let mut s = PixelSampler::new(seed, p as u64, 0);
                 let rot = random_rotation(Vec3::new(s.next_1d(), s.next_1d(), s.next_1d()));
-                let origin = this.probe_position(this.coords_of(p));
+                let origin = this.probe_origin(p);
+                let grid_point = this.probe_position(this.coords_of(p));
                 let max_dist = 1.5 * this.spacing.length();
                 let mut stats = PathStats::default();
                 let mut queries = Vec::new();
+                // A probe that is off traces an eighth of the rays (to be switched back on).
+                let n_rays = if this.active[p] {
+                    n_rays
+                } else {
+                    (n_rays / 8).max(1)
+                };
+                let mut geo = ProbeGeometry {
+                    rays: n_rays,
+                    ..Default::default()
+                };
                 let rays = (0..n_rays)
                     .map(|r| {
                         let d = rot * fibonacci(r, n_rays);
@@ -501,12 +613,31 @@ impl ProbeVolume {
                         let v = Vertex::new(scene, &si, si.wo);
                         let back_face = si.ng.dot(si.wo) < 0.0
                             && !scene.materials()[si.material as usize].double_sided;
+                        if back_face {
+                            geo.back_faces += 1;
+                            if hit.t < geo.closest_back.0 {
+                                geo.closest_back = (hit.t, d);
+                            }
+                        } else {
+                            if hit.t < geo.closest_front.0 {
+                                geo.closest_front = (hit.t, d);
+                            }
+                            let rel = (si.p - grid_point).abs();
+                            geo.front_in_cells |= rel.cmplt(this.spacing).all();
+                        }
                         let l = match radiance {
                             ProbeRadiance::Source => {
                                 queries.push((r, v.query()));
                                 scene.emission(&si)
                             }
                             _ => this.ray_radiance(scene, &v, radiance, &mut s, &mut stats),
+                        };
+                        let l = if this.settings.attenuation > 0.0
+                            && radiance != ProbeRadiance::Indirect
+                        {
+                            l - scene.emission(&si) * (1.0 - this.emission_attenuation(p, d, hit.t))
+                        } else {
+                            l
                         };
                         // Back faces (inside geometry) shorten the distance (RTXGI).
                         let dist = if back_face {
@@ -517,12 +648,13 @@ impl ProbeVolume {
                         (d, l, dist)
                     })
                     .collect();
-                (rays, queries, stats)
+                (rays, queries, geo, stats)
             })
             .collect();
         let mut out = ProbeRays::default();
-        for (p, (rays, queries, st)) in traced.into_iter().enumerate() {
+        for (p, (rays, queries, geo, st)) in traced.into_iter().enumerate() {
             out.stats.add(&st);
+            out.geometry.push(geo);
             for (r, q) in queries {
                 out.slots.push((p as u32, r));
                 out.queries.push(q);
@@ -547,11 +679,7 @@ impl ProbeVolume {
             }
         }
         let (im, mm) = (self.irradiance_map, self.moment_map);
-        let h = if self.frames == 0 {
-            0.0
-        } else {
-            self.settings.hysteresis
-        };
+        let hysteresis = self.settings.hysteresis;
         let sharp = self.settings.depth_sharpness;
         // An integral exponent (the default 50) as a chain of multiplications.
         let sharp_int = sharp.fract() == 0.0 && sharp.abs() < 1024.0;
@@ -560,7 +688,13 @@ impl ProbeVolume {
             .par_chunks_mut(im.len())
             .zip(self.moments.par_chunks_mut(mm.len()))
             .zip(rays.rays.par_iter())
-            .for_each(|((irr, mom), rays)| {
+            .zip(self.active.par_iter().zip(self.blended.par_iter_mut()))
+            .for_each(|(((irr, mom), rays), (&active, blended))| {
+                if !active {
+                    return;
+                }
+                let h = if *blended { hysteresis } else { 0.0 };
+                *blended = true;
                 im.blend(irr, rays, h, |c| c, |_, l, _| l * PI);
                 let w = |c: f32| {
                     if sharp_int {
@@ -572,6 +706,46 @@ impl ProbeVolume {
                 mm.blend(mom, rays, h, w, |_, _, d| Vec2::new(d, d * d));
             });
         self.frames += 1;
+        self.relocate_and_classify(&rays.geometry);
+    }
+
+    /// Relocation and classification from the rays' findings (see the module's notes).
+    fn relocate_and_classify(&mut self, geometry: &[ProbeGeometry]) {
+        let min_front = 0.1 * self.spacing.min_element();
+        let limit = 0.45 * self.spacing;
+        for (p, g) in geometry.iter().enumerate() {
+            let inside = g.back_fraction() > INSIDE_FRACTION;
+            self.back_fraction[p] = g.back_fraction();
+            if self.settings.relocate {
+                let mut off = self.offsets[p];
+                if inside && g.closest_back.0.is_finite() {
+                    off += g.closest_back.1 * (g.closest_back.0 + 0.5 * min_front);
+                } else if !inside && g.closest_front.0 < min_front {
+                    off -= g.closest_front.1 * (min_front - g.closest_front.0);
+                }
+                self.offsets[p] = off.clamp(-limit, limit);
+            }
+            if self.settings.classify {
+                self.active[p] = !inside && g.front_in_cells;
+            }
+        }
+    }
+
+    /// §3.3: the factor on the emission a ray of probe `p` (direction `d`) finds at distance
+    /// `t`. Emission at probe centres is too bright for the surfaces the probe shades, which
+    /// lie farther from the light: on average `b` behind the probe, its mean distance toward
+    /// `−d` (the moments it already holds) clipped to its eight cells; the factor is the
+    /// inverse square law's `(t / (t + s·b))²`, `s` the setting. A heuristic (the paper's own
+    /// word), biased either way; 1 before the probe holds any distances.
+    pub fn emission_attenuation(&self, p: usize, d: Vec3, t: f32) -> f32 {
+        let l = self.moment_map.len();
+        let mean = self
+            .moment_map
+            .lookup(&self.moments[p * l..(p + 1) * l], -d)
+            .x;
+        let to_cells = (self.spacing / d.abs().max(Vec3::splat(1e-6))).min_element();
+        let b = self.settings.attenuation * mean.min(to_cells).max(0.0);
+        if b > 0.0 { (t / (t + b)).powi(2) } else { 1.0 }
     }
 
     /// The radiance a probe ray brings back from vertex `v` (eq. 4 or eq. 5).

@@ -1,6 +1,6 @@
 //! The DDGI probe volume: octahedral maps, convergence in the emissive enclosure at the rate
 //! the hysteresis predicts (eq. 5 to the full irradiance, eq. 4 to the indirect-only one), and
-//! the Chebyshev visibility weight behind a wall.
+//! the Chebyshev visibility weight behind a wall, probe relocation and classification.
 
 mod common;
 
@@ -248,6 +248,24 @@ fn render_frames(
     last.unwrap()
 }
 
+/// relMSE (ε = 0.01) of `img` against `reference` over the pixels `mask` does not mark.
+fn rel_mse_off_emitters(
+    img: &nrc_scene::Image,
+    reference: &nrc_scene::Image,
+    mask: &[bool],
+) -> f64 {
+    let (mut sum, mut n) = (0.0f64, 0);
+    for ((a, b), m) in img.data.iter().zip(&reference.data).zip(mask) {
+        if !*m {
+            for c in 0..3 {
+                sum += ((a[c] - b[c]) as f64).powi(2) / ((b[c] as f64).powi(2) + 0.01);
+                n += 1;
+            }
+        }
+    }
+    sum / n as f64
+}
+
 /// `ddgi-secondary` in the enclosure: with converged eq. 5 probes the secondary vertex's
 /// radiance is exact, so the image is `L_e / (1 − ρ) = 2` everywhere (mean within 1 %).
 #[test]
@@ -269,18 +287,7 @@ fn ddgi_secondary_error_falls_as_the_probe_grid_densifies() {
     let reference =
         common::render_scene(&scene, &nrc_render::PathTracer::default(), w, h, 1024, 3).mean;
     let mask = nrc_render::emitters::emitter_pixels(&scene, w, h);
-    let rel_mse = |img: &nrc_scene::Image| {
-        let (mut sum, mut n) = (0.0f64, 0);
-        for ((a, b), m) in img.data.iter().zip(&reference.data).zip(&mask) {
-            if !*m {
-                for c in 0..3 {
-                    sum += ((a[c] - b[c]) as f64).powi(2) / ((b[c] as f64).powi(2) + 0.01);
-                    n += 1;
-                }
-            }
-        }
-        sum / n as f64
-    };
+    let rel_mse = |img: &nrc_scene::Image| rel_mse_off_emitters(img, &reference, &mask);
     let errors: Vec<f64> = [4, 8, 16]
         .iter()
         .map(|n| {
@@ -301,6 +308,7 @@ fn ddgi_secondary_error_falls_as_the_probe_grid_densifies() {
 /// down; nothing else lit): the uniform cone of half-angle α = 45° gives the irradiance
 /// `π L_e sin²α cos θ` (Nusselt) for every normal within `90° − α` of the axis. After 100 eq. 5
 /// updates at hysteresis 0.9, the probe's texels within 40° of the axis agree within 3 %.
+/// With §3.3's attenuation at `s = 1` the same texels hold a quarter of that (see below).
 #[test]
 fn a_probe_under_an_emissive_disc_matches_the_closed_form() {
     let mut b = SceneBuilder::new();
@@ -324,31 +332,37 @@ fn a_probe_under_an_emissive_disc_matches_the_closed_form() {
         );
     }
     b.mesh(&disc, light, false)
-        // A black floor far below sets the box (the probe sits at its centre, the origin).
+        // A wide black floor below sets the box (the probe sits at its centre, the origin).
         .mesh(
             &Mesh::quad(
                 Vec3::new(0.0, -1.0, 0.0),
-                Vec3::new(1.0, 0.0, 0.0),
-                Vec3::new(0.0, 0.0, -1.0),
+                Vec3::new(10.0, 0.0, 0.0),
+                Vec3::new(0.0, 0.0, -10.0),
             ),
             black,
             false,
         )
         .camera(Vec3::new(0.0, 0.0, 3.0), Vec3::ZERO, 60.0);
     let scene = b.build();
-    let settings = DdgiSettings {
-        counts: Some(UVec3::ONE),
-        hysteresis: 0.9,
-        ..Default::default()
+    let texels = |attenuation: f32| {
+        let settings = DdgiSettings {
+            counts: Some(UVec3::ONE),
+            hysteresis: 0.9,
+            attenuation,
+            ..Default::default()
+        };
+        let mut v = ProbeVolume::new(&scene.bounds(), settings).unwrap();
+        for f in 0..100 {
+            v.update(&scene, 500 + f);
+        }
+        v.irradiance_texels(0)
     };
-    let mut v = ProbeVolume::new(&scene.bounds(), settings).unwrap();
-    for f in 0..100 {
-        v.update(&scene, 500 + f);
-    }
     let polygon = segments as f32 / (2.0 * PI) * (2.0 * PI / segments as f32).sin();
-    let mut checked = 0;
-    let mut worst = 0.0f32;
-    for (n, e) in v.irradiance_texels(0) {
+    let (mut checked, mut worst) = (0, 0.0f32);
+    // §3.3's attenuation at s = 1: the floor lies as far below the probe as the disc above it
+    // in every direction of the cone, so each disc ray's emission is scaled by (t / 2t)² = ¼.
+    let (mut lowest, mut highest) = (f32::INFINITY, 0.0f32);
+    for ((n, e), (_, e_att)) in texels(0.0).into_iter().zip(texels(1.0)) {
         let cos = n.dot(Vec3::Y);
         if cos < 40f32.to_radians().cos() {
             continue;
@@ -356,12 +370,93 @@ fn a_probe_under_an_emissive_disc_matches_the_closed_form() {
         // sin²α of the cone, its area scaled by the 64-gon's (inscribed) area.
         let expect = PI * 0.5 * polygon * cos;
         worst = worst.max((e.x / expect - 1.0).abs());
+        lowest = lowest.min(e_att.x / e.x);
+        highest = highest.max(e_att.x / e.x);
         checked += 1;
     }
     println!(
-        "disc: {checked} texels within 40° of the axis, worst relative error {:.2} %",
+        "disc: {checked} texels within 40° of the axis, worst relative error {:.2} %; attenuated (s = 1) by {lowest:.3} to {highest:.3} (expected about 0.25: the moments average 1/cos over their lobe, so b is a little above t)",
         100.0 * worst
     );
     assert!(checked >= 4, "{checked} texels checked");
     assert!(worst < 0.03, "worst {worst}");
+    assert!(lowest > 0.2 && highest < 0.3, "{lowest} … {highest}");
+}
+
+/// Relocation and classification on the Cornell box (8³ probes, 256 rays). Without
+/// relocation the probes inside the two blocks stay there (more than a quarter of their rays
+/// hit back faces: the negative control); with it at least two thirds of them step out within
+/// two updates (the rest lie deeper than the 0.45 of a cell a probe may move). Classification
+/// switches off the probes whose eight cells hold no surface (the middle of the room) and
+/// those still inside geometry, and keeps those by the walls: the update then traces fewer
+/// rays, and the `ddgi-secondary` image loses nothing (relMSE within 10 % of the plain
+/// volume's).
+#[test]
+fn relocation_leaves_geometry_and_classification_switches_off_empty_cells() {
+    let scene = nrc_scene::Scene::load(&common::project_scenes().join("cornell-box.gltf")).unwrap();
+    let inside = |relocate: bool| {
+        let mut v = ProbeVolume::new(
+            &scene.bounds(),
+            DdgiSettings {
+                counts: Some(UVec3::splat(8)),
+                relocate,
+                ..Default::default()
+            },
+        )
+        .unwrap();
+        let count = |v: &ProbeVolume| {
+            (0..v.probe_count())
+                .filter(|&p| v.probe_back_fraction(p) > 0.25)
+                .count()
+        };
+        v.update(&scene, 1);
+        let first = count(&v);
+        v.update(&scene, 2);
+        v.update(&scene, 3);
+        (first, count(&v))
+    };
+    let (still_before, still_after) = inside(false);
+    let (moved_before, moved_after) = inside(true);
+    println!(
+        "probes inside geometry: {still_before} → {still_after} without relocation, {moved_before} → {moved_after} with it"
+    );
+    assert!(still_before > 0 && still_after == still_before);
+    assert_eq!(moved_before, still_before);
+    assert!(3 * moved_after <= still_before);
+
+    let mut v = ProbeVolume::new(
+        &scene.bounds(),
+        DdgiSettings {
+            counts: Some(UVec3::splat(8)),
+            classify: true,
+            relocate: true,
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    let all = v.update(&scene, 1).closest_rays;
+    v.update(&scene, 2);
+    let after = v.update(&scene, 3).closest_rays;
+    let off = (0..v.probe_count()).filter(|&p| !v.probe_active(p)).count();
+    println!(
+        "classification: {off} of {} probes off, rays per update {all} → {after}",
+        v.probe_count()
+    );
+    assert!(off > 0 && off < v.probe_count());
+    assert!(after < all);
+    // The probes relocation could not free (deeper in a block than 0.45 of a cell) are off.
+    assert!((0..v.probe_count()).all(|p| !v.probe_active(p) || v.probe_back_fraction(p) <= 0.25));
+
+    let (w, h) = (32, 32);
+    let reference =
+        common::render_scene(&scene, &nrc_render::PathTracer::default(), w, h, 1024, 3).mean;
+    let mask = nrc_render::emitters::emitter_pixels(&scene, w, h);
+    let rel_mse = |pass: &str| {
+        rel_mse_off_emitters(&render_frames(&scene, pass, w, h, 16), &reference, &mask)
+    };
+    let plain = rel_mse("ddgi-secondary:probes=8,rays=128,hysteresis=0.8");
+    let classified =
+        rel_mse("ddgi-secondary:probes=8,rays=128,hysteresis=0.8,classify=1,relocate=1");
+    println!("ddgi-secondary relMSE: {plain:.4} plain, {classified:.4} classified and relocated");
+    assert!(classified < 1.1 * plain, "{classified} against {plain}");
 }

@@ -118,8 +118,7 @@ fn nrc_restir_with_an_exact_source_matches_the_reference_per_pixel_and_fails_wit
         seed: 0,
     };
     for (residual, unbiased) in [(1, true), (0, false)] {
-        let pass =
-            format!("nrc-restir:mcap=4,clamp=0.3,jitter=0,residual={residual}");
+        let pass = format!("nrc-restir:mcap=4,clamp=0.3,jitter=0,residual={residual}");
         let images = runs(&scene, &pass, &tracer, Some(&source), (24, 24, 4, 512));
         let (worst, beyond, bound) = per_pixel_z(&images, &reference, &ref_var, ref_spp);
         println!(

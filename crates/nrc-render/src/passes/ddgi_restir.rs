@@ -10,8 +10,8 @@
 //!   irradiance;
 //! - `ddgi-nrc-restir`: probes whose rays take their radiance from the cache at their hits.
 //!
-//! Per frame and pixel sample at the primary vertex `x` (non-delta; delta primaries are path
-//! traced):
+//! Per frame and pixel sample at the primary vertex `x` (non-delta, perceptual roughness at
+//! least `smooth` = 0.2; delta and near-specular primaries are path traced):
 //!
 //! 1. **Candidates** (§3.2 step 1): `light` points from the light sampler and `bsdf` BSDF
 //!    samples, each ray's first hit a candidate wherever it lands (an escaped ray: the
@@ -41,9 +41,10 @@
 //!
 //! What the estimator converges to is `L_e(x) + T(L_e + L_src)`: exact where the source is
 //! exact, and, with probes or a cache, biased by the source's error one bounce away from the
-//! camera (the paper's premise: the error is hidden behind a scattering event). Not built:
-//! the near-specular recursion by footprint of eqs. 7–8 (glossy secondary vertices use the
-//! source's answer directly) and §3.3's attenuation of `L_e` in the probe update.
+//! camera (the paper's premise: the error is hidden behind a scattering event). §3.3's
+//! attenuation of `L_e` in the probe update is the volume's option (`attenuation=S`). Not
+//! built: the near-specular recursion by footprint of eqs. 7–8 (glossy secondary vertices use
+//! the source's answer directly).
 
 use std::f32::consts::PI;
 use std::time::Instant;
@@ -96,6 +97,10 @@ pub struct DdgiRestirSettings {
     pub requery: bool,
     /// Jitter camera rays in the pixel.
     pub jitter: bool,
+    /// Primaries of perceptual roughness below this are path traced, as delta ones are (the
+    /// paper traces near-specular transport recursively; a reservoir of 9 candidates cannot
+    /// follow a mirror-like lobe, and neighbours' samples rarely fall in it). 0: delta only.
+    pub smooth: f32,
     /// The probe volume (probe modes).
     pub ddgi: DdgiSettings,
 }
@@ -114,6 +119,7 @@ impl Default for DdgiRestirSettings {
             residual: true,
             requery: false,
             jitter: true,
+            smooth: 0.2,
             ddgi: DdgiSettings::default(),
         }
     }
@@ -141,6 +147,9 @@ impl DdgiRestirSettings {
         }
         if !(self.m_cap > 0.0 && self.m_cap.is_finite()) {
             return Err(format!("M-cap must be positive, got {}", self.m_cap));
+        }
+        if !(0.0..=1.0).contains(&self.smooth) {
+            return Err(format!("smooth must lie in [0, 1], got {}", self.smooth));
         }
         if !(self.clamp >= 0.0 && self.clamp <= 10.0) {
             return Err(format!("clamp must lie in [0, 10], got {}", self.clamp));
@@ -540,9 +549,11 @@ impl RenderPass for DdgiRestirPass {
             seed,
             self.settings.jitter,
         );
-        let traced: Vec<Traced> = par_map(g.len(), |i| match usable(&g.primary[i]) {
-            Some(p) => self.candidates(scene, &p.v, &mut stream(seed, i, Phase::Candidates)),
-            None => Traced::default(),
+        let traced: Vec<Traced> = par_map(g.len(), |i| {
+            match usable(&g.primary[i], self.settings.smooth) {
+                Some(p) => self.candidates(scene, &p.v, &mut stream(seed, i, Phase::Candidates)),
+                None => Traced::default(),
+            }
         });
         let mut queries = Vec::new();
         let mut rays = None;
@@ -700,7 +711,7 @@ impl RenderPass for DdgiRestirPass {
             let mut stats = tr.stats;
             let mut r = DdgiReservoir::new();
             let mut aux = Vec3::ZERO;
-            let Some(p) = usable(&g.primary[i]) else {
+            let Some(p) = usable(&g.primary[i], set.smooth) else {
                 return (r, aux, stats);
             };
             let v = &p.v;
@@ -757,7 +768,7 @@ impl RenderPass for DdgiRestirPass {
         let spatial: Vec<(DdgiReservoir, PathStats)> = par_map(n, |i| {
             let own = initial[i].0;
             let mut stats = PathStats::default();
-            let Some(p) = usable(&g.primary[i]) else {
+            let Some(p) = usable(&g.primary[i], set.smooth) else {
                 return (own, stats);
             };
             if set.spatial_neighbours == 0 {
@@ -796,7 +807,7 @@ impl RenderPass for DdgiRestirPass {
         let cap = set.m_cap * (ml + mb);
         let temporal: Vec<(DdgiReservoir, PathStats)> = par_map(n, |i| {
             let (own, mut stats) = spatial[i];
-            let (Some(p), Some(h)) = (usable(&g.primary[i]), history.as_ref()) else {
+            let (Some(p), Some(h)) = (usable(&g.primary[i], set.smooth), history.as_ref()) else {
                 return (own, stats);
             };
             let Some((j, pv)) = h.g.temporal_neighbour(&p.v, i) else {
@@ -822,7 +833,7 @@ impl RenderPass for DdgiRestirPass {
             stats.add(&st0);
             let mut l = g.emitted[i];
             if let Some(p) = &g.primary[i] {
-                if usable(&g.primary[i]).is_some() {
+                if usable(&g.primary[i], set.smooth).is_some() {
                     l += aux;
                     if let Some(y) = r.sample {
                         match contribution(&ctx, &p.v, &y) {
@@ -840,7 +851,7 @@ impl RenderPass for DdgiRestirPass {
             (l, r, stats)
         });
         times.shading_ms = t.elapsed().as_secs_f64() * 1e3;
-        times.candidates_ms += self.update_ms;
+        times.probes_ms = self.update_ms;
 
         let (out, res) = super::screen::assemble(&g, input, shaded, times);
         self.history = Some(History { g, res });
@@ -863,7 +874,8 @@ fn refresh_history(h: &mut History, refresh: &[(usize, Vertex)], fresh: &[Vec3])
     }
 }
 
-/// The primary vertex where the resampling applies (non-delta BSDF).
-fn usable(p: &Option<Primary>) -> Option<&Primary> {
-    p.as_ref().filter(|p| !p.v.bsdf.is_delta())
+/// The primary vertex where the resampling applies: not a delta, roughness at least `smooth`.
+fn usable(p: &Option<Primary>, smooth: f32) -> Option<&Primary> {
+    p.as_ref()
+        .filter(|p| !p.v.bsdf.is_delta() && p.v.bsdf.roughness() >= smooth)
 }

@@ -93,7 +93,7 @@ impl RenderPass for DdgiTerminatedPass {
         };
         let mut out = self.inner.resolve(input, &answers);
         out.stats.queries = self.queries.len() as u64;
-        out.stats.phases.candidates_ms = self.update_ms;
+        out.stats.phases.probes_ms = self.update_ms;
         out
     }
 }

@@ -77,6 +77,8 @@ pub struct PassStats {
 /// Milliseconds per phase of a resampling pass's frame.
 #[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
 pub struct PhaseTimes {
+    /// The probe volume's update (its rays traced and blended), for the DDGI passes.
+    pub probes_ms: f64,
     /// Camera rays and initial candidates.
     pub candidates_ms: f64,
     pub temporal_ms: f64,
@@ -205,6 +207,34 @@ pub fn pass_names() -> String {
 }
 
 /// Adds `KEY=VALUE` to a pass name's parameters where the value is not the default.
+/// A probe volume's parameter in a pass string (`probes`, `rays`, `hysteresis`, `relocate`,
+/// `classify`, `attenuation`): set, or `false` when `p` is none of them.
+fn volume_param(settings: &mut crate::ddgi::DdgiSettings, p: &PassParam) -> Result<bool, String> {
+    match p.key {
+        "probes" => settings.counts = Some(glam::UVec3::splat(p.count()?)),
+        "rays" => settings.rays_per_probe = p.count()?,
+        "hysteresis" => settings.hysteresis = p.real()?,
+        "relocate" => settings.relocate = p.flag()?,
+        "classify" => settings.classify = p.flag()?,
+        "attenuation" => settings.attenuation = p.real()?,
+        _ => return Ok(false),
+    }
+    Ok(true)
+}
+
+/// The probe volume's parameters that differ from the defaults, as `key=value`.
+fn volume_params(params: &mut Vec<String>, s: &crate::ddgi::DdgiSettings) {
+    let d = crate::ddgi::DdgiSettings::default();
+    if let Some(c) = s.counts {
+        params.push(format!("probes={}", c.x));
+    }
+    param(params, "rays", s.rays_per_probe, d.rays_per_probe);
+    param(params, "hysteresis", s.hysteresis, d.hysteresis);
+    param(params, "relocate", s.relocate as u32, d.relocate as u32);
+    param(params, "classify", s.classify as u32, d.classify as u32);
+    param(params, "attenuation", s.attenuation, d.attenuation);
+}
+
 fn param<T: PartialEq + fmt::Display>(params: &mut Vec<String>, key: &str, value: T, default: T) {
     if value != default {
         params.push(format!("{key}={value}"));
@@ -336,23 +366,16 @@ impl FromStr for PassSpec {
                     "residual" => set.residual = p.flag()?,
                     "requery" => set.requery = p.flag()?,
                     "jitter" => set.jitter = p.flag()?,
-                    "probes" if light != SurfaceLight::Cache => {
-                        set.ddgi.counts = Some(glam::UVec3::splat(p.count()?))
-                    }
-                    "rays" if light != SurfaceLight::Cache => {
-                        set.ddgi.rays_per_probe = p.count()?
-                    }
-                    "hysteresis" if light != SurfaceLight::Cache => {
-                        set.ddgi.hysteresis = p.real()?
-                    }
+                    "smooth" => set.smooth = p.real()?,
+                    _ if light != SurfaceLight::Cache && volume_param(&mut set.ddgi, &p)? => {}
                     k => {
                         return Err(format!(
                             "pass `{s}`: unknown parameter `{k}` (known: light, bsdf, k, radius, mcap, temporal, \
-                             clamp, residual, requery, jitter{})",
+                             clamp, residual, requery, jitter, smooth{})",
                             if light == SurfaceLight::Cache {
                                 ""
                             } else {
-                                ", probes, rays, hysteresis"
+                                ", probes, rays, hysteresis, relocate, classify, attenuation"
                             }
                         ));
                     }
@@ -371,12 +394,7 @@ impl FromStr for PassSpec {
             for param in pass_params(s, params) {
                 let p = param?;
                 match p.key {
-                    "probes" => {
-                        let n = p.count()?;
-                        settings.counts = Some(glam::UVec3::splat(n));
-                    }
-                    "rays" => settings.rays_per_probe = p.count()?,
-                    "hysteresis" => settings.hysteresis = p.real()?,
+                    _ if volume_param(&mut settings, &p)? => {}
                     "radiance" => {
                         settings.radiance = match p.value {
                             "full" => crate::ddgi::ProbeRadiance::Full,
@@ -387,7 +405,7 @@ impl FromStr for PassSpec {
                     }
                     k => {
                         return Err(format!(
-                            "pass `{s}`: unknown parameter `{k}` (known: probes, rays, hysteresis, radiance)"
+                            "pass `{s}`: unknown parameter `{k}` (known: probes, rays, hysteresis, relocate, classify, attenuation, radiance)"
                         ));
                     }
                 }
@@ -525,18 +543,8 @@ impl fmt::Display for PassSpec {
                 settings,
             } => {
                 write!(f, "ddgi-{termination}")?;
-                let d = crate::ddgi::DdgiSettings::default();
                 let mut params = Vec::new();
-                if let Some(c) = settings.counts {
-                    params.push(format!("probes={}", c.x));
-                }
-                param(
-                    &mut params,
-                    "rays",
-                    settings.rays_per_probe,
-                    d.rays_per_probe,
-                );
-                param(&mut params, "hysteresis", settings.hysteresis, d.hysteresis);
+                volume_params(&mut params, &settings);
                 match settings.radiance {
                     crate::ddgi::ProbeRadiance::Full => {}
                     crate::ddgi::ProbeRadiance::Indirect => params.push("radiance=indirect".into()),
@@ -585,21 +593,8 @@ impl fmt::Display for PassSpec {
                 );
                 param(&mut params, "requery", set.requery as u32, d.requery as u32);
                 param(&mut params, "jitter", set.jitter as u32, d.jitter as u32);
-                if let Some(c) = set.ddgi.counts {
-                    params.push(format!("probes={}", c.x));
-                }
-                param(
-                    &mut params,
-                    "rays",
-                    set.ddgi.rays_per_probe,
-                    d.ddgi.rays_per_probe,
-                );
-                param(
-                    &mut params,
-                    "hysteresis",
-                    set.ddgi.hysteresis,
-                    d.ddgi.hysteresis,
-                );
+                param(&mut params, "smooth", set.smooth, d.smooth);
+                volume_params(&mut params, &set.ddgi);
                 if !params.is_empty() {
                     write!(f, ":{}", params.join(","))?;
                 }
@@ -750,10 +745,11 @@ mod tests {
             "ddgi-secondary",
             "ddgi-first:probes=4,rays=64,hysteresis=0.9,radiance=indirect",
             "ddgi-secondary:radiance=nrc",
+            "ddgi-secondary:relocate=1,classify=1",
             "ddgi-restir",
             "nrc-restir",
             "ddgi-nrc-restir",
-            "ddgi-restir:light=4,bsdf=2,k=0,radius=10,mcap=5,temporal=0,clamp=0,residual=0,requery=1,jitter=0,probes=4,rays=64,hysteresis=0.9",
+            "ddgi-restir:light=4,bsdf=2,k=0,radius=10,mcap=5,temporal=0,clamp=0,residual=0,requery=1,jitter=0,smooth=0.5,probes=4,rays=64,hysteresis=0.9,relocate=1,classify=1,attenuation=0.5",
             "nrc-restir:clamp=0.05",
         ] {
             let spec: PassSpec = name.parse().unwrap();
@@ -798,6 +794,7 @@ mod tests {
             "nrc-restir:probes=4",
             "nrc-restir:requery=1",
             "ddgi-restir:bsdf=0",
+            "nrc-restir:classify=1",
             "ddgi-restir:clamp=-1",
             "ddgi-restir:clamp=nan",
             "ddgi-nrc-restir:probes=0",
