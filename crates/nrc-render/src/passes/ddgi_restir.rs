@@ -784,15 +784,7 @@ impl RenderPass for DdgiRestirPass {
                 &mut s,
                 &mut near,
             );
-            let others: Vec<(DdgiReservoir, &Vertex)> = near
-                .iter()
-                .map(|&q| {
-                    (
-                        initial[q].0,
-                        &g.primary[q].as_ref().expect("neighbours have vertices").v,
-                    )
-                })
-                .collect();
+            let others = g.with_vertices(&near, |q| initial[q].0);
             let target =
                 |v: &Vertex, y: &DdgiSample| contribution(&ctx, v, y).map_or(0.0, |c| c.target);
             let (r, _) = combine(&p.v, &own, &others, false, &mut s, target, |ov, y| {

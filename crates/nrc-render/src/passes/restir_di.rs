@@ -390,15 +390,7 @@ impl RenderPass for RestirDiPass {
                 &mut s,
                 &mut near,
             );
-            let others: Vec<(DiReservoir, &Vertex)> = near
-                .iter()
-                .map(|&q| {
-                    (
-                        temporal[q].0,
-                        &g.primary[q].as_ref().expect("neighbours have vertices").v,
-                    )
-                })
-                .collect();
+            let others = g.with_vertices(&near, |q| temporal[q].0);
             let (r, _) = self.combine(scene, &p.v, &own, &others, &mut s, &mut stats);
             (r, stats)
         });

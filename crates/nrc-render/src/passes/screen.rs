@@ -144,6 +144,19 @@ impl GBuffer {
         Some((j, &self.primary[j].as_ref()?.v))
     }
 
+    /// The neighbours `near` as `(res(q), vertex)` pairs, for [`combine`].
+    pub fn with_vertices<R>(&self, near: &[usize], res: impl Fn(usize) -> R) -> Vec<(R, &Vertex)> {
+        near.iter()
+            .map(|&q| {
+                let v = &self.primary[q]
+                    .as_ref()
+                    .expect("neighbours have vertices")
+                    .v;
+                (res(q), v)
+            })
+            .collect()
+    }
+
     /// Up to `k` spatial neighbours of pixel sample `i` (chain `s`): pixels uniform in a disc
     /// of `radius` pixels, kept where their vertex is similar to `me` (Bitterli et al. 2020:
     /// rejected candidates are not replaced).
