@@ -42,9 +42,11 @@
 //! What the estimator converges to is `L_e(x) + T(L_e + L_src)`: exact where the source is
 //! exact, and, with probes or a cache, biased by the source's error one bounce away from the
 //! camera (the paper's premise: the error is hidden behind a scattering event). §3.3's
-//! attenuation of `L_e` in the probe update is the volume's option (`attenuation=S`). Not
-//! built: the near-specular recursion by footprint of eqs. 7–8 (glossy secondary vertices use
-//! the source's answer directly).
+//! attenuation of `L_e` in the probe update is the volume's option (`attenuation=S`). The
+//! near-specular recursion of eqs. 7–8 (`footprint=c`, the paper's 0.2) follows, at shading,
+//! the chosen glossy sample point's lobe until the path's footprint is wide enough to blur the
+//! probes, in the probe modes; with the cache as the light the sample point's radiance is the
+//! cache's answer (it holds glossy radiance in every direction, and is asked once a frame).
 
 use std::f32::consts::PI;
 use std::time::Instant;
@@ -60,6 +62,7 @@ use crate::path_tracer::{PathStats, PathTracer};
 use crate::reservoir::Reservoir;
 use crate::sampler::PixelSampler;
 use crate::source::RadianceQuery;
+use crate::spread::Spread;
 use crate::transport::Vertex;
 use rayon::prelude::*;
 
@@ -101,6 +104,11 @@ pub struct DdgiRestirSettings {
     /// paper traces near-specular transport recursively; a reservoir of 9 candidates cannot
     /// follow a mirror-like lobe, and neighbours' samples rarely fall in it). 0: delta only.
     pub smooth: f32,
+    /// Eqs. 7–8's threshold `c` of the near-specular recursion (the paper's 0.2; 0: off): at
+    /// shading, the chosen glossy sample point's radiance follows its glossy lobe while the
+    /// path's footprint from the primary vertex stays below `c · a0`, then ends in eq. 6
+    /// (probe modes; the resampling's targets keep eq. 6 itself, as in the paper).
+    pub footprint: f32,
     /// The probe volume (probe modes).
     pub ddgi: DdgiSettings,
 }
@@ -120,6 +128,7 @@ impl Default for DdgiRestirSettings {
             requery: false,
             jitter: true,
             smooth: 0.2,
+            footprint: 0.2,
             ddgi: DdgiSettings::default(),
         }
     }
@@ -147,6 +156,12 @@ impl DdgiRestirSettings {
         }
         if !(self.m_cap > 0.0 && self.m_cap.is_finite()) {
             return Err(format!("M-cap must be positive, got {}", self.m_cap));
+        }
+        if !(self.footprint >= 0.0 && self.footprint <= 1e3) {
+            return Err(format!(
+                "footprint must lie in [0, 1000], got {}",
+                self.footprint
+            ));
         }
         if !(0.0..=1.0).contains(&self.smooth) {
             return Err(format!("smooth must lie in [0, 1], got {}", self.smooth));
@@ -482,26 +497,132 @@ impl DdgiRestirPass {
     /// `2π`; `π` is the cosine lobe's mass over the hemisphere (a uniform field of radiance
     /// `L` has `E = πL`), so `1/π` is what makes a glossy surface in a uniform field reflect
     /// its albedo.
-    fn ddgi_plus(vol: &ProbeVolume, at: &Vertex, s: &mut PixelSampler) -> Vec3 {
+    ///
+    /// With `spread` (eqs. 7–8, the path's footprint from the primary vertex up to `at`, in
+    /// the project's convention, [`crate::spread`]), while the footprint is below the
+    /// threshold the glossy sample is traced instead: the radiance arriving along it (the
+    /// emission at its hit and that hit's own `L_DDGI+`, recursively) replaces `E(x, ω)/π`.
+    fn ddgi_plus(
+        vol: &ProbeVolume,
+        scene: &Scene,
+        at: &Vertex,
+        spread: Option<Spread>,
+        s: &mut PixelSampler,
+        stats: &mut PathStats,
+        depth: u32,
+    ) -> Vec3 {
         let rho = at.bsdf.diffuse_reflectance();
-        let mut l = rho / PI * vol.irradiance(at.si.p, at.si.ns, at.wo_world);
+        let l = rho / PI * vol.irradiance(at.si.p, at.si.ns, at.wo_world);
         if matches!(at.bsdf, nrc_scene::bsdf::Bsdf::Diffuse { .. }) {
             return l;
         }
         let (u_lobe, u_dir) = (s.next_1d(), s.next_2d());
-        if let Some(bs) = at.bsdf.sample(at.wo, u_dir, u_lobe) {
-            let w = if bs.delta {
-                bs.weight
-            } else {
-                let f = (at.bsdf.eval(at.wo, bs.wi) - rho / PI).max(Vec3::ZERO);
-                f * bs.wi.z.abs() / bs.pdf
-            };
-            if w.is_finite() && w != Vec3::ZERO {
-                let wi = at.frame.to_world(bs.wi);
-                l += w / PI * vol.irradiance(at.si.p, wi, at.wo_world);
-            }
+        let Some(bs) = at.bsdf.sample(at.wo, u_dir, u_lobe) else {
+            return l;
+        };
+        let w = if bs.delta {
+            bs.weight
+        } else {
+            let f = (at.bsdf.eval(at.wo, bs.wi) - rho / PI).max(Vec3::ZERO);
+            f * bs.wi.z.abs() / bs.pdf
+        };
+        if !(w.is_finite() && w != Vec3::ZERO) {
+            return l;
         }
-        l
+        let wi = at.frame.to_world(bs.wi);
+        let Some(mut spread) = spread else {
+            return l + w / PI * vol.irradiance(at.si.p, wi, at.wo_world);
+        };
+        let ray = spawn_ray(at.si.p, at.si.ng, wi);
+        stats.closest_rays += 1;
+        let Some(hit) = scene.intersect(&ray) else {
+            return l + w * scene.environment().radiance(wi);
+        };
+        let si = scene.interaction(&ray, &hit);
+        let next = Vertex::new(scene, &si, si.wo);
+        let ends = depth + 1 >= MAX_RECURSION
+            || spread.arrive(hit.t * hit.t, (!bs.delta).then_some(bs.pdf), si.ng.dot(wi));
+        let li = scene.emission(&si)
+            + Self::ddgi_plus(
+                vol,
+                scene,
+                &next,
+                (!ends).then_some(spread),
+                s,
+                stats,
+                depth + 1,
+            );
+        l + w * li
+    }
+
+    /// The radiance a surface sample point `y` reflects toward the primary vertex `x1` (seen
+    /// from `eye`) in the probe modes: `L_DDGI+` of `vol` at `y` (eq. 6), through the
+    /// near-specular recursion of eqs. 7–8 while the footprint allows; and the rays it traced.
+    pub fn probe_radiance(
+        &self,
+        scene: &Scene,
+        vol: &ProbeVolume,
+        eye: Vec3,
+        x1: Option<&Vertex>,
+        y: &Vertex,
+        s: &mut PixelSampler,
+    ) -> (Vec3, u64) {
+        let spread = x1.and_then(|x1| self.spread_to(eye, x1, y));
+        let mut st = PathStats::default();
+        let l = Self::ddgi_plus(vol, scene, y, spread, s, &mut st, 0);
+        (l, st.closest_rays)
+    }
+
+    /// The chosen surface sample `y` with its radiance toward `x1` found again through the
+    /// near-specular recursion (unchanged where `y` is Lambertian: nothing to follow).
+    #[allow(clippy::too_many_arguments)]
+    fn recursed(
+        &self,
+        scene: &Scene,
+        vol: &ProbeVolume,
+        eye: Vec3,
+        x1: &Vertex,
+        y: SurfacePoint,
+        s: &mut PixelSampler,
+        stats: &mut PathStats,
+    ) -> SurfacePoint {
+        let wo = (x1.si.p - y.x).normalize_or_zero();
+        let si = scene.interaction_at(y.tri, y.x, wo);
+        let at = Vertex::new(scene, &si, wo);
+        if matches!(at.bsdf, nrc_scene::bsdf::Bsdf::Diffuse { .. }) {
+            return y;
+        }
+        let (l, rays) = self.probe_radiance(scene, vol, eye, Some(x1), &at, s);
+        stats.closest_rays += rays;
+        SurfacePoint {
+            l,
+            side: y.ng.dot(wo).signum(),
+            ..y
+        }
+    }
+
+    /// Eqs. 7–8 at a sample point `y` found from primary vertex `x1` (seen from `eye`): the
+    /// spread of the path `eye → x1 → y`, `p₁` the primary BSDF's density toward `y` (the
+    /// paper: proportional to the whole BSDF at the primary vertex); `None` once it is above
+    /// the threshold already, or off.
+    fn spread_to(&self, eye: Vec3, x1: &Vertex, y: &Vertex) -> Option<Spread> {
+        // The paper's a0 = 4π d²/cos against the project's d²/(4π cos): c × 16π².
+        let c = self.settings.footprint * 16.0 * PI * PI;
+        if c <= 0.0 {
+            return None;
+        }
+        let mut spread = Spread::new(c);
+        let to_x1 = x1.si.p - eye;
+        spread.arrive(
+            to_x1.length_squared(),
+            None,
+            x1.si.ns.dot(to_x1.normalize_or_zero()),
+        );
+        let d = y.si.p - x1.si.p;
+        let wi = d.normalize_or_zero();
+        let pdf = x1.bsdf.pdf(x1.wo, x1.frame.to_local(wi));
+        let pdf = (!x1.bsdf.is_delta()).then_some(pdf);
+        (!spread.arrive(d.length_squared(), pdf, y.si.ng.dot(wi))).then_some(spread)
     }
 }
 
@@ -671,20 +792,23 @@ impl RenderPass for DdgiRestirPass {
             SurfaceLight::Probes => {}
         }
         if let Some(vol) = self.volume.as_ref().filter(|_| set.uses_probes()) {
+            let eye = input.camera.position;
             traced.par_iter_mut().enumerate().for_each(|(i, tr)| {
                 let mut s = stream(seed, i, Phase::Extra);
                 for c in &mut tr.candidates {
                     if let (DdgiSample::Surface(y), Some(at)) = (&mut c.y, &c.at) {
-                        y.l = Self::ddgi_plus(vol, at, &mut s);
+                        y.l = self.probe_radiance(scene, vol, eye, None, at, &mut s).0;
                     }
                 }
             });
             if let Some(h) = &mut history {
+                let hg = &h.g;
                 let fresh: Vec<Vec3> = refresh
                     .par_iter()
                     .map(|(j, at)| {
                         let mut s = stream(seed ^ 0x5EED, *j, Phase::Extra);
-                        Self::ddgi_plus(vol, at, &mut s)
+                        self.probe_radiance(scene, vol, hg.camera.position, None, at, &mut s)
+                            .0
                     })
                     .collect();
                 refresh_history(h, &refresh, &fresh);
@@ -819,6 +943,8 @@ impl RenderPass for DdgiRestirPass {
 
         // 4. Shading: one shadow ray.
         let t = Instant::now();
+        let eye = input.camera.position;
+        let recursion = self.volume.as_ref().filter(|_| set.footprint > 0.0);
         let shaded: Vec<(Vec3, DdgiReservoir, PathStats)> = par_map(n, |i| {
             let (mut r, mut stats) = temporal[i];
             let (_, aux, st0) = initial[i];
@@ -828,9 +954,26 @@ impl RenderPass for DdgiRestirPass {
                 if usable(&g.primary[i], set.smooth).is_some() {
                     l += aux;
                     if let Some(y) = r.sample {
-                        match contribution(&ctx, &p.v, &y) {
-                            Some(c) if sees(scene, &p.v, &y, &mut stats) => l += c.c * r.w,
-                            _ => r.clear_sample(),
+                        if contribution(&ctx, &p.v, &y).is_some()
+                            && sees(scene, &p.v, &y, &mut stats)
+                        {
+                            // Eqs. 7–8 at shading (the paper's use (iii)): the chosen point's
+                            // radiance through the near-specular recursion.
+                            let y =
+                                match (y, recursion) {
+                                    (DdgiSample::Surface(sp), Some(vol)) => {
+                                        let mut s = stream(seed ^ 0xF007, i, Phase::Extra);
+                                        DdgiSample::Surface(self.recursed(
+                                            scene, vol, eye, &p.v, sp, &mut s, &mut stats,
+                                        ))
+                                    }
+                                    _ => y,
+                                };
+                            if let Some(c) = contribution(&ctx, &p.v, &y) {
+                                l += c.c * r.w;
+                            }
+                        } else {
+                            r.clear_sample();
                         }
                     }
                 } else {
@@ -865,6 +1008,9 @@ fn refresh_history(h: &mut History, refresh: &[(usize, Vertex)], fresh: &[Vec3])
         }
     }
 }
+
+/// Vertices the near-specular recursion of one sample follows at most.
+const MAX_RECURSION: u32 = 8;
 
 /// The primary vertex where the resampling applies: not a delta, roughness at least `smooth`.
 fn usable(p: &Option<Primary>, smooth: f32) -> Option<&Primary> {

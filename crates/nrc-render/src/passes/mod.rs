@@ -367,11 +367,12 @@ impl FromStr for PassSpec {
                     "requery" => set.requery = p.flag()?,
                     "jitter" => set.jitter = p.flag()?,
                     "smooth" => set.smooth = p.real()?,
+                    "footprint" => set.footprint = p.real()?,
                     _ if light != SurfaceLight::Cache && volume_param(&mut set.ddgi, &p)? => {}
                     k => {
                         return Err(format!(
                             "pass `{s}`: unknown parameter `{k}` (known: light, bsdf, k, radius, mcap, temporal, \
-                             clamp, residual, requery, jitter, smooth{})",
+                             clamp, residual, requery, jitter, smooth, footprint{})",
                             if light == SurfaceLight::Cache {
                                 ""
                             } else {
@@ -594,6 +595,7 @@ impl fmt::Display for PassSpec {
                 param(&mut params, "requery", set.requery as u32, d.requery as u32);
                 param(&mut params, "jitter", set.jitter as u32, d.jitter as u32);
                 param(&mut params, "smooth", set.smooth, d.smooth);
+                param(&mut params, "footprint", set.footprint, d.footprint);
                 volume_params(&mut params, &set.ddgi);
                 if !params.is_empty() {
                     write!(f, ":{}", params.join(","))?;
@@ -749,7 +751,7 @@ mod tests {
             "ddgi-restir",
             "nrc-restir",
             "ddgi-nrc-restir",
-            "ddgi-restir:light=4,bsdf=2,k=0,radius=10,mcap=5,temporal=0,clamp=0,residual=0,requery=1,jitter=0,smooth=0.5,probes=4,rays=64,hysteresis=0.9,relocate=1,classify=1,attenuation=0.5",
+            "ddgi-restir:light=4,bsdf=2,k=0,radius=10,mcap=5,temporal=0,clamp=0,residual=0,requery=1,jitter=0,smooth=0.5,footprint=0,probes=4,rays=64,hysteresis=0.9,relocate=1,classify=1,attenuation=0.5",
             "nrc-restir:clamp=0.05",
         ] {
             let spec: PassSpec = name.parse().unwrap();
