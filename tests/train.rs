@@ -276,7 +276,10 @@ fn every_producer_trains_on_the_environment_lit_kajiya_scene() {
     let scene = Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("../shared/scenes/kajiya-roughness-scale/scene.gltf");
     if !scene.exists() {
-        eprintln!("skipped: {} is absent", scene.display());
+        nrc_scene::testing::skipped(
+            "every_producer_trains_on_the_environment_lit_kajiya_scene",
+            &format!("{} is absent", scene.display()),
+        );
         return;
     }
     let dir = tempfile::tempdir().unwrap();

@@ -194,7 +194,10 @@ fn cpu_and_wgpu_give_the_same_forward_and_backward() {
     let wgpu = match nrc_cache::gpu::wgpu_device() {
         Ok(device) => device,
         Err(why) => {
-            println!("SKIPPED cpu_and_wgpu_give_the_same_forward_and_backward: {why}");
+            nrc_scene::testing::skipped(
+                "cpu_and_wgpu_give_the_same_forward_and_backward",
+                &why.to_string(),
+            );
             return;
         }
     };
@@ -314,7 +317,7 @@ fn cpu_and_wgpu_fused_mlp_agree() {
     let wgpu = match nrc_cache::gpu::wgpu_device() {
         Ok(device) => device,
         Err(why) => {
-            println!("SKIPPED cpu_and_wgpu_fused_mlp_agree: {why}");
+            nrc_scene::testing::skipped("cpu_and_wgpu_fused_mlp_agree", &why.to_string());
             return;
         }
     };
@@ -409,7 +412,10 @@ fn avx2_hash_grid_kernel_matches_the_portable_loop() {
     use burn::tensor::f16;
     use nrc_cache::cpu::grid::{Table, encode_tile, encode_tile_portable};
     if !nrc_cache::cpu::gemm::has_avx2_fma() {
-        println!("skipped: this CPU has no AVX2/FMA, so only the portable loop exists");
+        nrc_scene::testing::skipped(
+            "avx2_hash_grid_kernel_matches_the_portable_loop",
+            "this CPU has no AVX2/FMA, so only the portable loop exists",
+        );
         return;
     }
     let mut rng = Pcg64Mcg::seed_from_u64(7);

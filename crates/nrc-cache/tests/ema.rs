@@ -222,7 +222,10 @@ fn cache_inference_weights_are_the_closed_form_average() {
 fn avx2_sparse_step_matches_the_portable_loop() {
     use nrc_cache::cpu::optim::{RECORD, half_weights, sparse_step_portable};
     if !nrc_cache::cpu::gemm::has_avx2_fma() || !nrc_cache::cpu::grid::has_f16c() {
-        println!("skipped: this CPU has no AVX2/FMA/F16C, so only the portable loop exists");
+        nrc_scene::testing::skipped(
+            "avx2_sparse_step_matches_the_portable_loop",
+            "this CPU has no AVX2/FMA/F16C, so only the portable loop exists",
+        );
         return;
     }
     let mut rng = Pcg64Mcg::seed_from_u64(3);

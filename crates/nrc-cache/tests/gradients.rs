@@ -425,9 +425,12 @@ fn avx2_gemm_matches_portable_loops() {
 fn avx512_gemm_gives_the_avx2_bits() {
     use nrc_cache::cpu::gemm::Kernel;
     if Kernel::best() != Kernel::Avx512 {
-        println!(
-            "skipped: this CPU has no AVX-512F (best kernel {:?})",
-            Kernel::best()
+        nrc_scene::testing::skipped(
+            "avx512_gemm_gives_the_avx2_bits",
+            &format!(
+                "this CPU has no AVX-512F (best kernel {:?})",
+                Kernel::best()
+            ),
         );
         return;
     }

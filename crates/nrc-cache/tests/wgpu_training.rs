@@ -34,7 +34,7 @@ fn batch(n: usize, seed: u64) -> TrainingBatch {
 #[test]
 fn both_presets_train_on_wgpu_like_on_the_cpu() {
     if let Err(e) = nrc_cache::gpu::wgpu_device() {
-        println!("skipped: {e}");
+        nrc_scene::testing::skipped("both_presets_train_on_wgpu_like_on_the_cpu", &e.to_string());
         return;
     }
     let mut hash = CacheConfig::hash_grid_preset();

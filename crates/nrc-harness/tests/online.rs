@@ -225,7 +225,10 @@ fn online_training_on_the_environment_lit_kajiya_scene_brings_the_error_down() {
     let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
     let path = root.join("../shared/scenes/kajiya-roughness-scale/scene.gltf");
     if !path.exists() {
-        eprintln!("skipped: {} is absent", path.display());
+        nrc_scene::testing::skipped(
+            "online_training_on_the_environment_lit_kajiya_scene_brings_the_error_down",
+            &format!("{} is absent", path.display()),
+        );
         return;
     }
     let mut scene = Scene::load(&path).unwrap();

@@ -70,12 +70,15 @@ fn shipped_scenes_render() {
 #[test]
 fn shared_scenes_render() {
     let Some(dir) = shared_scenes() else {
-        eprintln!("skipped: ../shared/scenes is absent");
+        nrc_scene::testing::skipped("shared_scenes_render", "../shared/scenes is absent");
         return;
     };
     let files = gltf_files(&dir, true);
     if files.is_empty() {
-        eprintln!("skipped: no glTF files under {}", dir.display());
+        nrc_scene::testing::skipped(
+            "shared_scenes_render",
+            &format!("no glTF files under {}", dir.display()),
+        );
     }
     files.iter().for_each(|f| check(f));
 }

@@ -45,6 +45,7 @@ pub mod material;
 pub mod sampling;
 pub mod scene;
 pub mod tangents;
+pub mod testing;
 pub mod texture;
 
 pub use accel::Hit;

@@ -22,7 +22,10 @@ fn scene_files() -> Vec<PathBuf> {
     if shared.is_dir() {
         dirs.push(shared);
     } else {
-        println!("skipping shared scenes: {} is absent", shared.display());
+        nrc_scene::testing::skipped(
+            "shared scenes (bvh.rs)",
+            &format!("{} is absent", shared.display()),
+        );
     }
     let mut files = Vec::new();
     while let Some(d) = dirs.pop() {

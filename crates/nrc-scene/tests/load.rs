@@ -11,7 +11,10 @@ fn shared_scenes() -> Option<PathBuf> {
     if dir.is_dir() {
         Some(dir)
     } else {
-        println!("skipping: {} is absent", dir.display());
+        nrc_scene::testing::skipped(
+            "shared scenes (load.rs)",
+            &format!("{} is absent", dir.display()),
+        );
         None
     }
 }
