@@ -409,8 +409,8 @@ pub fn per_pixel_z(
             if z.abs() > bound && std::env::var("DIAG").is_ok() {
                 eprintln!(
                     "pixel ({}, {}) channel {c}: mean {mean:.4} ref {:.4} z {z:.1}",
-                    p % 24,
-                    p / 24,
+                    p % reference.width,
+                    p / reference.width,
                     reference.data[p][c]
                 );
             }
