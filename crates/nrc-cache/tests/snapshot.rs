@@ -194,3 +194,53 @@ fn set_weights_reaches_the_training_forward() {
     assert_eq!(sa.loss.to_bits(), sb.loss.to_bits());
     assert_eq!(a.weights(), b.weights());
 }
+
+/// Mutation test of the snapshot loader (issue 21): a trained snapshot, mutated by the seeded
+/// mutator of `nrc_scene::testing` (bytes flipped, truncated, a range repeated, a number of its
+/// JSON header set to NaN, ±Inf, huge or negative values), 300 cases, half of them aimed at the
+/// header (where the configuration and the shapes live): `RadianceCache::load` never panics
+/// and answers within the time limit; a load that succeeds infers finite radiance.
+#[test]
+fn mutated_snapshots_load_or_fail_cleanly() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("cache.nrc");
+    trained(ComputePath::Fused).save(&file).unwrap();
+    let bytes = std::fs::read(&file).unwrap();
+    let header = 8 + u64::from_le_bytes(bytes[..8].try_into().unwrap()) as usize;
+    let mut rng = Pcg64Mcg::seed_from_u64(21);
+    let (mut loaded, mut errors, mut failures) = (0, 0, Vec::new());
+    let t = std::time::Instant::now();
+    for case in 0..300 {
+        // Half the cases mutate the header alone (as text), the rest the whole file.
+        let mutated = if case % 2 == 0 {
+            let mut m = nrc_scene::testing::mutate(&bytes[8..header], true, &mut rng);
+            let mut out = (m.len() as u64).to_le_bytes().to_vec();
+            out.append(&mut m);
+            out.extend_from_slice(&bytes[header..]);
+            out
+        } else {
+            nrc_scene::testing::mutate(&bytes, false, &mut rng)
+        };
+        let f = dir.path().join(format!("m{case}.nrc"));
+        std::fs::write(&f, &mutated).unwrap();
+        let probe = batch(64, 5).queries;
+        let r = nrc_scene::testing::guarded(std::time::Duration::from_secs(30), move || {
+            match RadianceCache::load(&f, CacheDevice::Cpu) {
+                Ok(c) => Some(c.infer(&probe).iter().flatten().all(|x| x.is_finite())),
+                Err(_) => None,
+            }
+        });
+        match r {
+            Ok(Some(true)) => loaded += 1,
+            Ok(Some(false)) => failures.push(format!("case {case}: loaded, infers non-finite")),
+            Ok(None) => errors += 1,
+            Err(why) => failures.push(format!("case {case}: {why}")),
+        }
+    }
+    println!(
+        "300 mutated snapshots in {:.1} s: {loaded} loaded, {errors} clean errors",
+        t.elapsed().as_secs_f64()
+    );
+    assert!(failures.is_empty(), "{}", failures.join("\n"));
+    assert!(errors > 0);
+}

@@ -1,8 +1,11 @@
-//! Support for tests that cannot run on every machine (no AVX-512, no Vulkan adapter, no
-//! `../shared/scenes`): a skip is said, not silent.
+//! Support for tests: skips that are said, not silent (a test that cannot run on this machine:
+//! no AVX-512, no Vulkan adapter, no `../shared/scenes`), and the seeded mutator and guarded
+//! runner of the loaders' mutation tests.
 
 use std::io::Write;
 use std::path::Path;
+
+use rand::Rng;
 
 /// Reports that test `test` did not run here, and why: a `SKIPPED` line on stderr (seen with
 /// `--nocapture`) and, where the environment names a file in `NRC_SKIP_LOG`, a line appended to
@@ -24,6 +27,101 @@ pub fn skipped_to(log: Option<&Path>, test: &str, reason: &str) {
             let _ = writeln!(f, "{test}: {reason}");
         }
     }
+}
+
+/// Runs `f` on its own thread: its value, or an error naming a panic or a hang (no answer
+/// within `limit`; the thread is left behind).
+pub fn guarded<T: Send + 'static>(
+    limit: std::time::Duration,
+    f: impl FnOnce() -> T + Send + 'static,
+) -> Result<T, String> {
+    let (tx, rx) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        let _ = tx.send(f());
+    });
+    match rx.recv_timeout(limit) {
+        Ok(v) => Ok(v),
+        Err(std::sync::mpsc::RecvTimeoutError::Timeout) => {
+            Err(format!("no answer within {limit:?}"))
+        }
+        Err(std::sync::mpsc::RecvTimeoutError::Disconnected) => Err("panicked".into()),
+    }
+}
+
+/// One mutation of `bytes` (JSON-aware when `json`).
+pub fn mutate(bytes: &[u8], json: bool, rng: &mut impl Rng) -> Vec<u8> {
+    let mut b = bytes.to_vec();
+    let kind = rng.random_range(0..if json { 6 } else { 3 });
+    match kind {
+        // Flip a few bytes.
+        0 => {
+            for _ in 0..rng.random_range(1..8) {
+                let i = rng.random_range(0..b.len());
+                b[i] ^= 1 << rng.random_range(0..8);
+            }
+        }
+        // Truncate.
+        1 => b.truncate(rng.random_range(0..b.len())),
+        // Repeat a range.
+        2 => {
+            let i = rng.random_range(0..b.len());
+            let j = (i + rng.random_range(1..256)).min(b.len());
+            let piece = b[i..j].to_vec();
+            let at = rng.random_range(0..b.len());
+            b.splice(at..at, piece);
+        }
+        // A number replaced by NaN, ±Inf, a huge or a negative value, or a broken index.
+        _ => {
+            let text = String::from_utf8_lossy(&b).into_owned();
+            let numbers: Vec<(usize, usize)> = number_spans(&text);
+            if numbers.is_empty() {
+                return b;
+            }
+            let (s, e) = numbers[rng.random_range(0..numbers.len())];
+            let replacement = [
+                "NaN",
+                "Infinity",
+                "-Infinity",
+                "1e39",
+                "-1",
+                "4294967296",
+                "18446744073709551615",
+                "99999999",
+                "-0.5",
+                "0",
+            ][rng.random_range(0..10)];
+            let mut t = text;
+            t.replace_range(s..e, replacement);
+            b = t.into_bytes();
+        }
+    }
+    b
+}
+
+/// Byte spans of the JSON numbers in `text` (digits with sign, point and exponent).
+pub fn number_spans(text: &str) -> Vec<(usize, usize)> {
+    let bytes = text.as_bytes();
+    let mut out = Vec::new();
+    let mut i = 0;
+    let mut in_string = false;
+    while i < bytes.len() {
+        let c = bytes[i];
+        if c == b'"' && (i == 0 || bytes[i - 1] != b'\\') {
+            in_string = !in_string;
+        }
+        if !in_string && (c.is_ascii_digit() || c == b'-') {
+            let s = i;
+            while i < bytes.len()
+                && matches!(bytes[i], b'0'..=b'9' | b'-' | b'+' | b'.' | b'e' | b'E')
+            {
+                i += 1;
+            }
+            out.push((s, i));
+            continue;
+        }
+        i += 1;
+    }
+    out
 }
 
 #[cfg(test)]
