@@ -429,9 +429,15 @@ pub fn compare(
         }
     }
     if let Some(cv) = &c.converge {
-        let table = frames_to_error_table(&report.convergence, Metric::Mape, &cv.target)
-            .with_context(|| format!("frames to equal error (target {})", cv.target))?;
-        report.frames_to_error.push(table);
+        // A target without a usable first-frame error (an exact frame: MAPE 0) leaves the
+        // table out, not the report.
+        match frames_to_error_table(&report.convergence, Metric::Mape, &cv.target) {
+            Ok(table) => report.frames_to_error.push(table),
+            Err(e) => report.notes.push(format!(
+                "No frames-to-error table (target {}): {e}.",
+                cv.target
+            )),
+        }
         let title = format!(
             "MAPE of the running mean against accumulated time: {}, {}x{}",
             c.scene_name, w, h

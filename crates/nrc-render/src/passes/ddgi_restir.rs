@@ -55,7 +55,7 @@ use std::time::Instant;
 use glam::Vec3;
 use nrc_scene::{LightSample, Scene, sampling::luminance, spawn_ray};
 
-use super::restir_di::{self, MAX_COUNT};
+use super::restir_di;
 use super::screen::{GBuffer, Phase, Primary, combine, par_map, stream, visible_between};
 use super::{FrameInput, PassOutput, PassSpec, PhaseTimes, RenderPass};
 use crate::ddgi::{DdgiSettings, ProbeRadiance, ProbeRays, ProbeVolume};
@@ -140,25 +140,17 @@ impl Default for DdgiRestirSettings {
 impl DdgiRestirSettings {
     /// Errors for settings that cannot work.
     pub fn validate(&self) -> Result<(), String> {
-        if self.light_candidates > MAX_COUNT
-            || self.bsdf_candidates > MAX_COUNT
-            || self.spatial_neighbours > MAX_COUNT
-        {
-            return Err(format!(
-                "candidate and neighbour counts must be at most {MAX_COUNT}"
-            ));
-        }
+        super::screen::validate_reuse(
+            &[
+                self.light_candidates,
+                self.bsdf_candidates,
+                self.spatial_neighbours,
+            ],
+            self.spatial_radius,
+            self.m_cap,
+        )?;
         if self.bsdf_candidates == 0 {
             return Err("at least one BSDF candidate is needed (it covers every surface)".into());
-        }
-        if !(self.spatial_radius >= 0.0 && self.spatial_radius.is_finite()) {
-            return Err(format!(
-                "spatial radius must be finite and ≥ 0, got {}",
-                self.spatial_radius
-            ));
-        }
-        if !(self.m_cap > 0.0 && self.m_cap.is_finite()) {
-            return Err(format!("M-cap must be positive, got {}", self.m_cap));
         }
         if !(self.footprint >= 0.0 && self.footprint <= 1e3) {
             return Err(format!(

@@ -83,29 +83,18 @@ impl Default for RestirDiSettings {
 impl RestirDiSettings {
     /// Errors for settings that cannot work.
     pub fn validate(&self) -> Result<(), String> {
-        // Bounds against absurd values: each one is a loop per pixel.
-        if self.light_candidates > MAX_COUNT
-            || self.bsdf_candidates > MAX_COUNT
-            || self.spatial_neighbours > MAX_COUNT
-        {
-            return Err(format!(
-                "restir-di: candidate and neighbour counts must be at most {MAX_COUNT}"
-            ));
-        }
+        super::screen::validate_reuse(
+            &[
+                self.light_candidates,
+                self.bsdf_candidates,
+                self.spatial_neighbours,
+            ],
+            self.spatial_radius,
+            self.m_cap,
+        )
+        .map_err(|e| format!("restir-di: {e}"))?;
         if self.light_candidates + self.bsdf_candidates == 0 {
             return Err("restir-di: at least one candidate (light or BSDF) is needed".into());
-        }
-        if !(self.spatial_radius >= 0.0 && self.spatial_radius.is_finite()) {
-            return Err(format!(
-                "restir-di: spatial radius must be finite and ≥ 0, got {}",
-                self.spatial_radius
-            ));
-        }
-        if !(self.m_cap > 0.0 && self.m_cap.is_finite()) {
-            return Err(format!(
-                "restir-di: M-cap must be positive, got {}",
-                self.m_cap
-            ));
         }
         Ok(())
     }

@@ -323,3 +323,23 @@ pub fn assemble<R>(
     };
     (out, states)
 }
+
+/// The bounds every resampling pass puts on its reuse settings (`counts`: its candidate and
+/// neighbour counts; absurd values would be loops per pixel).
+pub(super) fn validate_reuse(counts: &[u32], radius: f32, m_cap: f32) -> Result<(), String> {
+    let max = super::restir_di::MAX_COUNT;
+    if counts.iter().any(|&c| c > max) {
+        return Err(format!(
+            "candidate and neighbour counts must be at most {max}"
+        ));
+    }
+    if !(radius >= 0.0 && radius.is_finite()) {
+        return Err(format!(
+            "spatial radius must be finite and ≥ 0, got {radius}"
+        ));
+    }
+    if !(m_cap > 0.0 && m_cap.is_finite()) {
+        return Err(format!("M-cap must be positive, got {m_cap}"));
+    }
+    Ok(())
+}
