@@ -949,26 +949,23 @@ impl RenderPass for DdgiRestirPass {
                 if usable(&g.primary[i], set.smooth).is_some() {
                     l += aux;
                     if let Some(y) = r.sample {
-                        if contribution(&ctx, &p.v, &y).is_some()
-                            && sees(scene, &p.v, &y, &mut stats)
-                        {
-                            // Eqs. 7–8 at shading (the paper's use (iii)): the chosen point's
-                            // radiance through the near-specular recursion.
-                            let y =
-                                match (y, recursion) {
+                        match contribution(&ctx, &p.v, &y) {
+                            Some(c) if sees(scene, &p.v, &y, &mut stats) => {
+                                // Eqs. 7–8 at shading (the paper's use (iii)): the chosen
+                                // point's radiance through the near-specular recursion.
+                                let c = match (y, recursion) {
                                     (DdgiSample::Surface(sp), Some(vol)) => {
                                         let mut s = stream(seed ^ 0xF007, i, Phase::Extra);
-                                        DdgiSample::Surface(self.recursed(
+                                        let y = DdgiSample::Surface(self.recursed(
                                             scene, vol, eye, &p.v, sp, &mut s, &mut stats,
-                                        ))
+                                        ));
+                                        contribution(&ctx, &p.v, &y).map_or(Vec3::ZERO, |c| c.c)
                                     }
-                                    _ => y,
+                                    _ => c.c,
                                 };
-                            if let Some(c) = contribution(&ctx, &p.v, &y) {
-                                l += c.c * r.w;
+                                l += c * r.w;
                             }
-                        } else {
-                            r.clear_sample();
+                            _ => r.clear_sample(),
                         }
                     }
                 } else {
