@@ -113,3 +113,67 @@ fn flags_of(path: &Path, sub: &str, given: &[&str]) -> Result<Vec<OsString>> {
     }
     Ok(flags)
 }
+
+#[cfg(test)]
+mod tests {
+    use clap::Parser;
+    use rand::SeedableRng;
+
+    /// A run file of `nrc train` with every kind of value: strings, numbers, a switch, null, an
+    /// inline cache configuration (the shipped hash-grid preset).
+    fn run_file() -> String {
+        format!(
+            r#"{{
+  "scene": "scenes/cornell-box.gltf", "producer": "mix:pt-sl=0.5,sppc=0.5",
+  "frames": 200, "records": 16384, "width": 128, "height": 96, "no_nee": true,
+  "pass": null, "from_terminations": 0.25, "camera_path": "orbit.json",
+  "config": {}
+}}"#,
+            include_str!("../models/nrc-hashgrid.json")
+        )
+    }
+
+    /// Mutation test of run files (issue 21): the run file above mutated by the seeded mutator
+    /// of `nrc_scene::testing`; expanding it and parsing the command line (and its inline
+    /// configuration) gives a command or an error, never a panic or a hang.
+    #[test]
+    fn mutated_run_files_expand_or_fail_cleanly() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(21);
+        let mut tally = nrc_scene::testing::Tally::default();
+        let limits = (std::time::Duration::from_secs(20), usize::MAX);
+        // The unmutated file parses (its configuration too, or the test would test nothing).
+        let parse = |path: std::path::PathBuf| {
+            move || {
+                let args = vec!["nrc".into(), "train".into(), "--run".into(), path.into()];
+                let cli = crate::Cli::try_parse_from(super::expand(args).ok()?).ok()?;
+                match cli.command {
+                    crate::Command::Train(t) => Some(t.cache.config().is_ok()),
+                    _ => Some(false),
+                }
+            }
+        };
+        let seed = dir.path().join("run.json");
+        let text = run_file();
+        std::fs::write(&seed, &text).unwrap();
+        assert_eq!(parse(seed)(), Some(true), "the seed run file parses");
+        for case in 0..400 {
+            let mutated = nrc_scene::testing::mutate(text.as_bytes(), true, &mut rng);
+            let path = dir.path().join(format!("run-{case}.json"));
+            std::fs::write(&path, &mutated).unwrap();
+            let label = format!("{case}-run.json");
+            // A parsed run whose inline configuration is refused counts as a clean error.
+            let load = parse(path);
+            tally.case("run file", &label, &mutated, limits, move || {
+                load().filter(|ok| *ok)
+            });
+        }
+        println!("{}", tally.summary());
+        tally.assert_clean();
+        let (_, loaded, refused) = tally.kinds["run file"];
+        assert!(
+            loaded > 0 && refused > 0,
+            "{loaded} parsed, {refused} refused"
+        );
+    }
+}

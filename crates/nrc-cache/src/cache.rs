@@ -326,6 +326,7 @@ impl RadianceCache {
                     loss: LossSettings {
                         activation: self.layout.output_activation,
                         epsilon: self.config.loss.epsilon,
+                        max_relative_error: self.config.loss.max_relative_error,
                     },
                     first_step: self.step,
                     ema_base,
@@ -351,7 +352,10 @@ impl RadianceCache {
                         &rows,
                         self.adam,
                         self.ema,
-                        self.config.loss.epsilon,
+                        (
+                            self.config.loss.epsilon,
+                            self.config.loss.max_relative_error,
+                        ),
                         self.step + k,
                     ));
                 }

@@ -208,6 +208,11 @@ pub struct LossConfig {
     /// Targets with a channel above this (or below 0) are absurd: dropped and counted.
     #[serde(default = "max_target")]
     pub max_target: f32,
+    /// The relative residual `|y − t| / √(lum(y)² + ε)` beyond which a sample's loss grows
+    /// linearly instead of quadratically (Huber's loss; see `loss.rs`): one firefly target's
+    /// gradient is bounded. `1e30` gives the plain relative L2 loss.
+    #[serde(default = "max_relative_error")]
+    pub max_relative_error: f32,
 }
 
 fn loss_eps() -> f32 {
@@ -215,6 +220,9 @@ fn loss_eps() -> f32 {
 }
 fn max_target() -> f32 {
     1e8
+}
+fn max_relative_error() -> f32 {
+    16.0
 }
 
 /// Optimizer: `Adam`, or an `EMA` of the weights wrapping Adam (inference uses the average).
@@ -573,6 +581,12 @@ impl CacheConfig {
             return err(
                 "loss.max_target".into(),
                 format!("must be finite and > 0, got {}", l.max_target),
+            );
+        }
+        if !(l.max_relative_error.is_finite() && l.max_relative_error > 0.0) {
+            return err(
+                "loss.max_relative_error".into(),
+                format!("must be finite and > 0, got {}", l.max_relative_error),
             );
         }
         validate_optimizer(&self.optimizer, "optimizer", true)

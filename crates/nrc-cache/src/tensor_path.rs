@@ -86,7 +86,7 @@ pub fn train_step_tensor(
     rows: &Tensor<2>,
     adam: AdamParams,
     ema: Option<f32>,
-    epsilon: f32,
+    (epsilon, max_relative_error): (f32, f32),
     step: u32,
 ) -> Tensor<1> {
     let has_grid = layout.grid_params > 0;
@@ -99,7 +99,7 @@ pub fn train_step_tensor(
     let weight = rows_ad.narrow(1, WEIGHT_AT, 1);
     let o = network_tensor(layout, path, grid.clone(), mlp.clone(), raw);
     let y = predict_tensor(layout.output_activation, o, factor);
-    let loss = loss_tensor(y, target, weight, epsilon);
+    let loss = loss_tensor(y, target, weight, epsilon, max_relative_error);
     let grads = loss.backward();
     let t = step.min(i32::MAX as u32) as i32;
     let bc1 = 1.0 - adam.beta1.powi(t);

@@ -1,5 +1,6 @@
-//! The online loop: deterministic for a seed, snapshots reload and render identically, and a
-//! long run on the caustics scene stays finite everywhere.
+//! The online loop: deterministic for a seed, snapshots reload and render identically, online
+//! training brings the cache's error down, and long runs on the hard scenes with every producer
+//! stay finite everywhere and do not diverge (shortened in CI, 2000 frames on demand).
 
 use nrc_cache::{CacheConfig, CacheDevice, RadianceCache};
 use nrc_harness::methods::{CacheMethodSettings, scene_trainer};
@@ -75,40 +76,237 @@ fn online_loop_is_deterministic_and_snapshots_render_identically() {
     );
 }
 
-#[test]
-fn a_long_run_on_caustics_stays_finite() {
-    let scene = scene("caustics.gltf");
-    for producer in ["mix:pt-sl=0.4,bt=0.2,lt=0.2,sppc=0.2", "pt"] {
-        let mut t = trainer(&scene, producer, 2048);
-        let (mut records, mut dropped) = (0, 0);
-        for f in 0..40 {
-            let render = f % 8 == 7;
-            let (s, out) = t.frame(&scene, &scene.camera, 24, 24, render).unwrap();
-            assert!(s.loss.is_finite(), "{producer} frame {f}: loss {}", s.loss);
-            assert_eq!(
-                s.used + s.dropped_nonfinite + s.dropped_absurd,
-                s.records,
-                "every record used or counted"
+/// What a long online run saw.
+struct LongRun {
+    records: usize,
+    dropped_nonfinite: usize,
+    dropped_absurd: usize,
+    /// relMSE of the cache render after the early checkpoint and at the end.
+    early: f64,
+    end: f64,
+    /// relMSE at every tenth of the run.
+    trajectory: Vec<f64>,
+    ms_per_frame: f64,
+    loss: f32,
+}
+
+/// A reference of `scene` at `w × h` (`spp` samples), with its emitter mask.
+fn reference_of(scene: &Scene, (w, h): (u32, u32), spp: u32) -> (nrc_scene::Image, Vec<bool>) {
+    let reference = nrc_render::render(
+        scene,
+        &scene.camera,
+        &PathTracer::default(),
+        &nrc_render::RenderSettings {
+            width: w,
+            height: h,
+            spp,
+            seed: 3,
+            variance: false,
+        },
+        &|_| {},
+    )
+    .mean;
+    let mask = nrc_render::emitters::emitter_pixels(scene, w, h);
+    (reference, mask)
+}
+
+/// A long online run (issue 21): `frames` frames of `producer` on `scene` (`records` per
+/// frame). Every frame's loss is finite and every record used or counted as dropped; every
+/// 25th frame is rendered by the trainer's pass (1 spp, the spread termination) and must be
+/// finite and non-negative with no invalid sample; the cache's weights are finite at the end.
+/// The cache's error: the emitter-excluded relMSE of the trainer's render (its pass, paths
+/// ending in the cache by the spread heuristic and continued through delta surfaces; 4 spp,
+/// one fixed seed, so that only the cache differs between checkpoints) against `reference`,
+/// after `early` frames and at the end. (A cache-first render would also measure the cache at
+/// delta surfaces, where BT and SPPC train nothing: there its error grew steadily with SPPC on
+/// both caustic scenes, by extrapolation, while the loss stayed low.)
+fn long_run(
+    scene: &Scene,
+    producer: &str,
+    (frames, early, records): (u32, u32, usize),
+    (reference, mask): &(nrc_scene::Image, Vec<bool>),
+) -> LongRun {
+    let (w, h) = (reference.width as u32, reference.height as u32);
+    let mut t = trainer(scene, producer, records);
+    let input = FrameInput {
+        scene,
+        camera: &scene.camera,
+        width: w,
+        height: h,
+        spp: 4,
+        seed: 17,
+    };
+    let error = |t: &mut OnlineTrainer| {
+        let image = t.render(&input).image;
+        assert!(
+            image.data.iter().all(|p| p.is_finite()),
+            "{producer}: cache render"
+        );
+        rel_mse_excluding(&image, reference, mask)
+    };
+    let mut run = LongRun {
+        records: 0,
+        dropped_nonfinite: 0,
+        dropped_absurd: 0,
+        early: f64::NAN,
+        end: f64::NAN,
+        trajectory: Vec::new(),
+        ms_per_frame: 0.0,
+        loss: f32::NAN,
+    };
+    let start = std::time::Instant::now();
+    let mut checking = std::time::Duration::ZERO;
+    for f in 1..=frames {
+        let render = f % 25 == 0;
+        let (s, out) = t.frame(scene, &scene.camera, w, h, render).unwrap();
+        assert!(s.loss.is_finite(), "{producer} frame {f}: loss {}", s.loss);
+        assert_eq!(
+            s.used + s.dropped_nonfinite + s.dropped_absurd,
+            s.records,
+            "{producer} frame {f}: every record used or counted"
+        );
+        run.records += s.records;
+        run.dropped_nonfinite += s.dropped_nonfinite;
+        run.dropped_absurd += s.dropped_absurd;
+        run.loss = s.loss;
+        if let Some(out) = out {
+            assert_eq!(out.stats.invalid_samples, 0, "{producer} frame {f}");
+            assert!(
+                out.image
+                    .data
+                    .iter()
+                    .all(|p| p.is_finite() && p.min_element() >= 0.0),
+                "{producer} frame {f}: a non-finite or negative pixel"
             );
-            records += s.records;
-            dropped += s.dropped_nonfinite + s.dropped_absurd;
-            if let Some(out) = out {
-                assert_eq!(out.stats.invalid_samples, 0, "{producer} frame {f}");
-                assert!(
-                    out.image
-                        .data
-                        .iter()
-                        .all(|p| p.is_finite() && p.min_element() >= 0.0)
-                );
+        }
+        let tenth = f % (frames / 10).max(1) == 0;
+        if f == early || f == frames || tenth {
+            let c = std::time::Instant::now();
+            let e = error(&mut t);
+            checking += c.elapsed();
+            if tenth {
+                run.trajectory.push(e);
+            }
+            if f == early {
+                run.early = e;
+            }
+            if f == frames {
+                run.end = e;
             }
         }
-        let (grid, mlp) = t.cache.weights();
-        assert!(
-            grid.iter().chain(&mlp).all(|w| w.is_finite()),
-            "{producer}: non-finite weight"
-        );
-        println!("{producer}: {records} records, {dropped} dropped, final loss finite");
     }
+    run.ms_per_frame = (start.elapsed() - checking).as_secs_f64() * 1e3 / frames as f64;
+    let (grid, mlp) = t.cache.weights();
+    assert!(
+        grid.iter().chain(&mlp).all(|w| w.is_finite()),
+        "{producer}: non-finite weight"
+    );
+    run
+}
+
+/// The hard scenes of the long runs: `caustics`, `ajar` and, where `../shared/scenes/` is
+/// present, `photon-nrc-ajar-caustic`.
+fn hard_scenes() -> Vec<(String, Scene)> {
+    let mut out = vec![
+        ("caustics".to_string(), scene("caustics.gltf")),
+        ("ajar".to_string(), scene("ajar.gltf")),
+    ];
+    let shared = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../../shared/scenes/photon-nrc-ajar-caustic/ajar_caustic.glb");
+    if shared.exists() {
+        out.push((
+            "photon-nrc-ajar-caustic".to_string(),
+            Scene::load(&shared).unwrap(),
+        ));
+    } else {
+        nrc_scene::testing::skipped(
+            "online runs on photon-nrc-ajar-caustic",
+            &format!("{} is absent", shared.display()),
+        );
+    }
+    out
+}
+
+/// Each producer alone and the mix.
+const LONG_RUN_PRODUCERS: [&str; 6] = [
+    "pt",
+    "pt-sl",
+    "bt",
+    "lt",
+    "sppc",
+    "mix:pt-sl=0.4,bt=0.2,lt=0.2,sppc=0.2",
+];
+
+/// Runs known to drift: SPPC alone on `photon-nrc-ajar-caustic` (its error grew 4.4× from frame
+/// 15 to 60 in the short run; not yet understood, see RESULTS.md). They must still exceed the
+/// slack (so that a fix is noticed and the entry removed).
+const KNOWN_DRIFT: [(&str, &str); 1] = [("photon-nrc-ajar-caustic", "sppc")];
+
+/// Long runs on the hard scenes with every producer; the end error at most `slack` times the
+/// early one (no divergence), but for [`KNOWN_DRIFT`] when `known` is given. Prints a table row
+/// per run.
+fn long_runs(
+    (frames, early, records): (u32, u32, usize),
+    size: (u32, u32),
+    spp: u32,
+    (slack, known): (f64, bool),
+) {
+    println!(
+        "| scene | producer | frames | records | dropped (non-finite / absurd) | relMSE at frame {early} | at frame {frames} | ms per frame | relMSE at every tenth of the run |\n|---|---|---|---|---|---|---|---|---|"
+    );
+    let mut failures = Vec::new();
+    for (name, scene) in hard_scenes() {
+        let reference = reference_of(&scene, size, spp);
+        for producer in LONG_RUN_PRODUCERS {
+            let r = long_run(&scene, producer, (frames, early, records), &reference);
+            let trajectory: Vec<String> = r.trajectory.iter().map(|e| format!("{e:.3}")).collect();
+            println!(
+                "| {name} | {producer} | {frames} | {} | {} / {} | {:.4} | {:.4} | {:.1} | {} |",
+                r.records,
+                r.dropped_nonfinite,
+                r.dropped_absurd,
+                r.early,
+                r.end,
+                r.ms_per_frame,
+                trajectory.join(" ")
+            );
+            assert!(r.loss.is_finite());
+            let drifts = known && KNOWN_DRIFT.contains(&(name.as_str(), producer));
+            if drifts && r.end <= slack * r.early {
+                failures.push(format!(
+                    "{name} {producer} no longer drifts ({:.4} at frame {frames}, {:.4} at frame {early}): remove it from KNOWN_DRIFT",
+                    r.end, r.early
+                ));
+            } else if !drifts && !(r.end <= slack * r.early) {
+                failures.push(format!(
+                    "{name} {producer}: relMSE {:.4} at frame {frames} against {:.4} at frame {early}",
+                    r.end, r.early
+                ));
+            }
+        }
+    }
+    assert!(
+        failures.is_empty(),
+        "diverging runs:\n{}",
+        failures.join("\n")
+    );
+}
+
+/// The long runs shortened for CI: 60 frames of 1024 records; the error at the end at most
+/// twice that after 15 frames (at 16 × 16 pixels and 4 spp the render's own noise moves the
+/// error by ±15 % between checkpoints; a diverging cache, as the one a firefly target kicked
+/// before the loss was bounded, went from 0.31 to 10.3).
+#[test]
+fn short_online_runs_on_the_hard_scenes_stay_finite_and_do_not_diverge() {
+    long_runs((60, 15, 1024), (16, 16), 1024, (2.0, true));
+}
+
+/// The long runs (issue 21), on demand: 2000 frames of 4096 records, the error at the end no
+/// worse than at frame 200 (`cargo test --release --test online -- --ignored long`).
+#[test]
+#[ignore]
+fn long_online_runs_on_the_hard_scenes_stay_finite_and_do_not_diverge() {
+    long_runs((2000, 200, 4096), (32, 32), 4096, (1.0, false));
 }
 
 /// relMSE of `image` against `reference` on the emitter-excluded image, as `nrc compare
@@ -136,21 +334,7 @@ fn errors_after_5_and_100_frames(config: CacheConfig) -> [f64; 2] {
 fn errors_over_a_run(scene: &Scene, producer: &str, config: CacheConfig) -> [f64; 2] {
     let (w, h) = (32, 32);
     let tracer = PathTracer::default();
-    let reference = nrc_render::render(
-        scene,
-        &scene.camera,
-        &tracer,
-        &nrc_render::RenderSettings {
-            width: w,
-            height: h,
-            spp: 2048,
-            seed: 3,
-            variance: false,
-        },
-        &|_| {},
-    )
-    .mean;
-    let mask = nrc_render::emitters::emitter_pixels(scene, w, h);
+    let (reference, mask) = reference_of(scene, (w, h), 2048);
     assert!(mask.iter().any(|m| !*m));
     let mut s = CacheMethodSettings::new(config, CacheDevice::Cpu);
     s.records_per_frame = 4096;

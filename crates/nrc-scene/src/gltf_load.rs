@@ -10,10 +10,11 @@
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
-use glam::{Mat3, Mat4, Vec2, Vec3, Vec4};
+use glam::{Mat3, Mat4, Quat, Vec2, Vec3, Vec4};
 use gltf::accessor::{DataType, Dimensions};
 use gltf::mesh::Mode;
 
+use crate::animation::{Animation, Binding, Channel, Interpolation, Local, Property};
 use crate::camera::Camera;
 use crate::error::{Result, SceneError};
 use crate::light::{PunctualKind, PunctualLight};
@@ -38,6 +39,12 @@ pub fn load(path: &Path) -> Result<Scene> {
 
 /// Loads a `.gltf` or `.glb` file into a [`SceneDescription`] (world-space meshes).
 pub fn load_description(path: &Path) -> Result<SceneDescription> {
+    load_animated(path).map(|(d, _)| d)
+}
+
+/// Loads a `.gltf` or `.glb` file into a [`SceneDescription`] at rest and its node animations
+/// (translation, rotation and scale channels; see [`crate::animation`]).
+pub fn load_animated(path: &Path) -> Result<(SceneDescription, Animation)> {
     let bytes = std::fs::read(path).map_err(|source| SceneError::Io {
         path: path.to_path_buf(),
         source,
@@ -93,7 +100,10 @@ pub fn load_description(path: &Path) -> Result<SceneDescription> {
     };
     loader.warn_unused_extensions();
     loader.load_buffers(blob)?;
-    loader.build()
+    let mut animation = loader.animation()?;
+    let (desc, bindings) = loader.build()?;
+    animation.bindings = bindings;
+    Ok((desc, animation))
 }
 
 /// Unsupported required extensions are errors.
@@ -261,7 +271,9 @@ impl Loader<'_> {
         Ok(())
     }
 
-    fn build(mut self) -> Result<SceneDescription> {
+    /// The description at rest, and what each node carries (for [`Animation`]).
+    fn build(&mut self) -> Result<(SceneDescription, Vec<Binding>)> {
+        let mut bindings = Vec::new();
         let document = self.document;
         let mut desc = SceneDescription {
             source: self.path.clone(),
@@ -318,7 +330,13 @@ impl Loader<'_> {
                 match cam.projection() {
                     gltf::camera::Projection::Perspective(p) => {
                         match Camera::from_world_matrix(&world, p.yfov()) {
-                            Ok(c) => desc.camera = Some(c),
+                            Ok(c) => {
+                                desc.camera = Some(c);
+                                bindings.push(Binding::Camera {
+                                    node: node.index(),
+                                    fov_y: p.yfov(),
+                                });
+                            }
                             Err(e) => self.warn(format!("ignoring camera {}: {e}", cam.index())),
                         }
                     }
@@ -329,9 +347,14 @@ impl Loader<'_> {
             }
             if let Some(light) = node.light() {
                 let l = self.light(&light, &world)?;
+                bindings.push(Binding::Light {
+                    node: node.index(),
+                    light: desc.lights.len(),
+                });
                 desc.lights.push(l);
             }
             if let Some(mesh) = node.mesh() {
+                let first = desc.positions.len();
                 for prim in mesh.primitives() {
                     self.primitive(
                         &mesh,
@@ -342,6 +365,10 @@ impl Loader<'_> {
                         &mut attrs,
                     )?;
                 }
+                bindings.push(Binding::Vertices {
+                    node: node.index(),
+                    range: first..desc.positions.len(),
+                });
             }
             for child in node.children() {
                 stack.push((child, world, depth + 1));
@@ -366,7 +393,127 @@ impl Loader<'_> {
         desc.tangents = fill(tangents, Vec4::ZERO);
         desc.textures = std::mem::take(&mut self.textures);
         desc.warnings = std::mem::take(&mut self.warnings);
-        Ok(desc)
+        Ok((desc, bindings))
+    }
+
+    /// The node hierarchy at rest and the animation channels (all animations of the document
+    /// play together, from time 0).
+    fn animation(&mut self) -> Result<Animation> {
+        let document = self.document;
+        let mut nodes: Vec<(Local, Option<usize>)> = document
+            .nodes()
+            .map(|n| {
+                let local = match n.transform() {
+                    gltf::scene::Transform::Decomposed {
+                        translation,
+                        rotation,
+                        scale,
+                    } => Local::Trs(
+                        Vec3::from(translation),
+                        Quat::from_array(rotation),
+                        Vec3::from(scale),
+                    ),
+                    gltf::scene::Transform::Matrix { matrix } => {
+                        Local::Matrix(Mat4::from_cols_array_2d(&matrix))
+                    }
+                };
+                (local, None)
+            })
+            .collect();
+        for n in document.nodes() {
+            for c in n.children() {
+                nodes[c.index()].1 = Some(n.index());
+            }
+        }
+        // Every chain of parents ends (no node is its own ancestor).
+        for start in 0..nodes.len() {
+            let (mut at, mut steps) = (start, 0);
+            while let Some(p) = nodes[at].1 {
+                at = p;
+                steps += 1;
+                if steps > nodes.len() {
+                    return Err(self.invalid(format!("node {start} is its own ancestor")));
+                }
+            }
+        }
+        let mut channels = Vec::new();
+        for anim in document.animations() {
+            for channel in anim.channels() {
+                let node = channel.target().node().index();
+                let property = match channel.target().property() {
+                    gltf::animation::Property::Translation => Property::Translation,
+                    gltf::animation::Property::Rotation => Property::Rotation,
+                    gltf::animation::Property::Scale => Property::Scale,
+                    gltf::animation::Property::MorphTargetWeights => {
+                        self.warn(format!(
+                            "animation {}: ignoring a morph-target weights channel",
+                            anim.index()
+                        ));
+                        continue;
+                    }
+                };
+                if matches!(nodes[node].0, Local::Matrix(_)) {
+                    return Err(self.invalid(format!(
+                        "animation {} drives node {node}, which has a matrix (glTF allows animating only translation, rotation and scale)",
+                        anim.index()
+                    )));
+                }
+                let sampler = channel.sampler();
+                let interpolation = match sampler.interpolation() {
+                    gltf::animation::Interpolation::Step => Interpolation::Step,
+                    gltf::animation::Interpolation::Linear => Interpolation::Linear,
+                    gltf::animation::Interpolation::CubicSpline => Interpolation::CubicSpline,
+                };
+                let what = |m: &str| format!("animation {}: {m}", anim.index());
+                let (input, output) = (sampler.input(), sampler.output());
+                let dims = if property == Property::Rotation {
+                    Dimensions::Vec4
+                } else {
+                    Dimensions::Vec3
+                };
+                let float_or_normalized = property == Property::Rotation
+                    && output.normalized()
+                    && output.data_type() != DataType::U32;
+                if input.data_type() != DataType::F32
+                    || input.dimensions() != Dimensions::Scalar
+                    || (output.data_type() != DataType::F32 && !float_or_normalized)
+                    || output.dimensions() != dims
+                {
+                    return Err(self.invalid(what(
+                        "sampler accessors must be float scalars (times) and float vectors (values)",
+                    )));
+                }
+                for a in [&input, &output] {
+                    if a.view().is_none() || a.count() == 0 {
+                        return Err(self.invalid(what("sampler accessor without data")));
+                    }
+                }
+                let buffers = &self.buffers;
+                let reader = channel.reader(|b| buffers.get(b.index()).map(|d| d.0.as_slice()));
+                let times: Vec<f32> = reader
+                    .read_inputs()
+                    .ok_or_else(|| self.invalid(what("unreadable key times")))?
+                    .collect();
+                let values: Vec<Vec4> = match reader.read_outputs() {
+                    Some(gltf::animation::util::ReadOutputs::Translations(it))
+                    | Some(gltf::animation::util::ReadOutputs::Scales(it)) => {
+                        it.map(|v| Vec3::from(v).extend(0.0)).collect()
+                    }
+                    Some(gltf::animation::util::ReadOutputs::Rotations(r)) => {
+                        r.into_f32().map(Vec4::from).collect()
+                    }
+                    _ => return Err(self.invalid(what("unreadable key values"))),
+                };
+                let c = Channel::new(node, property, interpolation, times, values)
+                    .map_err(|e| self.invalid(what(&e)))?;
+                channels.push(c);
+            }
+        }
+        Ok(Animation {
+            nodes,
+            channels,
+            bindings: Vec::new(),
+        })
     }
 
     /// Appends one primitive's triangles, transformed to world space.

@@ -32,6 +32,7 @@
 //! ```
 
 pub mod accel;
+pub mod animation;
 pub mod bsdf;
 pub mod camera;
 pub mod environment;
@@ -49,6 +50,7 @@ pub mod testing;
 pub mod texture;
 
 pub use accel::Hit;
+pub use animation::AnimatedScene;
 pub use bsdf::PbrParams;
 pub use camera::{Camera, CameraError};
 pub use environment::Environment;

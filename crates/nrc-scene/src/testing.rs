@@ -48,6 +48,129 @@ pub fn guarded<T: Send + 'static>(
     }
 }
 
+/// A global allocator (the system's) that records the largest single request, allocation or
+/// reallocation, since [`reset_largest_allocation`]: a mutation test binary installs it
+/// (`#[global_allocator] static A: LargestAllocation = LargestAllocation;`) to bound what an
+/// absurd count in a file may make a loader allocate. It sees every thread of the process, so
+/// the bound is checked by a test that runs its cases one at a time.
+pub struct LargestAllocation;
+
+static LARGEST: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+
+// SAFETY: every call is forwarded unchanged to the system allocator; only a counter is kept.
+unsafe impl std::alloc::GlobalAlloc for LargestAllocation {
+    unsafe fn alloc(&self, layout: std::alloc::Layout) -> *mut u8 {
+        LARGEST.fetch_max(layout.size(), std::sync::atomic::Ordering::Relaxed);
+        // SAFETY: the caller's contract is the system allocator's.
+        unsafe { std::alloc::System.alloc(layout) }
+    }
+    unsafe fn alloc_zeroed(&self, layout: std::alloc::Layout) -> *mut u8 {
+        LARGEST.fetch_max(layout.size(), std::sync::atomic::Ordering::Relaxed);
+        // SAFETY: as above.
+        unsafe { std::alloc::System.alloc_zeroed(layout) }
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: std::alloc::Layout) {
+        // SAFETY: as above.
+        unsafe { std::alloc::System.dealloc(ptr, layout) }
+    }
+    unsafe fn realloc(&self, ptr: *mut u8, layout: std::alloc::Layout, new_size: usize) -> *mut u8 {
+        LARGEST.fetch_max(new_size, std::sync::atomic::Ordering::Relaxed);
+        // SAFETY: as above.
+        unsafe { std::alloc::System.realloc(ptr, layout, new_size) }
+    }
+}
+
+/// The largest request [`LargestAllocation`] saw since the last reset, in bytes.
+pub fn largest_allocation() -> usize {
+    LARGEST.load(std::sync::atomic::Ordering::Relaxed)
+}
+
+/// Starts [`largest_allocation`] again from zero.
+pub fn reset_largest_allocation() {
+    LARGEST.store(0, std::sync::atomic::Ordering::Relaxed);
+}
+
+/// The outcome of one mutated input.
+#[derive(Debug, PartialEq, Eq)]
+pub enum Outcome {
+    /// Loaded (and, where the test checks it, usable).
+    Loaded,
+    /// Refused with an error.
+    Refused,
+    /// A failure of the property: a panic, a hang, an allocation beyond the bound or a loaded
+    /// result that is not usable; the text says which.
+    Failed(String),
+}
+
+/// A tally of mutated inputs per kind of file, and the failures with the files kept for them.
+#[derive(Default)]
+pub struct Tally {
+    /// kind → (cases, loaded, refused).
+    pub kinds: std::collections::BTreeMap<String, (u32, u32, u32)>,
+    pub failures: Vec<String>,
+}
+
+impl Tally {
+    /// Runs one case: `load` on its own thread within `limit`, its largest allocation at most
+    /// `max_bytes`; `Some(true)` a usable result, `Some(false)` one that is not, `None` an
+    /// error. A failing input (`bytes`) is written to the system's temporary folder as
+    /// `nrc-mutated-<label>` and named in the failure, to be kept as a regression fixture.
+    pub fn case(
+        &mut self,
+        kind: &str,
+        label: &str,
+        bytes: &[u8],
+        (limit, max_bytes): (std::time::Duration, usize),
+        load: impl FnOnce() -> Option<bool> + Send + 'static,
+    ) -> Outcome {
+        reset_largest_allocation();
+        let r = guarded(limit, load);
+        let largest = largest_allocation();
+        let outcome = match r {
+            Err(why) => Outcome::Failed(why),
+            Ok(_) if largest > max_bytes => Outcome::Failed(format!(
+                "allocated {largest} bytes at once, beyond the bound of {max_bytes}"
+            )),
+            Ok(Some(true)) => Outcome::Loaded,
+            Ok(Some(false)) => Outcome::Failed("loaded but not usable".into()),
+            Ok(None) => Outcome::Refused,
+        };
+        let k = self.kinds.entry(kind.to_string()).or_default();
+        k.0 += 1;
+        match &outcome {
+            Outcome::Loaded => k.1 += 1,
+            Outcome::Refused => k.2 += 1,
+            Outcome::Failed(why) => {
+                let keep = std::env::temp_dir().join(format!("nrc-mutated-{label}"));
+                let _ = std::fs::write(&keep, bytes);
+                self.failures
+                    .push(format!("{label}: {why}; kept as {}", keep.display()));
+            }
+        }
+        outcome
+    }
+
+    /// One line per kind: cases, loaded, refused.
+    pub fn summary(&self) -> String {
+        self.kinds
+            .iter()
+            .map(|(k, (n, ok, err))| format!("{k}: {n} cases, {ok} loaded, {err} clean errors"))
+            .collect::<Vec<_>>()
+            .join("\n")
+    }
+
+    /// Panics naming every failure.
+    pub fn assert_clean(&self) {
+        let total: u32 = self.kinds.values().map(|k| k.0).sum();
+        assert!(
+            self.failures.is_empty(),
+            "{} of {total} mutated inputs failed:\n{}",
+            self.failures.len(),
+            self.failures.join("\n")
+        );
+    }
+}
+
 /// One mutation of `bytes` (JSON-aware when `json`).
 pub fn mutate(bytes: &[u8], json: bool, rng: &mut impl Rng) -> Vec<u8> {
     let mut b = bytes.to_vec();

@@ -945,3 +945,258 @@ fn assert_paired_with_path_tracing(targets: &[[f32; 3]], reference: &[[f32; 3]],
     assert!(a.iter().all(|&m| m > 1e-3), "{what}: targets {a:?}");
     println!("{what}: worst group at {worst:.2} standard errors (bound {z:.2})");
 }
+
+/// The shipped Cornell box (light from one area light under the ceiling: bright near it,
+/// coloured by the side walls, shadowed by the blocks), or with its light moved by `shift`
+/// (the negative controls' directionally wrong light), loaded from a temporary copy.
+fn cornell(shift: Option<Vec3>) -> Scene {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes");
+    let Some(s) = shift else {
+        return Scene::load(&dir.join("cornell-box.gltf")).unwrap();
+    };
+    let text = std::fs::read_to_string(dir.join("cornell-box.gltf")).unwrap();
+    let node = "\"mesh\": 7,\n      \"name\": \"light\"";
+    assert_eq!(text.matches(node).count(), 1, "the light's node");
+    let moved = text.replace(
+        node,
+        &format!(
+            "{node},\n      \"translation\": [{}, {}, {}]",
+            s.x, s.y, s.z
+        ),
+    );
+    let tmp = tempfile::tempdir().unwrap();
+    std::fs::write(tmp.path().join("cornell-box.gltf"), moved).unwrap();
+    std::fs::copy(
+        dir.join("cornell-box.bin"),
+        tmp.path().join("cornell-box.bin"),
+    )
+    .unwrap();
+    Scene::load(&tmp.path().join("cornell-box.gltf")).unwrap()
+}
+
+/// The light moved 0.12 toward the red wall and 0.1 toward the camera (the box is 0.56 wide).
+const MOVED_LIGHT: Vec3 = Vec3::new(-0.12, 0.0, -0.1);
+
+/// Fixed queries on the Cornell box: camera rays through jittered tiles of a 16 × 16 grid whose
+/// primary hits lie at least 0.05 from every other surface (eight rays in the tangent plane,
+/// 2 mm above it, meet nothing within 0.05), so that no light-path vertex comes closer than
+/// that to a query (BT's connection `1/d²` stays bounded), and at least 0.03 inside their own
+/// face (no convex edge), so that a small photon ball lies wholly on its own surface (a ball
+/// across a block's edge holds less surface than `πR²` and its estimate comes out low: four
+/// such queries failed at −6 to −12 se before this rule); at most `n` of them.
+fn cornell_queries(scene: &Scene, n: usize) -> Vec<StartRay> {
+    let mut out = Vec::new();
+    for s in camera_tiles(&scene.camera, 16, 16, 256, 5) {
+        let Some(hit) = scene.intersect(&s.ray) else {
+            continue;
+        };
+        let si = scene.interaction(&s.ray, &hit);
+        let n_out = if si.ng.dot(si.wo) > 0.0 {
+            si.ng
+        } else {
+            -si.ng
+        };
+        let (t, b) = n_out.any_orthonormal_pair();
+        let clear = (0..8).all(|k| {
+            let a = k as f32 * std::f32::consts::FRAC_PI_4;
+            let d = t * a.cos() + b * a.sin();
+            let ray = Ray::new(si.p + n_out * 2e-3, d);
+            // The surface goes on 0.03 beyond the point (no convex edge within a ball).
+            let down = Ray::new(si.p + n_out * 2e-3 + d * 0.03, -n_out);
+            scene.intersect(&ray).is_none_or(|h| h.t > 0.05)
+                && scene
+                    .intersect(&down)
+                    .is_some_and(|h| (h.t - 2e-3).abs() < 1e-3)
+        });
+        if clear {
+            out.push(s);
+        }
+    }
+    assert!(out.len() >= n, "{} clear queries", out.len());
+    out.truncate(n);
+    out
+}
+
+/// Per query (and per channel), the estimates' mean agrees with the path-traced samples' mean
+/// within a Bonferroni-corrected z bound (α = 10⁻³ over every query and channel; standard
+/// errors from each side's sample variance): the checks beyond the bound, described.
+fn per_query_failures(
+    estimates: &[Vec<[f32; 3]>],
+    reference: &[Vec<[f32; 3]>],
+    what: &str,
+) -> Vec<String> {
+    assert_eq!(estimates.len(), reference.len());
+    let z = common::z_two_sided(1e-3 / (estimates.len() * 3) as f64);
+    let (mut worst, mut failures) = (0.0f64, Vec::new());
+    for (q, (e, r)) in estimates.iter().zip(reference).enumerate() {
+        let (a, sa) = mean_se(e);
+        let (b, sb) = mean_se(r);
+        for c in 0..3 {
+            let zz = (a[c] - b[c]) / (sa[c] * sa[c] + sb[c] * sb[c]).sqrt().max(1e-12);
+            worst = worst.max(zz.abs());
+            if zz.abs() > z {
+                failures.push(format!(
+                    "query {q} channel {c}: {:.4} vs path-traced {:.4} ({zz:+.1} se)",
+                    a[c], b[c]
+                ));
+            }
+        }
+    }
+    println!(
+        "{what}: {} queries, worst |z| {worst:.2} (bound {z:.2}), {} of {} checks beyond",
+        estimates.len(),
+        failures.len(),
+        estimates.len() * 3
+    );
+    failures
+}
+
+/// [`per_query_failures`] finds none.
+fn assert_per_query(estimates: &[Vec<[f32; 3]>], reference: &[Vec<[f32; 3]>], what: &str) {
+    let failures = per_query_failures(estimates, reference, what);
+    assert!(failures.is_empty(), "{what}:\n{}", failures.join("\n"));
+}
+
+/// A negative control: [`per_query_failures`] finds some (a tenth of the checks at least).
+fn assert_per_query_fails(estimates: &[Vec<[f32; 3]>], reference: &[Vec<[f32; 3]>], what: &str) {
+    let failures = per_query_failures(estimates, reference, what);
+    assert!(
+        failures.len() * 10 >= estimates.len() * 3,
+        "{what}: a directionally wrong light passed ({} checks beyond the bound)",
+        failures.len()
+    );
+}
+
+/// `k` path-traced samples (emission excluded) of the radiance leaving each start ray's primary
+/// hit toward the camera.
+fn path_traced_samples(scene: &Scene, starts: &[StartRay], k: u32) -> Vec<Vec<[f32; 3]>> {
+    let t = tracer();
+    starts
+        .iter()
+        .enumerate()
+        .map(|(i, s)| {
+            let hit = scene.intersect(&s.ray).expect("every start hits");
+            let si = scene.interaction(&s.ray, &hit);
+            (0..k)
+                .map(|j| {
+                    let mut sampler = nrc_render::PixelSampler::new(79, i as u64, j as u64);
+                    let mut ps = nrc_render::PathStats::default();
+                    t.reflected(scene, &si, si.wo, 1, &mut sampler, &mut ps)
+                        .to_array()
+                })
+                .collect()
+        })
+        .collect()
+}
+
+/// Asserts that `check` fails (a negative control).
+fn assert_fails(what: &str, check: impl FnOnce() + std::panic::UnwindSafe) {
+    assert!(
+        std::panic::catch_unwind(check).is_err(),
+        "{what}: a directionally wrong light passed the check"
+    );
+}
+
+/// Queries and path-traced samples per query in the Cornell box tests.
+const CORNELL_QUERIES: usize = 96;
+const CORNELL_SAMPLES: u32 = 1024;
+
+/// BT's targets at fixed queries on the Cornell box against path tracing, per query (1024 light
+/// paths and 1024 path-traced samples each); BT run with the light moved (the same queries,
+/// the original box's path tracing) fails.
+#[test]
+fn bt_matches_path_tracing_per_query_on_the_cornell_box() {
+    let scene = cornell(None);
+    let starts = cornell_queries(&scene, CORNELL_QUERIES);
+    let reference = path_traced_samples(&scene, &starts, CORNELL_SAMPLES);
+    let bt = |lit: &Scene| {
+        let n = starts.len();
+        let out = with_ctx(lit, &starts, |ctx| {
+            BidirectionalProducer::default().produce(ctx, CORNELL_SAMPLES as usize * n, 13)
+        });
+        assert_eq!(out.batch.targets.len(), CORNELL_SAMPLES as usize * n);
+        // BT cycles through its start rays: record `r · n + i` belongs to query `i`.
+        (0..n)
+            .map(|i| {
+                out.batch
+                    .targets
+                    .iter()
+                    .skip(i)
+                    .step_by(n)
+                    .copied()
+                    .collect()
+            })
+            .collect::<Vec<Vec<[f32; 3]>>>()
+    };
+    assert_per_query(&bt(&scene), &reference, "bt on the cornell box");
+    let wrong = bt(&cornell(Some(MOVED_LIGHT)));
+    assert_per_query_fails(&wrong, &reference, "bt negative control (light moved)");
+}
+
+/// SPPC at fixed queries on the Cornell box in its radius-reduction limit (balls of radius
+/// 0.01, well inside their own surface): each ball's estimate over 24 independent runs of 8
+/// frames against path tracing, per query; photons from the moved light fail.
+#[test]
+fn sppc_matches_path_tracing_per_query_on_the_cornell_box() {
+    let scene = cornell(None);
+    let starts = cornell_queries(&scene, CORNELL_QUERIES);
+    let reference = path_traced_samples(&scene, &starts, CORNELL_SAMPLES);
+    let runs = 24;
+    let sppc_runs = |lit: &Scene| {
+        let bounds = lit.bounds();
+        let mut per_query = vec![Vec::new(); starts.len()];
+        for run in 0..runs {
+            let mut producer = sppc(starts.len(), 0.0, 2048.0);
+            producer.initial_radius = 0.01 / (bounds.max - bounds.min).length();
+            let mut last = None;
+            for frame in 0..8 {
+                last = Some(with_ctx(lit, &starts, |ctx| {
+                    producer.produce(ctx, starts.len(), 1000 * run + frame)
+                }));
+            }
+            let targets = last.unwrap().batch.targets;
+            assert_eq!(targets.len(), starts.len(), "one record per ball");
+            for (q, t) in targets.into_iter().enumerate() {
+                per_query[q].push(t);
+            }
+        }
+        per_query
+    };
+    assert_per_query(&sppc_runs(&scene), &reference, "sppc on the cornell box");
+    let wrong = sppc_runs(&cornell(Some(MOVED_LIGHT)));
+    assert_per_query_fails(&wrong, &reference, "sppc negative control (light moved)");
+}
+
+/// LT on the Cornell box at its own queries (light-path vertices; LT takes no fixed queries),
+/// paired with path tracing at the same point and direction in 16 groups; LT under the moved
+/// light fails.
+#[test]
+fn lt_matches_path_tracing_at_its_queries_on_the_cornell_box() {
+    let scene = cornell(None);
+    let paired = |lit: &Scene| {
+        let starts = tiles(&scene, 256);
+        let out = with_ctx(lit, &starts, |ctx| {
+            LightProducer::default().produce(ctx, 8192, 17)
+        });
+        let reference = path_traced_at_queries(&scene, &out.batch.queries, 16);
+        let pairs: (Vec<[f32; 3]>, Vec<[f32; 3]>) = out
+            .batch
+            .targets
+            .iter()
+            .zip(reference)
+            .filter_map(|(t, r)| r.map(|r| (*t, r)))
+            .unzip();
+        assert!(
+            pairs.0.len() > 6000,
+            "{} queries found again",
+            pairs.0.len()
+        );
+        pairs
+    };
+    let (targets, reference) = paired(&scene);
+    assert_paired_with_path_tracing(&targets, &reference, "lt on the cornell box");
+    let (wrong, reference) = paired(&cornell(Some(MOVED_LIGHT)));
+    assert_fails("lt negative control", || {
+        assert_paired_with_path_tracing(&wrong, &reference, "lt negative control (light moved)")
+    });
+}

@@ -74,6 +74,8 @@ pub struct LossSettings {
     pub activation: OutputActivation,
     /// ε of the relative loss.
     pub epsilon: f32,
+    /// The relative residual beyond which the loss is linear.
+    pub max_relative_error: f32,
 }
 
 /// Phase A of a step, parallel over tiles: forward, loss and backward of every tile, the hash
@@ -149,6 +151,7 @@ fn forward_backward(
                             [row[TARGET_AT], row[TARGET_AT + 1], row[TARGET_AT + 2]],
                             row[WEIGHT_AT],
                             loss.epsilon,
+                            loss.max_relative_error,
                             scale,
                         );
                         loss_acc += l;

@@ -62,6 +62,36 @@ fn block(faces: [[[f32; 3]; 4]; 5]) -> Mesh {
 }
 
 pub fn build() -> Document {
+    build_with_light_node().0
+}
+
+/// Seconds the light of `cornell-box-moving` takes to cross the ceiling and come back.
+pub const MOVING_PERIOD: f32 = 4.0;
+
+/// `cornell-box-moving`: the Cornell box whose light moves along the ceiling, linearly, from
+/// the middle toward the red wall, across to the green wall and back to the middle in
+/// [`MOVING_PERIOD`] seconds (0.17 m each way: the lamp's edge stays 4 cm from the walls).
+pub fn build_moving() -> Document {
+    let (mut doc, light) = build_with_light_node();
+    let x = |d: f32| Vec3::new(d, 0.0, 0.0);
+    let q = MOVING_PERIOD / 4.0;
+    doc.add_vec3_animation(
+        "light moves along the ceiling",
+        light,
+        "translation",
+        "LINEAR",
+        &[
+            (0.0, x(0.0)),
+            (q, x(0.17)),
+            (3.0 * q, x(-0.17)),
+            (4.0 * q, x(0.0)),
+        ],
+    );
+    doc
+}
+
+/// The Cornell box and the index of its light's node.
+fn build_with_light_node() -> (Document, usize) {
     let mut doc = Document::default();
     let white = doc.add_material(Material::diffuse("white", WHITE));
     let red = doc.add_material(Material::diffuse("red", RED));
@@ -196,6 +226,7 @@ pub fn build() -> Document {
         ],
     ]);
 
+    let mut light_node = usize::MAX;
     for (name, mesh, material) in [
         ("floor", floor, white),
         ("ceiling", ceiling, white),
@@ -206,7 +237,10 @@ pub fn build() -> Document {
         ("tall_block", tall_block, white),
         ("light", lamp, light),
     ] {
-        doc.add_object(name, &mesh, material, Transform::IDENTITY);
+        let node = doc.add_object(name, &mesh, material, Transform::IDENTITY);
+        if name == "light" {
+            light_node = node;
+        }
     }
 
     // Camera: position (278, 273, −800) mm looking along +z with +y up; focal length 35 mm
@@ -220,5 +254,5 @@ pub fn build() -> Document {
         scale: 1.0,
     };
     doc.add_camera("camera", yfov, placement);
-    doc
+    (doc, light_node)
 }

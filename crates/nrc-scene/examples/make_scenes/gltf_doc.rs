@@ -337,6 +337,7 @@ pub struct Document {
     textures: Vec<Value>,
     samplers: Vec<Value>,
     png_files: Vec<(String, Vec<u8>)>,
+    animations: Vec<Value>,
 }
 
 impl Document {
@@ -345,9 +346,14 @@ impl Document {
         while !self.bin.len().is_multiple_of(4) {
             self.bin.push(0);
         }
-        self.buffer_views.push(json!({
-            "buffer": 0, "byteOffset": self.bin.len(), "byteLength": bytes.len(), "target": target,
-        }));
+        let mut view = json!({
+            "buffer": 0, "byteOffset": self.bin.len(), "byteLength": bytes.len(),
+        });
+        // Animation data has no target (it is neither vertex nor index data).
+        if target != 0 {
+            view["target"] = json!(target);
+        }
+        self.buffer_views.push(view);
         self.bin.extend_from_slice(bytes);
         self.buffer_views.len() - 1
     }
@@ -487,6 +493,39 @@ impl Document {
         let g = self.add_geometry(mesh);
         let m = self.add_mesh(name, g, material);
         self.add_mesh_node(name, m, transform)
+    }
+
+    /// An animation of node `node`'s translation (`"translation"`) or scale through `values`
+    /// at `times` seconds (`interpolation`: `"STEP"` or `"LINEAR"`).
+    pub fn add_vec3_animation(
+        &mut self,
+        name: &str,
+        node: usize,
+        path: &str,
+        interpolation: &str,
+        keys: &[(f32, Vec3)],
+    ) {
+        assert!(
+            keys.windows(2).all(|w| w[1].0 > w[0].0),
+            "increasing key times"
+        );
+        let floats =
+            |vs: &mut dyn Iterator<Item = f32>| vs.flat_map(f32::to_le_bytes).collect::<Vec<u8>>();
+        let times = self.add_view(&floats(&mut keys.iter().map(|k| k.0)), 0);
+        let (t0, t1) = (keys[0].0, keys[keys.len() - 1].0);
+        let input = self.add_accessor(json!({
+            "bufferView": times, "componentType": FLOAT, "count": keys.len(), "type": "SCALAR",
+            "min": [num(t0)], "max": [num(t1)],
+        }));
+        let values = self.add_view(&floats(&mut keys.iter().flat_map(|k| k.1.to_array())), 0);
+        let output = self.add_accessor(json!({
+            "bufferView": values, "componentType": FLOAT, "count": keys.len(), "type": "VEC3",
+        }));
+        self.animations.push(json!({
+            "name": name,
+            "samplers": [{ "input": input, "output": output, "interpolation": interpolation }],
+            "channels": [{ "sampler": 0, "target": { "node": node, "path": path } }],
+        }));
     }
 
     /// An empty node that groups children under one transform.
@@ -634,6 +673,7 @@ impl Document {
             ("samplers", self.samplers.clone()),
             ("accessors", self.accessors.clone()),
             ("bufferViews", self.buffer_views.clone()),
+            ("animations", self.animations.clone()),
         ];
         for (key, list) in lists {
             if !list.is_empty() {

@@ -1,5 +1,6 @@
 //! Writes the scenes the project ships: `scenes/<name>.gltf` with its `.bin` buffer and PNG
-//! textures, for `cornell-box`, `caustics`, `ajar`, `glossy` and `sun-spot-env` (with the
+//! textures, for `cornell-box` (and `cornell-box-moving`, its light animated), `caustics`,
+//! `ajar`, `glossy` and `sun-spot-env` (with the
 //! HDR sky `sky.exr` it is rendered under), then checks each file
 //! against the glTF 2.0 rules (see `check.rs`), loads it with the project's own loader
 //! (`nrc_scene::Scene::load`), checks that the loader sees what was written (triangles,
@@ -27,8 +28,9 @@ use std::process::ExitCode;
 /// Builds one scene's document.
 type Builder = fn() -> gltf_doc::Document;
 
-const SCENES: [(&str, Builder); 5] = [
+const SCENES: [(&str, Builder); 6] = [
     ("cornell-box", cornell_box::build),
+    ("cornell-box-moving", cornell_box::build_moving),
     ("caustics", caustics::build),
     ("ajar", ajar::build),
     ("glossy", glossy::build),
