@@ -90,6 +90,26 @@ pub struct CompareArgs {
     #[arg(long, value_name = "METHOD", requires = "converge")]
     pub converge_target: Option<MethodSpec>,
 
+    /// An animated sequence instead of one frame: every method renders these many frames of
+    /// the scene posed at `frame / fps` seconds (glTF node animation), its state carried over,
+    /// each against its own reference (path traced at --reference-spp); writes `sequence.md`,
+    /// `sequence.json` and `sequence-mape.png` with |E| and |E′| of Hedman et al. §5.2.
+    #[arg(long, value_name = "FRAMES", conflicts_with_all = ["converge", "sweep", "reference"])]
+    pub sequence: Option<u32>,
+
+    /// Frames per second of scene time in a --sequence.
+    #[arg(long, default_value_t = 30.0, requires = "sequence")]
+    pub fps: f32,
+
+    /// Camera path of a --sequence (JSON keyframes, as for `nrc train --camera-path`); default:
+    /// the scene's camera at each frame's time.
+    #[arg(long, requires = "sequence")]
+    pub camera_path: Option<PathBuf>,
+
+    /// Pixels tracked by the temporal measures of a --sequence, on a regular grid (0: all).
+    #[arg(long, default_value_t = 1024, requires = "sequence")]
+    pub tracked: usize,
+
     /// Skip HDR-FLIP (the costliest metric).
     #[arg(long)]
     pub no_flip: bool,
@@ -197,6 +217,27 @@ pub fn run(args: &CompareArgs) -> Result<()> {
 
 fn run_comparison(args: &CompareArgs, budget: Budget, scene: &Scene) -> Result<()> {
     let (w, h) = (args.width, args.height);
+    let c = comparison(args, budget)?;
+    if let Some(frames) = args.sequence {
+        let seq = nrc_harness::sequence::Sequence {
+            frames,
+            fps: args.fps,
+            reference_spp: args.reference_spp,
+            tracked: args.tracked,
+            camera_path: args.camera_path.clone(),
+        };
+        let report = nrc_harness::sequence::compare_sequence(&c, &seq, &|m| eprintln!("{m}"))?;
+        print!(
+            "{}",
+            std::fs::read_to_string(c.out.join("sequence.md")).unwrap_or_default()
+        );
+        eprintln!(
+            "wrote sequence.md, sequence.json and sequence-mape.png to {} ({} methods)",
+            args.out.display(),
+            report.rows.len()
+        );
+        return Ok(());
+    }
     let reference = match &args.reference {
         Some(path) => reference::load_given(path, w, h)?,
         None => {
@@ -221,13 +262,40 @@ fn run_comparison(args: &CompareArgs, budget: Budget, scene: &Scene) -> Result<(
         },
         reference.location.display()
     );
+    let bar = ProgressBar::new(total_frames(&c)).with_style(
+        ProgressStyle::with_template("{elapsed_precise} [{bar:30}] {pos}/{len} frames {msg}")
+            .expect("valid progress template")
+            .progress_chars("=> "),
+    );
+    let (report, markdown) = compare(&c, scene, &reference, &|p| match p {
+        Progress::Method(name) => bar.set_message(name.to_string()),
+        Progress::Frame => bar.inc(1),
+    })?;
+    bar.finish_and_clear();
+    for note in &report.notes {
+        if note.contains("NaN or infinite") {
+            eprintln!("warning: {note}");
+        }
+    }
+    print!("{}", report.to_markdown());
+    eprintln!(
+        "wrote {} and the images to {}",
+        markdown.display(),
+        args.out.display()
+    );
+    Ok(())
+}
+
+/// The comparison the arguments describe.
+fn comparison(args: &CompareArgs, budget: Budget) -> Result<Comparison> {
+    let (w, h) = (args.width, args.height);
     let methods = args.methods();
     let any_cache = methods.iter().any(|m| m.producer.is_some());
     let mut cache_settings = args
         .model
         .method_settings(args.train_frames, args.seed, any_cache)?;
     cache_settings.online = !args.frozen;
-    let c = Comparison {
+    Ok(Comparison {
         methods: methods.clone(),
         budget,
         width: w,
@@ -256,27 +324,5 @@ fn run_comparison(args: &CompareArgs, budget: Budget, scene: &Scene) -> Result<(
             .map(|s| s.to_string_lossy().into_owned())
             .unwrap_or_default(),
         scene_path: args.scene.scene.display().to_string(),
-    };
-    let bar = ProgressBar::new(total_frames(&c)).with_style(
-        ProgressStyle::with_template("{elapsed_precise} [{bar:30}] {pos}/{len} frames {msg}")
-            .expect("valid progress template")
-            .progress_chars("=> "),
-    );
-    let (report, markdown) = compare(&c, scene, &reference, &|p| match p {
-        Progress::Method(name) => bar.set_message(name.to_string()),
-        Progress::Frame => bar.inc(1),
-    })?;
-    bar.finish_and_clear();
-    for note in &report.notes {
-        if note.contains("NaN or infinite") {
-            eprintln!("warning: {note}");
-        }
-    }
-    print!("{}", report.to_markdown());
-    eprintln!(
-        "wrote {} and the images to {}",
-        markdown.display(),
-        args.out.display()
-    );
-    Ok(())
+    })
 }

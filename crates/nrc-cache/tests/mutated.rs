@@ -74,6 +74,29 @@ fn run(cases: u32, seed: u64) -> (Tally, usize) {
     let mut rng = Pcg64Mcg::seed_from_u64(seed);
     let mut tally = Tally::default();
     let mut baseline = 0;
+    // Every input that ever failed (tests/fixtures/mutated/: configurations that built, trained
+    // and then inferred non-finite radiance, before the learning rate was bounded).
+    let fixtures = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/mutated");
+    let mut kept: Vec<_> = std::fs::read_dir(&fixtures)
+        .into_iter()
+        .flatten()
+        .flatten()
+        .map(|e| e.path())
+        .collect();
+    kept.sort();
+    for path in kept {
+        let bytes = std::fs::read(&path).unwrap();
+        let label = format!("fixture-{}", path.file_name().unwrap().to_string_lossy());
+        let text = String::from_utf8_lossy(&bytes).into_owned();
+        let data = batch(256, &mut rng);
+        tally.case(
+            "fixture",
+            &label,
+            &bytes,
+            (LIMIT, MAX_ALLOCATION),
+            usable(text, data),
+        );
+    }
     for file in &files {
         let original = std::fs::read(file).unwrap();
         let name = file.file_name().unwrap().to_string_lossy().into_owned();

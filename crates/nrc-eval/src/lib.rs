@@ -52,4 +52,4 @@ pub use image::{ImageView, RgbImage, ScalarImage};
 pub use metrics::{ErrorMetrics, Metric, MetricOptions, compute_metrics};
 pub use report::{Report, ReportRow, write_report};
 pub use sweep::{SweepPoint, SweepSeries, TimeToReach, time_to_reach};
-pub use temporal::{TemporalAccumulator, TemporalStats, temporal_stats};
+pub use temporal::{TemporalAccumulator, TemporalStats, TrackedLuminance, temporal_stats};

@@ -164,6 +164,72 @@ pub fn temporal_stats(
     acc.finish()
 }
 
+/// The measure of the paper's §5.2: frames reduced to the tone-mapped luminance of a fixed set of
+/// tracked pixels, the tone map fixed once from the sequence's first reference so that it adds no
+/// flicker of its own. Tone map: Reinhard's `x/(1 + x)` of the luminance scaled so that the
+/// reference's log-average luminance maps to 0.18 (his "key"). The reduced frames go into a
+/// [`TemporalAccumulator`] as `1 × n` images (the luminance in all three channels, so that the
+/// means over pixels and channels are means over the tracked pixels).
+#[derive(Clone, Debug, PartialEq)]
+pub struct TrackedLuminance {
+    /// Indices of the tracked pixels (row-major).
+    pub pixels: Vec<usize>,
+    /// Luminance scale of the tone map.
+    pub scale: f64,
+}
+
+impl TrackedLuminance {
+    /// `tracked` pixels on a regular grid over the image (every pixel when `tracked` is 0 or at
+    /// least the pixel count), the tone map from `reference`.
+    pub fn from_reference(reference: &ImageView<'_>, tracked: usize) -> Self {
+        let (w, h) = (reference.width(), reference.height());
+        let n = w * h;
+        let pixels: Vec<usize> = if tracked == 0 || tracked >= n {
+            (0..n).collect()
+        } else {
+            let side = (tracked as f64).sqrt().ceil() as usize;
+            let mut out = Vec::new();
+            for j in 0..side {
+                for i in 0..side {
+                    let x = ((i as f64 + 0.5) * w as f64 / side as f64) as usize;
+                    let y = ((j as f64 + 0.5) * h as f64 / side as f64) as usize;
+                    out.push(y.min(h - 1) * w + x.min(w - 1));
+                }
+            }
+            out.truncate(tracked);
+            out
+        };
+        let lum = |p: &[f32; 3]| 0.2126 * p[0] as f64 + 0.7152 * p[1] as f64 + 0.0722 * p[2] as f64;
+        let log_avg = (reference
+            .pixels()
+            .iter()
+            .map(|p| (1e-4 + lum(p).max(0.0)).ln())
+            .sum::<f64>()
+            / n.max(1) as f64)
+            .exp();
+        Self {
+            pixels,
+            scale: 0.18 / log_avg.max(1e-12),
+        }
+    }
+
+    /// The tone-mapped luminance of the tracked pixels of `image`, as `1 × n` RGB pixels.
+    pub fn apply(&self, image: &ImageView<'_>) -> Vec<[f32; 3]> {
+        let px = image.pixels();
+        self.pixels
+            .iter()
+            .map(|&i| {
+                let p = px[i];
+                let l = (0.2126 * p[0] as f64 + 0.7152 * p[1] as f64 + 0.0722 * p[2] as f64)
+                    .max(0.0)
+                    * self.scale;
+                let t = (l / (1.0 + l)) as f32;
+                [t; 3]
+            })
+            .collect()
+    }
+}
+
 /// Sum over pixels and channels of `|a − b|` (or `|a|` when `b` is `None`).
 fn sum_abs(a: &[[f32; 3]], b: Option<&[[f32; 3]]>) -> f64 {
     match b {

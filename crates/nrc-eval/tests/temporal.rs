@@ -103,3 +103,52 @@ fn inconsistent_sequences_are_errors() {
     );
     assert!(TemporalAccumulator::new().finish().is_err());
 }
+
+/// The paper's measure on tracked pixels: a sequence whose frames equal its references but for
+/// one tracked pixel that is wrong by a known tone-mapped step every other frame gives the known
+/// |E| and |E′|; frames equal to a static reference give |E′| = 0 exactly.
+#[test]
+fn tracked_luminance_gives_the_known_error_and_change() {
+    use nrc_eval::TrackedLuminance;
+    let (_, refs) = sequence(|_| 0.0);
+    let views_r = views(&refs);
+    let tracker = TrackedLuminance::from_reference(&views_r[0], 4);
+    assert_eq!(tracker.pixels.len(), 4);
+    // A static, exact sequence: no error, no change of it.
+    let mut acc = TemporalAccumulator::new();
+    for _ in 0..T {
+        let a = tracker.apply(&views_r[0]);
+        let r = tracker.apply(&views_r[0]);
+        acc.push(
+            &ImageView::new("f", a.len(), 1, &a).unwrap(),
+            Some(&ImageView::new("r", r.len(), 1, &r).unwrap()),
+        )
+        .unwrap();
+    }
+    let s = acc.finish().unwrap();
+    assert_eq!(s.mean_abs_error_change, Some(0.0));
+    assert_eq!(s.mean_abs_error, Some(0.0));
+    // The first tracked pixel's tone-mapped luminance off by +d on odd frames: |E| = d/4 · (2/5)
+    // (two of five frames, one of four pixels), |E′| = d/4 (every pair differs by d at one pixel).
+    let mut acc = TemporalAccumulator::new();
+    let mut step = 0.0f64;
+    for (t, r) in views_r.iter().enumerate() {
+        let rt = tracker.apply(r);
+        let mut ft = rt.clone();
+        if t % 2 == 1 {
+            ft[0] = [ft[0][0] + 0.05; 3];
+            step = (ft[0][0] - rt[0][0]) as f64;
+        }
+        acc.push(
+            &ImageView::new("f", ft.len(), 1, &ft).unwrap(),
+            Some(&ImageView::new("r", rt.len(), 1, &rt).unwrap()),
+        )
+        .unwrap();
+    }
+    let s = acc.finish().unwrap();
+    assert!(
+        near(s.mean_abs_error.unwrap(), step / 4.0 * 2.0 / 5.0),
+        "{s:?}"
+    );
+    assert!(near(s.mean_abs_error_change.unwrap(), step / 4.0), "{s:?}");
+}

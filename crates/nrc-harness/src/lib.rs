@@ -16,6 +16,7 @@
 //!
 //! - [`run`]: a run of the online loop (camera paths, the frame loop and its outputs, the
 //!   statistics file, the snapshot's scene check).
+//! - [`sequence`]: comparisons over animated sequences (per-frame references, |E| and |E′|).
 //!
 //! The CLI (`src/` of the workspace root) parses arguments into these types and prints.
 
@@ -26,6 +27,7 @@ pub mod methods;
 pub mod options;
 pub mod reference;
 pub mod run;
+pub mod sequence;
 
 pub use budget::{Budget, Estimate, Frame, FrameRequest, Method, render_frame};
 pub use methods::{CacheMethodSettings, MethodList, MethodSpec};

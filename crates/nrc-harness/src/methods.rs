@@ -135,7 +135,7 @@ impl FromStr for MethodSpec {
                 producer,
             });
         }
-        // The resampling passes by their pass names, at 1 sample per pixel.
+        // The resampling and instant-radiosity passes by their pass names, at 1 sample per pixel.
         // `-nrc` variants read a cache trained online by `pt-sl` (other producers: the general
         // form, e.g. wsrestir-gi-nrc@1spp+bt).
         if s.starts_with("restir-")
@@ -143,6 +143,9 @@ impl FromStr for MethodSpec {
             || s.starts_with("ddgi-")
             || s == "nrc-restir"
             || s.starts_with("nrc-restir:")
+            || s == "ir"
+            || s.starts_with("ir:")
+            || s.starts_with("smc-ir")
         {
             let pass: PassSpec = s.parse().map_err(|e: String| err(&e))?;
             let producer = pass.uses_source().then(|| {

@@ -20,6 +20,7 @@ pub mod cache_terminated;
 pub mod ddgi_restir;
 pub mod ddgi_terminated;
 pub mod hash_grid;
+pub mod instant_radiosity;
 pub mod path_traced;
 pub mod restir_di;
 pub mod restir_gi;
@@ -37,6 +38,7 @@ use crate::source::{RadianceQuery, RadianceSource};
 pub use cache_terminated::{CacheTerminatedPass, TERMINATION_NAMES, Termination, TerminationPoint};
 pub use ddgi_restir::{DdgiRestirPass, DdgiRestirSettings, SurfaceLight};
 pub use ddgi_terminated::DdgiTerminatedPass;
+pub use instant_radiosity::{InstantRadiosityPass, IrSettings, VplMode};
 pub use path_traced::PathTracedPass;
 pub use restir_di::{RestirDiPass, RestirDiSettings};
 pub use restir_gi::{RestirGiPass, RestirGiSettings};
@@ -176,6 +178,10 @@ pub enum PassSpec {
     /// cache-fed probes' (`ddgi-nrc-restir`) radiance; parameters after a colon (see
     /// [`DdgiRestirSettings`]), e.g. `nrc-restir:clamp=0.05`.
     DdgiRestir(DdgiRestirSettings),
+    /// Instant radiosity: `ir` (VPLs traced from the lights each frame), `smc-ir` (sequential
+    /// Monte Carlo instant radiosity), `smc-ir-nrc` (its radiosities from the radiance source);
+    /// parameters after a colon (see [`IrSettings`]), e.g. `smc-ir:vpls=1024,mmax=8`.
+    InstantRadiosity(IrSettings),
 }
 
 impl Default for PassSpec {
@@ -202,7 +208,10 @@ pub fn pass_names() -> String {
          the probe rays' radiance from the cache); \
          ddgi-restir, nrc-restir, ddgi-nrc-restir[:light=N,bsdf=N,k=N,radius=PX,mcap=X,temporal=0|1,clamp=F,residual=0|1,\
          requery=0|1,jitter=0|1,probes=N,rays=R,hysteresis=H] (DDGI resampling: every surface a light, lit by probes, \
-         the cache or cache-fed probes; defaults light=8,bsdf=1,k=3,radius=30,mcap=20,clamp=0.1 (G_max = 1/(clamp·diagonal)²))"
+         the cache or cache-fed probes; defaults light=8,bsdf=1,k=3,radius=30,mcap=20,clamp=0.1 (G_max = 1/(clamp·diagonal)²)); \
+         ir, smc-ir, smc-ir-nrc[:vpls=N,mmax=N,per_pixel=N,clamp=F,residual=0|1,spp=N,rate=N,warmup=N,points=N,indirect=0|1] \
+         (instant radiosity: VPLs from the lights each frame, sequential Monte Carlo VPLs with path-traced or cache radiosities; \
+         defaults vpls=2048,mmax=16,per_pixel=64,clamp=0.1,spp=16,rate=16,warmup=100,points=1024)"
     )
 }
 
@@ -305,6 +314,46 @@ impl FromStr for PassSpec {
                 });
             }
             _ => {}
+        }
+        for (prefix, mode) in [
+            ("smc-ir-nrc", VplMode::SmcSource),
+            ("smc-ir", VplMode::Smc),
+            ("ir", VplMode::Classic),
+        ] {
+            let Some(rest) = s.strip_prefix(prefix) else {
+                continue;
+            };
+            let params = match rest.strip_prefix(':') {
+                Some(p) => p,
+                None if rest.is_empty() => "",
+                None => continue,
+            };
+            let mut set = IrSettings {
+                mode,
+                ..Default::default()
+            };
+            for param in pass_params(s, params) {
+                let p = param?;
+                match p.key {
+                    "vpls" => set.vpls = p.count()?,
+                    "mmax" => set.m_max = p.count()?,
+                    "per_pixel" => set.per_pixel = p.count()?,
+                    "clamp" => set.clamp = p.real()?,
+                    "residual" => set.residual = p.flag()?,
+                    "spp" => set.radiosity_spp = p.count()?,
+                    "rate" => set.rate = p.count()?,
+                    "warmup" => set.warmup = p.count()?,
+                    "points" => set.visible_points = p.count()?,
+                    "indirect" => set.indirect = p.flag()?,
+                    k => {
+                        return Err(format!(
+                            "pass `{s}`: unknown parameter `{k}` (known: vpls, mmax, per_pixel, clamp, residual, spp, rate, warmup, points, indirect)"
+                        ));
+                    }
+                }
+            }
+            set.validate().map_err(|e| format!("pass `{s}`: {e}"))?;
+            return Ok(Self::InstantRadiosity(set));
         }
         if let Some(rest) = s.strip_prefix("restir-di") {
             let (variant, params) = rest.split_once(':').unwrap_or((rest, ""));
@@ -556,6 +605,7 @@ impl fmt::Display for PassSpec {
                 }
                 Ok(())
             }
+            Self::InstantRadiosity(set) => f.write_str(&set.name()),
             Self::DdgiRestir(set) => {
                 f.write_str(match set.light {
                     SurfaceLight::Probes => "ddgi-restir",
@@ -675,6 +725,10 @@ impl PassSpec {
                 | Self::RestirGi(_)
                 | Self::DdgiTerminated { .. }
                 | Self::DdgiRestir(_)
+                | Self::InstantRadiosity(IrSettings {
+                    mode: VplMode::Smc | VplMode::SmcSource,
+                    ..
+                })
         )
     }
 
@@ -692,6 +746,13 @@ impl PassSpec {
                     ..
                 }
         ) || matches!(self, Self::DdgiRestir(s) if s.light != SurfaceLight::Probes)
+            || matches!(
+                self,
+                Self::InstantRadiosity(IrSettings {
+                    mode: VplMode::SmcSource,
+                    ..
+                })
+            )
     }
 
     /// The pass's state, with `tracer`'s depth limit and Russian roulette (its light strategy
@@ -712,6 +773,7 @@ impl PassSpec {
                 settings,
             } => Box::new(DdgiTerminatedPass::new(termination, settings, tracer)),
             Self::DdgiRestir(set) => Box::new(DdgiRestirPass::new(set, tracer)),
+            Self::InstantRadiosity(set) => Box::new(InstantRadiosityPass::new(set, *tracer)),
         }
     }
 }
@@ -732,6 +794,10 @@ mod tests {
             "cache-bth:8",
             "cache-nonee",
             "cache-first-nonee",
+            "ir",
+            "smc-ir",
+            "smc-ir-nrc:vpls=256,mmax=8,residual=1",
+            "ir:per_pixel=0,clamp=0.05,indirect=1",
             "restir-di",
             "restir-di-biased",
             "restir-di:light=16,k=3",
