@@ -226,7 +226,14 @@ fn run_comparison(args: &CompareArgs, budget: Budget, scene: &Scene) -> Result<(
             tracked: args.tracked,
             camera_path: args.camera_path.clone(),
         };
-        let report = nrc_harness::sequence::compare_sequence(&c, &seq, &|m| eprintln!("{m}"))?;
+        let animated = args.scene.load_animated()?;
+        let pose = |t: f32| args.scene.pose(&animated, t);
+        let report = nrc_harness::sequence::compare_sequence(
+            &c,
+            &seq,
+            (&pose, animated.is_animated()),
+            &|m| eprintln!("{m}"),
+        )?;
         print!(
             "{}",
             std::fs::read_to_string(c.out.join("sequence.md")).unwrap_or_default()

@@ -4,7 +4,7 @@
 
 use std::path::PathBuf;
 
-use anyhow::{Context, Result, bail};
+use anyhow::{Context, Result, bail, ensure};
 use indicatif::{ProgressBar, ProgressStyle};
 use nrc_render::PassSpec;
 use nrc_render::Termination;
@@ -34,6 +34,11 @@ pub struct TrainArgs {
     /// Frames to run.
     #[arg(long, default_value_t = 64)]
     pub frames: u32,
+
+    /// Frames per second of scene time on an animated scene (glTF node animation: the scene
+    /// is posed at `frame / fps` seconds each frame, and the cache trains while it moves).
+    #[arg(long, default_value_t = 30.0)]
+    pub fps: f32,
 
     /// Camera path: a JSON list of keyframes `{"position": [x,y,z], "target": [x,y,z],
     /// "up": [x,y,z] (optional), "fov_y": degrees (optional)}`, spread evenly over the frames
@@ -165,10 +170,30 @@ pub fn run(args: &TrainArgs) -> Result<()> {
             dir,
             every: args.every,
         });
+    ensure!(
+        args.fps.is_finite() && args.fps > 0.0,
+        "--fps must be positive, got {}",
+        args.fps
+    );
+    let animated = args.scene.load_animated()?;
+    let pose = |t: f32| args.scene.pose(&animated, t);
+    let scenes = if animated.is_animated() {
+        eprintln!(
+            "the scene is animated ({:.2} s): posed at frame / {} s each frame",
+            animated.animation.duration(),
+            args.fps
+        );
+        nrc_harness::run::Frames::Animated {
+            pose: &pose,
+            fps: args.fps,
+        }
+    } else {
+        nrc_harness::run::Frames::Static(&scene)
+    };
     let all = pool.install(|| {
         nrc_harness::run::train(
             &mut trainer,
-            &scene,
+            &scenes,
             &cameras,
             (args.width, args.height),
             frames.as_ref(),

@@ -168,6 +168,24 @@ impl SceneArgs {
     /// Loads the scene and applies the camera, background and environment overrides.
     pub fn load(&self) -> Result<Scene> {
         let mut scene = Scene::load(&self.scene)?;
+        self.apply(&mut scene)?;
+        Ok(scene)
+    }
+
+    /// Loads the scene with its animation; [`SceneArgs::pose`] gives it at a time.
+    pub fn load_animated(&self) -> Result<nrc_scene::AnimatedScene> {
+        Ok(nrc_scene::AnimatedScene::load(&self.scene)?)
+    }
+
+    /// `animated` at `t` seconds with the overrides applied.
+    pub fn pose(&self, animated: &nrc_scene::AnimatedScene, t: f32) -> Result<Scene> {
+        let mut scene = animated.at(t)?;
+        self.apply(&mut scene)?;
+        Ok(scene)
+    }
+
+    /// Applies the camera, background and environment overrides to `scene`.
+    pub fn apply(&self, scene: &mut Scene) -> Result<()> {
         scene.camera = self
             .camera(&scene.camera)
             .with_context(|| "invalid camera")?;
@@ -185,7 +203,7 @@ impl SceneArgs {
             }
             scene.set_environment(env);
         }
-        Ok(scene)
+        Ok(())
     }
 
     /// The scene's camera with the command-line overrides applied.

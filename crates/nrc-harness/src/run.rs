@@ -102,11 +102,22 @@ pub struct FrameOutput {
     pub every: u32,
 }
 
+/// The scene of each frame of a run: one that stands still, or one posed at `frame / fps`
+/// seconds (`pose` gives the scene at a time).
+pub enum Frames<'a> {
+    Static(&'a Scene),
+    Animated {
+        pose: &'a (dyn Fn(f32) -> Result<Scene> + Sync),
+        fps: f32,
+    },
+}
+
 /// Runs the online loop over `cameras` (one frame each) at `width × height`, rendering every
-/// frame and writing those `frames` asks for; `progress` sees each frame's statistics.
+/// frame and writing those `frames` asks for; `progress` sees each frame's statistics. An
+/// animated scene is posed afresh each frame (the cache trains while it moves).
 pub fn train(
     trainer: &mut OnlineTrainer,
-    scene: &Scene,
+    scenes: &Frames<'_>,
     cameras: &[Camera],
     (width, height): (u32, u32),
     frames: Option<&FrameOutput>,
@@ -114,6 +125,14 @@ pub fn train(
 ) -> Result<Vec<FrameStats>> {
     let mut all = Vec::with_capacity(cameras.len());
     for (f, camera) in cameras.iter().enumerate() {
+        let posed;
+        let scene = match scenes {
+            Frames::Static(s) => *s,
+            Frames::Animated { pose, fps } => {
+                posed = pose(f as f32 / fps)?;
+                &posed
+            }
+        };
         let (stats, out) = trainer.frame(scene, camera, width, height, true)?;
         let last = f + 1 == cameras.len();
         if let (Some(o), Some(out)) = (frames, &out)

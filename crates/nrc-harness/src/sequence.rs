@@ -12,7 +12,7 @@
 //! the same work for every method: it is done once per frame before the methods run and
 //! reported on its own line, not charged to them.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::time::Instant;
 
 use anyhow::{Context, Result};
@@ -21,7 +21,7 @@ use nrc_eval::plot::plot_error_vs_time;
 use nrc_eval::{ErrorMetrics, ImageView, SweepPoint, SweepSeries, TemporalAccumulator};
 use nrc_eval::{Metric, TrackedLuminance};
 use nrc_render::{RenderSettings, render};
-use nrc_scene::{AnimatedScene, Camera, Image, Scene};
+use nrc_scene::{Camera, Image, Scene};
 
 use crate::budget::{FrameRequest, render_frame};
 use crate::compare::Comparison;
@@ -74,11 +74,13 @@ pub struct SequenceReport {
     pub rows: Vec<SequenceRow>,
 }
 
-/// Runs the sequence comparison for the methods and budget of `c` on the scene at
-/// `c.scene_path`; writes `sequence.md`, `sequence.json` and `sequence-mape.png` into `c.out`.
+/// Runs the sequence comparison for the methods and budget of `c` on the scene `pose(t)` gives
+/// at time `t` seconds (`animated`: whether it moves); writes `sequence.md`, `sequence.json`
+/// and `sequence-mape.png` into `c.out`.
 pub fn compare_sequence(
     c: &Comparison,
     seq: &Sequence,
+    (pose, animated): (&dyn Fn(f32) -> Result<Scene>, bool),
     progress: &dyn Fn(&str),
 ) -> Result<SequenceReport> {
     anyhow::ensure!(
@@ -96,12 +98,11 @@ pub fn compare_sequence(
         "the sequence's references need at least 1 sample per pixel"
     );
     let (w, h) = (c.width, c.height);
-    let animated = AnimatedScene::load(Path::new(&c.scene_path))
-        .with_context(|| format!("loading {}", c.scene_path))?;
     let t0 = Instant::now();
     let scenes: Vec<Scene> = (0..seq.frames)
-        .map(|f| animated.at(f as f32 / seq.fps))
-        .collect::<std::result::Result<_, _>>()?;
+        .map(|f| pose(f as f32 / seq.fps))
+        .collect::<Result<_>>()
+        .with_context(|| format!("posing {}", c.scene_path))?;
     let pose_ms = t0.elapsed().as_secs_f64() * 1e3 / seq.frames as f64;
     let cameras: Vec<Camera> = match &seq.camera_path {
         Some(p) => crate::run::camera_path(Some(p), &scenes[0].camera, seq.frames)?,
@@ -206,7 +207,7 @@ pub fn compare_sequence(
         reference_spp: seq.reference_spp,
         tracked_pixels: tracker.pixels.len(),
         pose_ms,
-        animated: animated.is_animated(),
+        animated,
         rows,
     };
     write(&report, c)?;

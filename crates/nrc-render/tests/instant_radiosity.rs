@@ -197,3 +197,42 @@ fn smc_ir_replaces_at_most_m_max_vpls_per_frame() {
     assert!(replaced_total > 0, "the VPL set never changed");
     println!("{replaced_total} VPLs replaced over 11 frames");
 }
+
+/// A static camera over a static scene with a fixed VPL set (`M_max = 0`: nothing replaced),
+/// frames of the same seed: identical images, so the error changes by nothing between frames
+/// (|E′| = 0: `nrc-eval`'s temporal tests show identical frames give exactly 0).
+#[test]
+fn a_fixed_vpl_set_renders_a_static_scene_identically() {
+    let scene = Scene::load(&common::project_scenes().join("cornell-box.gltf")).unwrap();
+    let set = IrSettings {
+        mode: VplMode::Smc,
+        vpls: 128,
+        m_max: 0,
+        per_pixel: 16,
+        radiosity_spp: 2,
+        rate: 4,
+        warmup: 2,
+        visible_points: 256,
+        indirect: true,
+        ..Default::default()
+    };
+    let mut pass = InstantRadiosityPass::new(set, tracer());
+    let input = FrameInput {
+        scene: &scene,
+        camera: &scene.camera,
+        width: 16,
+        height: 16,
+        spp: 1,
+        seed: 3,
+    };
+    let first = passes::run(&mut pass, &input, &ZeroSource).image;
+    assert!(
+        first.data.iter().any(|p| p.max_element() > 0.0),
+        "the VPLs light the box"
+    );
+    for _ in 0..3 {
+        let again = passes::run(&mut pass, &input, &ZeroSource).image;
+        assert_eq!(again.data, first.data);
+        assert_eq!(pass.last.replaced, 0);
+    }
+}
