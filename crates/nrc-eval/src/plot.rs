@@ -37,6 +37,24 @@ pub fn plot_error_vs_time(
     png_path: &Path,
     svg_path: &Path,
 ) -> Result<()> {
+    plot_series(
+        series,
+        metric,
+        (title, "time per frame (ms)"),
+        png_path,
+        svg_path,
+    )
+}
+
+/// [`plot_error_vs_time`] with another quantity on the x axis (the points' `time_ms` field
+/// holds it; `x_desc` names it), e.g. the frame number of a sequence.
+pub fn plot_series(
+    series: &[SweepSeries],
+    metric: Metric,
+    (title, x_desc): (&str, &str),
+    png_path: &Path,
+    svg_path: &Path,
+) -> Result<()> {
     register_font();
     let curves: Vec<(&str, Vec<(f64, f64)>)> = series
         .iter()
@@ -54,7 +72,7 @@ pub fn plot_error_vs_time(
     let mut svg = String::new();
     {
         let root = SVGBackend::with_string(&mut svg, (w, h)).into_drawing_area();
-        draw(&root, &curves, metric, title).map_err(|reason| EvalError::Draw {
+        draw(&root, &curves, metric, (title, x_desc)).map_err(|reason| EvalError::Draw {
             path: svg_path.to_path_buf(),
             reason,
         })?;
@@ -64,7 +82,7 @@ pub fn plot_error_vs_time(
     let mut rgb = vec![255u8; (w * h * 3) as usize];
     {
         let root = BitMapBackend::with_buffer(&mut rgb, (w, h)).into_drawing_area();
-        draw(&root, &curves, metric, title).map_err(|reason| EvalError::Draw {
+        draw(&root, &curves, metric, (title, x_desc)).map_err(|reason| EvalError::Draw {
             path: png_path.to_path_buf(),
             reason,
         })?;
@@ -88,7 +106,7 @@ fn draw<DB: DrawingBackend>(
     root: &DrawingArea<DB, Shift>,
     curves: &[(&str, Vec<(f64, f64)>)],
     metric: Metric,
-    title: &str,
+    (title, x_desc): (&str, &str),
 ) -> std::result::Result<(), String> {
     let e = |err: DrawingAreaErrorKind<DB::ErrorType>| err.to_string();
     root.fill(&WHITE).map_err(e)?;
@@ -103,7 +121,7 @@ fn draw<DB: DrawingBackend>(
         .map_err(e)?;
     chart
         .configure_mesh()
-        .x_desc("time per frame (ms)")
+        .x_desc(x_desc)
         .y_desc(metric.label())
         .x_label_formatter(&|v| format_tick(*v))
         .y_label_formatter(&|v| format_tick(*v))

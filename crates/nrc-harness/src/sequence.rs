@@ -17,7 +17,7 @@ use std::time::Instant;
 
 use anyhow::{Context, Result};
 use nrc_eval::metrics::{MAPE_EPSILON, REL_MSE_EPSILON, mape, rel_mse};
-use nrc_eval::plot::plot_error_vs_time;
+use nrc_eval::plot::plot_series;
 use nrc_eval::{ErrorMetrics, ImageView, SweepPoint, SweepSeries, TemporalAccumulator};
 use nrc_eval::{Metric, TrackedLuminance};
 use nrc_render::{RenderSettings, render};
@@ -273,10 +273,10 @@ fn write(r: &SequenceReport, c: &Comparison) -> Result<()> {
                 .collect(),
         })
         .collect();
-    plot_error_vs_time(
+    plot_series(
         &series,
         Metric::Mape,
-        &format!("{}: MAPE per frame (x: frame number)", c.scene_name),
+        (&format!("{}: MAPE per frame", c.scene_name), "frame"),
         &c.out.join("sequence-mape.png"),
         &c.out.join("sequence-mape.svg"),
     )?;

@@ -87,6 +87,43 @@ pub fn load_animated(path: &Path) -> Result<(SceneDescription, Animation)> {
             }
         }
     }
+    // Fields the gltf crate's accessors unwrap (the mutation tests found both panics): an
+    // animation channel's target path and interpolation that did not parse, an image with
+    // neither a URI nor a buffer view, or a buffer view without a MIME type.
+    for (a, anim) in json.animations.iter().enumerate() {
+        let bad = |m: &str| parse(format!("invalid glTF document: animation {a}: {m}"));
+        for c in &anim.channels {
+            if !matches!(c.target.path, gltf::json::validation::Checked::Valid(_)) {
+                return Err(bad(
+                    "a channel's target path is not translation, rotation, scale or weights",
+                ));
+            }
+            if c.sampler.value() >= anim.samplers.len() || c.target.node.value() >= json.nodes.len()
+            {
+                return Err(bad("a channel refers to a missing sampler or node"));
+            }
+        }
+        for sm in &anim.samplers {
+            if !matches!(sm.interpolation, gltf::json::validation::Checked::Valid(_)) {
+                return Err(bad(
+                    "a sampler's interpolation is not STEP, LINEAR or CUBICSPLINE",
+                ));
+            }
+            if sm.input.value() >= n_accessors || sm.output.value() >= n_accessors {
+                return Err(bad("a sampler refers to a missing accessor"));
+            }
+        }
+    }
+    for (i, image) in json.images.iter().enumerate() {
+        let bad = |m: &str| parse(format!("invalid glTF document: image {i}: {m}"));
+        match (&image.uri, &image.buffer_view) {
+            (None, None) => return Err(bad("neither a uri nor a bufferView")),
+            (_, Some(_)) if image.mime_type.is_none() => {
+                return Err(bad("a bufferView image needs a mimeType"));
+            }
+            _ => {}
+        }
+    }
     let document = gltf::Document::from_json(json).map_err(|e| parse(describe(e)))?;
     let mut loader = Loader {
         path: path.to_path_buf(),

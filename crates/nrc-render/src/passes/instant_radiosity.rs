@@ -189,7 +189,8 @@ pub struct Vpl {
 }
 
 impl Vpl {
-    /// `I(y) = lum(L(y)) / p(y)` (eq. 6).
+    /// `I(y) = lum(L(y)) / p(y)` (eq. 6). Without a density (no VPLs yet to measure it
+    /// against, at initialisation) candidates rank by their radiosity alone.
     pub fn intensity(&self) -> f32 {
         let l = luminance(self.power);
         if self.density > 0.0 {
@@ -794,7 +795,6 @@ impl RenderPass for InstantRadiosityPass {
                         self.iterate_traced(input, &visible, seed.wrapping_add(w as u64 * 7919));
                         self.vpl_densities();
                     }
-                    self.trace_radiosities(input.scene, &mut self.vpls.clone());
                 }
                 if self.settings.mode == VplMode::Smc {
                     self.iterate_traced(input, &visible, seed);

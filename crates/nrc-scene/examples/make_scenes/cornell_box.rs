@@ -72,6 +72,17 @@ pub const MOVING_PERIOD: f32 = 4.0;
 /// the middle toward the red wall, across to the green wall and back to the middle in
 /// [`MOVING_PERIOD`] seconds (0.17 m each way: the lamp's edge stays 4 cm from the walls).
 pub fn build_moving() -> Document {
+    moving("LINEAR")
+}
+
+/// `cornell-box-jump`: the same keys with STEP interpolation: the lamp stays in the middle for
+/// the first second, jumps 0.17 m toward the red wall at 1 s and across to the green side at
+/// 3 s (a sudden change, to measure how fast the caches recover).
+pub fn build_jump() -> Document {
+    moving("STEP")
+}
+
+fn moving(interpolation: &str) -> Document {
     let (mut doc, light) = build_with_light_node();
     let x = |d: f32| Vec3::new(d, 0.0, 0.0);
     let q = MOVING_PERIOD / 4.0;
@@ -79,7 +90,7 @@ pub fn build_moving() -> Document {
         "light moves along the ceiling",
         light,
         "translation",
-        "LINEAR",
+        interpolation,
         &[
             (0.0, x(0.0)),
             (q, x(0.17)),

@@ -1,5 +1,6 @@
 //! Writes the scenes the project ships: `scenes/<name>.gltf` with its `.bin` buffer and PNG
-//! textures, for `cornell-box` (and `cornell-box-moving`, its light animated), `caustics`,
+//! textures, for `cornell-box` (and `cornell-box-moving` and `cornell-box-jump`, its light
+//! animated, linearly and in steps), `caustics`,
 //! `ajar`, `glossy` and `sun-spot-env` (with the
 //! HDR sky `sky.exr` it is rendered under), then checks each file
 //! against the glTF 2.0 rules (see `check.rs`), loads it with the project's own loader
@@ -28,9 +29,10 @@ use std::process::ExitCode;
 /// Builds one scene's document.
 type Builder = fn() -> gltf_doc::Document;
 
-const SCENES: [(&str, Builder); 6] = [
+const SCENES: [(&str, Builder); 7] = [
     ("cornell-box", cornell_box::build),
     ("cornell-box-moving", cornell_box::build_moving),
+    ("cornell-box-jump", cornell_box::build_jump),
     ("caustics", caustics::build),
     ("ajar", ajar::build),
     ("glossy", glossy::build),
