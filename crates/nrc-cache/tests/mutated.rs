@@ -188,10 +188,7 @@ fn mutated_configurations_and_snapshots_load_or_fail_cleanly() {
 #[test]
 #[ignore]
 fn many_mutated_configurations_and_snapshots_load_or_fail_cleanly() {
-    let cases = std::env::var("NRC_MUTATIONS")
-        .ok()
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(2000);
+    let cases = nrc_scene::testing::mutation_cases(2000);
     let t = std::time::Instant::now();
     let (tally, _) = run(cases, 2026);
     println!("{:.1} s:\n{}", t.elapsed().as_secs_f64(), tally.summary());

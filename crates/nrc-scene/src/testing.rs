@@ -171,6 +171,14 @@ impl Tally {
     }
 }
 
+/// Cases per file of a long mutation run: `NRC_MUTATIONS` from the environment, else `default`.
+pub fn mutation_cases(default: u32) -> u32 {
+    std::env::var("NRC_MUTATIONS")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(default)
+}
+
 /// One mutation of `bytes` (JSON-aware when `json`).
 pub fn mutate(bytes: &[u8], json: bool, rng: &mut impl Rng) -> Vec<u8> {
     let mut b = bytes.to_vec();

@@ -336,10 +336,7 @@ fn mutated_inputs_load_or_fail_cleanly() {
 #[test]
 #[ignore]
 fn many_mutated_inputs_load_or_fail_cleanly() {
-    let cases = std::env::var("NRC_MUTATIONS")
-        .ok()
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(2000);
+    let cases = nrc_scene::testing::mutation_cases(2000);
     let t = std::time::Instant::now();
     let (tally, _) = run(cases, 2026);
     println!(
