@@ -257,7 +257,12 @@ impl fmt::Display for MethodSpec {
             ) => {
                 write!(f, "pt-{spp}spp-nonee")
             }
-            (pass, None, 1) if pass.is_stateful() => write!(f, "{pass}"),
+            // The passes `from_str` takes by their own names.
+            (pass, None, 1)
+                if pass.is_stateful() || matches!(pass, PassSpec::InstantRadiosity(_)) =>
+            {
+                write!(f, "{pass}")
+            }
             (pass, Some(p), 1) if pass.is_stateful() && p.to_string() == DEFAULT_PASS_PRODUCER => {
                 write!(f, "{pass}")
             }
@@ -591,6 +596,10 @@ mod tests {
             "nrc-restir:clamp=0.05",
             "ddgi-nrc-restir",
             "nrc-restir@1spp+bt",
+            "ir",
+            "ir:vpls=512",
+            "smc-ir",
+            "smc-ir-nrc:mmax=8",
         ] {
             let spec: MethodSpec = name.parse().unwrap();
             assert_eq!(spec.to_string(), name);

@@ -9,8 +9,9 @@
 //! renders the frames in order at the comparison's budget, its state carried from frame to
 //! frame as it would be while the user watches (a cache trains inside each timed frame). The
 //! scene's posing (vertices moved, acceleration structure and light sampler built afresh) is
-//! the same work for every method: it is done once per frame before the methods run and
-//! reported on its own line, not charged to them.
+//! the same work for every method: it is done once per frame before the methods take their
+//! turns at that frame (so only one posed scene is held at a time), and reported on its own
+//! line, not charged to them.
 
 use std::path::PathBuf;
 use std::time::Instant;
@@ -84,8 +85,8 @@ pub fn compare_sequence(
     progress: &dyn Fn(&str),
 ) -> Result<SequenceReport> {
     anyhow::ensure!(
-        seq.frames >= 2,
-        "--sequence needs at least 2 frames, got {}",
+        (2..=1_000_000).contains(&seq.frames),
+        "--sequence needs between 2 and 1000000 frames, got {}",
         seq.frames
     );
     anyhow::ensure!(
@@ -98,75 +99,88 @@ pub fn compare_sequence(
         "the sequence's references need at least 1 sample per pixel"
     );
     let (w, h) = (c.width, c.height);
-    let t0 = Instant::now();
-    let scenes: Vec<Scene> = (0..seq.frames)
-        .map(|f| pose(f as f32 / seq.fps))
-        .collect::<Result<_>>()
-        .with_context(|| format!("posing {}", c.scene_path))?;
-    let pose_ms = t0.elapsed().as_secs_f64() * 1e3 / seq.frames as f64;
-    let cameras: Vec<Camera> = match &seq.camera_path {
-        Some(p) => crate::run::camera_path(Some(p), &scenes[0].camera, seq.frames)?,
-        None => scenes.iter().map(|s| s.camera).collect(),
+    // Frame by frame: one posed scene at a time (a long sequence of a big scene would not fit
+    // in memory as a list of scenes); each method keeps its own state across the frames.
+    let mut pose_time = std::time::Duration::ZERO;
+    let mut posed = |f: u32| -> Result<Scene> {
+        let t0 = Instant::now();
+        let s = pose(f as f32 / seq.fps)
+            .with_context(|| format!("posing {} at frame {f}", c.scene_path))?;
+        pose_time += t0.elapsed();
+        Ok(s)
     };
+    let first = posed(0)?;
+    let cameras: Vec<Camera> = match &seq.camera_path {
+        Some(p) => crate::run::camera_path(Some(p), &first.camera, seq.frames)?,
+        None => Vec::new(),
+    };
+    let camera_at = |f: usize, scene: &Scene| cameras.get(f).copied().unwrap_or(scene.camera);
     progress(&format!(
         "sequence: {} frames at {} fps, references at {} spp",
         seq.frames, seq.fps, seq.reference_spp
     ));
-    let references: Vec<Image> = scenes
-        .iter()
-        .zip(&cameras)
-        .enumerate()
-        .map(|(f, (s, cam))| {
-            render(
-                s,
-                cam,
-                &c.tracer,
-                &RenderSettings {
-                    width: w,
-                    height: h,
-                    spp: seq.reference_spp,
-                    seed: 0x5e9 + f as u64,
-                    variance: false,
-                },
-                &|_| {},
-            )
-            .mean
-        })
-        .collect();
-    let ref_views: Vec<ImageView<'_>> = references
-        .iter()
-        .map(|r| ImageView::of_scene_image("reference", r))
-        .collect::<std::result::Result<_, _>>()?;
-    let tracker = TrackedLuminance::from_reference(&ref_views[0], seq.tracked);
-    let tracked_refs: Vec<Vec<[f32; 3]>> = ref_views.iter().map(|r| tracker.apply(r)).collect();
-
-    let mut rows = Vec::new();
+    struct Run {
+        method: Box<dyn crate::budget::Method>,
+        acc: TemporalAccumulator,
+        row: SequenceRow,
+    }
+    let mut runs = Vec::new();
     for spec in &c.methods {
         let mut method = spec.build(&c.tracer, &c.cache);
+        let cam = camera_at(0, &first);
         method
-            .prepare(&scenes[0], &cameras[0], w, h)
+            .prepare(&first, &cam, w, h)
             .map_err(|e| anyhow::anyhow!("{spec}: {e}"))?;
         let name = method.name().to_string();
         progress(&name);
         method
-            .restart(&scenes[0], &cameras[0], w, h, 0, c.seed)
+            .restart(&first, &cam, w, h, 0, c.seed)
             .map_err(|e| anyhow::anyhow!("{name}: {e}"))?;
-        let mut acc = TemporalAccumulator::new();
-        let mut row = SequenceRow {
-            method: name.clone(),
-            ms_per_frame: 0.0,
-            mean_abs_error: 0.0,
-            mean_abs_error_change: 0.0,
-            mape: Vec::new(),
-            rel_mse: Vec::new(),
-            tracked_error: Vec::new(),
-            time_ms: Vec::new(),
-        };
-        for f in 0..seq.frames as usize {
+        runs.push(Run {
+            method,
+            acc: TemporalAccumulator::new(),
+            row: SequenceRow {
+                method: name,
+                ms_per_frame: 0.0,
+                mean_abs_error: 0.0,
+                mean_abs_error_change: 0.0,
+                mape: Vec::new(),
+                rel_mse: Vec::new(),
+                tracked_error: Vec::new(),
+                time_ms: Vec::new(),
+            },
+        });
+    }
+    let mut tracker: Option<TrackedLuminance> = None;
+    let mut scene = first;
+    for f in 0..seq.frames as usize {
+        if f > 0 {
+            scene = posed(f as u32)?;
+        }
+        let cam = camera_at(f, &scene);
+        let reference: Image = render(
+            &scene,
+            &cam,
+            &c.tracer,
+            &RenderSettings {
+                width: w,
+                height: h,
+                spp: seq.reference_spp,
+                seed: 0x5e9 + f as u64,
+                variance: false,
+            },
+            &|_| {},
+        )
+        .mean;
+        let ref_view = ImageView::of_scene_image("reference", &reference)?;
+        let tracker =
+            tracker.get_or_insert_with(|| TrackedLuminance::from_reference(&ref_view, seq.tracked));
+        let tracked_ref = tracker.apply(&ref_view);
+        for run in &mut runs {
             let frame = render_frame(
-                method.as_mut(),
-                &scenes[f],
-                &cameras[f],
+                run.method.as_mut(),
+                &scene,
+                &cam,
                 &FrameRequest {
                     width: w,
                     height: h,
@@ -174,29 +188,35 @@ pub fn compare_sequence(
                     budget: c.budget,
                 },
             )?;
-            let view = ImageView::of_scene_image(&name, &frame.image)?;
-            row.mape.push(mape(&view, &ref_views[f], MAPE_EPSILON)?);
-            row.rel_mse
-                .push(rel_mse(&view, &ref_views[f], REL_MSE_EPSILON)?);
-            row.time_ms.push(frame.elapsed.as_secs_f64() * 1e3);
+            let view = ImageView::of_scene_image(&run.row.method, &frame.image)?;
+            run.row.mape.push(mape(&view, &ref_view, MAPE_EPSILON)?);
+            run.row
+                .rel_mse
+                .push(rel_mse(&view, &ref_view, REL_MSE_EPSILON)?);
+            run.row.time_ms.push(frame.elapsed.as_secs_f64() * 1e3);
             let tracked = tracker.apply(&view);
-            acc.push(
-                &ImageView::new(&name, tracked.len(), 1, &tracked)?,
+            run.acc.push(
+                &ImageView::new(&run.row.method, tracked.len(), 1, &tracked)?,
                 Some(&ImageView::new(
                     "reference",
                     tracked.len(),
                     1,
-                    &tracked_refs[f],
+                    &tracked_ref,
                 )?),
             )?;
         }
-        let stats = acc.finish()?;
-        row.mean_abs_error = stats.mean_abs_error.unwrap_or(f64::NAN);
-        row.mean_abs_error_change = stats.mean_abs_error_change.unwrap_or(f64::NAN);
+    }
+    let pose_ms = pose_time.as_secs_f64() * 1e3 / seq.frames as f64;
+    let tracked_pixels = tracker.map_or(0, |t| t.pixels.len());
+    let mut rows = Vec::new();
+    for mut run in runs {
+        let stats = run.acc.finish()?;
+        run.row.mean_abs_error = stats.mean_abs_error.unwrap_or(f64::NAN);
+        run.row.mean_abs_error_change = stats.mean_abs_error_change.unwrap_or(f64::NAN);
         // Per-pixel-and-channel means: the three channels hold the same luminance.
-        row.tracked_error = stats.per_frame_error.clone();
-        row.ms_per_frame = row.time_ms.iter().sum::<f64>() / row.time_ms.len() as f64;
-        rows.push(row);
+        run.row.tracked_error = stats.per_frame_error;
+        run.row.ms_per_frame = run.row.time_ms.iter().sum::<f64>() / run.row.time_ms.len() as f64;
+        rows.push(run.row);
     }
     let report = SequenceReport {
         scene: c.scene_path.clone(),
@@ -205,7 +225,7 @@ pub fn compare_sequence(
         width: w,
         height: h,
         reference_spp: seq.reference_spp,
-        tracked_pixels: tracker.pixels.len(),
+        tracked_pixels,
         pose_ms,
         animated,
         rows,

@@ -193,6 +193,19 @@ mod density_tests {
                     "k = {k}: mean p {direct}"
                 );
             }
+            // Negative control: a wrong point count (as if the VPL budget, not the points
+            // present, were eq. 7's I) doubles 1/p and must fail the same bound.
+            let wrong: f64 = pts
+                .iter()
+                .enumerate()
+                .filter(|(_, p)| p.x >= 0.1 && p.x <= 0.9 && p.z >= 0.1 && p.z <= 0.9)
+                .map(|(i, p)| 1.0 / f64::from(grid.density(*p, k, 2 * n, Some(i))))
+                .sum::<f64>()
+                / m as f64;
+            assert!(
+                (wrong - 1.0).abs() >= bound,
+                "k = {k}: a wrong count passed ({wrong})"
+            );
         }
     }
 }

@@ -105,6 +105,19 @@ impl IrSettings {
         if self.vpls == 0 {
             return Err("vpls must be at least 1".into());
         }
+        // Absurd counts would be absurd allocations (`rate · vpls` candidate points) or loops.
+        for (name, value, max) in [
+            ("vpls", self.vpls, 1 << 20),
+            ("rate", self.rate, 64),
+            ("spp", self.radiosity_spp, 4096),
+            ("warmup", self.warmup, 10_000),
+            ("points", self.visible_points, 1 << 20),
+            ("mmax", self.m_max, 1 << 20),
+        ] {
+            if value > max {
+                return Err(format!("{name} must be at most {max}, got {value}"));
+            }
+        }
         if self.per_pixel > self.vpls {
             return Err(format!(
                 "per_pixel ({}) must not exceed vpls ({})",
@@ -173,9 +186,6 @@ pub struct Vpl {
     /// `smc-ir`: radiosity `L(y)` (radiance leaving the diffuse surface); `ir`: flux weight
     /// `β / N` arrived at `y`.
     pub power: Vec3,
-    /// `ir`: the direction the light arrived from (world, toward the previous vertex), for
-    /// `f_y`; `smc-ir`: unused.
-    pub from: Vec3,
     /// Diffuse albedo at `y` (`ir`'s `f_y = albedo/π` for diffuse surfaces; glossy ones use
     /// their diffuse part, as the paper's diffuse assumption does).
     pub albedo: Vec3,
@@ -235,7 +245,6 @@ pub struct InstantRadiosityPass {
     pub settings: IrSettings,
     pub tracer: PathTracer,
     vpls: Vec<Vpl>,
-    frame: u64,
     next_seed: u64,
     pending: Option<Pending>,
     gbuffer: Option<GBuffer>,
@@ -248,7 +257,6 @@ impl InstantRadiosityPass {
             settings,
             tracer,
             vpls: Vec::new(),
-            frame: 0,
             next_seed: 1,
             pending: None,
             gbuffer: None,
@@ -326,7 +334,6 @@ impl InstantRadiosityPass {
                                 position: v.si.p,
                                 normal: ng,
                                 power: v.beta,
-                                from: v.si.wo,
                                 albedo: v.bsdf.diffuse_reflectance(),
                                 density: 0.0,
                                 anchor: v.si.p,
@@ -423,7 +430,6 @@ impl InstantRadiosityPass {
                     position: si.p,
                     normal: ng,
                     power: Vec3::ZERO,
-                    from: ng,
                     albedo: bsdf.diffuse_reflectance(),
                     density: 0.0,
                     anchor: from.p,
@@ -536,7 +542,9 @@ impl InstantRadiosityPass {
             return;
         }
         let grid = PointGrid::new(&self.vpls.iter().map(|v| v.position).collect::<Vec<_>>());
-        let n = self.settings.vpls as usize;
+        // Eq. 7's I is the number of VPLs there are (the budget once the set is full), the same
+        // I as eq. 5's in `vpl_light`.
+        let n = self.vpls.len();
         candidates
             .par_iter_mut()
             .for_each(|c| c.density = grid.density(c.position, 1, n, None));
@@ -671,7 +679,8 @@ impl InstantRadiosityPass {
     ) -> Vec3 {
         let mut sum = Vec3::ZERO;
         let n_vpl = self.vpls.len();
-        let budget = self.settings.vpls.max(1) as f32;
+        // Eq. 5's I: the VPLs there are, as their densities (eq. 7) count them.
+        let budget = n_vpl.max(1) as f32;
         for j in (group..n_vpl).step_by(groups.max(1)) {
             let y = &self.vpls[j];
             let d = y.position - v.si.p;
@@ -762,7 +771,6 @@ impl RenderPass for InstantRadiosityPass {
 
     fn reset(&mut self) {
         self.vpls.clear();
-        self.frame = 0;
         self.next_seed = 1;
         self.pending = None;
         self.gbuffer = None;
@@ -839,7 +847,6 @@ impl RenderPass for InstantRadiosityPass {
         if self.settings.mode != VplMode::Classic {
             self.vpl_densities();
         }
-        self.frame += 1;
         let g = self.gbuffer.take().expect("trace before resolve");
         let scene = input.scene;
         let g_max = self.g_max(scene);
