@@ -245,20 +245,22 @@ fn run_comparison(args: &CompareArgs, budget: Budget, scene: &Scene) -> Result<(
         );
         return Ok(());
     }
+    let req = ReferenceRequest {
+        scene_path: &args.scene.scene,
+        scene,
+        width: w,
+        height: h,
+        spp: args.reference_spp,
+        seed: 0,
+        tracer: args.depth.tracer(),
+    };
     let reference = match &args.reference {
-        Some(path) => reference::load_given(path, w, h)?,
-        None => {
-            let req = ReferenceRequest {
-                scene_path: &args.scene.scene,
-                scene,
-                width: w,
-                height: h,
-                spp: args.reference_spp,
-                seed: 0,
-                tracer: args.depth.tracer(),
-            };
-            crate::reference::obtain_with_bar(&req, &args.cache.dir(), false)?
+        Some(path) => {
+            let r = reference::load_given(path, w, h)?;
+            reference::check_given(&r, &req)?;
+            r
         }
+        None => crate::reference::obtain_with_bar(&req, &args.cache.dir(), false)?,
     };
     eprintln!(
         "reference: {} {}",

@@ -3,10 +3,10 @@
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicU64, Ordering};
 
-use anyhow::{Context, Result, bail};
+use anyhow::{Result, bail};
 use indicatif::{ProgressBar, ProgressStyle};
-use nrc_render::passes::{self, FrameInput, PassSpec, PathTracedPass, RenderPass};
-use nrc_render::{LightStrategy, PathTracer, ZeroSource};
+use nrc_render::LightStrategy;
+use nrc_render::passes::{CacheTerminatedSettings, PassSpec, PathTracedSettings};
 
 use nrc_harness::options::TracerArgs;
 
@@ -75,11 +75,9 @@ pub struct RenderArgs {
     #[arg(long, value_enum, default_value_t = nrc_harness::options::DeviceArg::Cpu)]
     pub device: nrc_harness::options::DeviceArg,
 
-    /// The pass: pt, pt-nonee, pt-light (the reference path tracer, instead of --strategy), or
-    /// cache[-TERMINATION][-nonee] (paths ending in the --cache snapshot, instead of
-    /// --termination), or restir-di[-biased][:PARAMS] (ReSTIR DI at the primary vertex; give it
-    /// --frames for temporal reuse).
-    #[arg(long)]
+    /// The pass (default: pt, or cache with --cache); `--help` lists every pass and its
+    /// parameters. Stateful passes reuse samples across --frames.
+    #[arg(long, long_help = nrc_render::passes::help())]
     pub pass: Option<PassSpec>,
 
     /// Frames to render, the last one written: the resampling passes (restir-*) reuse samples
@@ -134,19 +132,21 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         eprintln!("warning: {w}");
     }
     let tracer = args.tracer.tracer();
-    let spec = args.pass.unwrap_or(if args.cache.is_some() {
-        PassSpec::CacheTerminated {
-            termination: args.termination,
-            nee: tracer.strategy != LightStrategy::BsdfOnly,
-        }
-    } else {
-        PassSpec::PathTraced {
-            strategy: tracer.strategy,
+    let spec: PassSpec = args.pass.clone().unwrap_or_else(|| {
+        if args.cache.is_some() {
+            let nee = tracer.strategy != LightStrategy::BsdfOnly;
+            CacheTerminatedSettings {
+                termination: args.termination,
+                nee,
+            }
+            .into()
+        } else {
+            PathTracedSettings {
+                strategy: tracer.strategy,
+            }
+            .into()
         }
     });
-    if args.variance.is_some() && !matches!(spec, PassSpec::PathTraced { .. }) {
-        bail!("--variance is only available with the pt passes");
-    }
     // The radiance source: the --cache snapshot, checked against the scene, for the passes
     // that read one.
     let cache = match (spec.uses_source(), &args.cache) {
@@ -162,20 +162,16 @@ pub fn run(args: &RenderArgs) -> Result<()> {
             bail!("the pass {spec} ends paths in a cache: give it one with --cache snapshot.nrc")
         }
         (true, Some(snapshot)) => {
-            let cache = nrc_cache::RadianceCache::load(snapshot, args.device.resolve_and_print())
-                .with_context(|| {
-                format!("cannot load the cache snapshot {}", snapshot.display())
-            })?;
-            if let Err(e) =
-                nrc_harness::run::check_snapshot_scene(&cache, &scene, &args.scene.scene)?
-            {
-                if !args.allow_other_scene {
-                    bail!("{}: {e}", snapshot.display());
-                }
-                eprintln!(
-                    "warning: {}: {e} (allowed by --allow-other-scene)",
-                    snapshot.display()
-                );
+            let device = args.device.resolve_and_print();
+            let (cache, warning) = nrc_harness::run::load_snapshot(
+                snapshot,
+                device,
+                &scene,
+                &args.scene.scene,
+                args.allow_other_scene,
+            )?;
+            if let Some(w) = warning {
+                eprintln!("warning: {w}");
             }
             Some((cache, snapshot))
         }
@@ -185,45 +181,29 @@ pub fn run(args: &RenderArgs) -> Result<()> {
             .expect("valid progress template")
             .progress_chars("=> "),
     );
-    let mut pass = match spec {
-        PassSpec::PathTraced { strategy } => {
-            let mut p = PathTracedPass::new(PathTracer { strategy, ..tracer });
-            p.variance = args.variance.is_some();
-            let (bar, done) = (bar.clone(), AtomicU64::new(0));
-            // Batched counts: updating the bar from every tile would contend on its lock.
-            p.progress = Some(Box::new(move |n| {
-                bar.set_position(done.fetch_add(n, Ordering::Relaxed) + n);
-            }));
-            Box::new(p) as Box<dyn RenderPass>
-        }
-        _ => spec.build(&tracer),
-    };
+    let (progress_bar, done) = (bar.clone(), AtomicU64::new(0));
     let cameras =
         nrc_harness::run::camera_path(args.camera_path.as_deref(), &scene.camera, args.frames)?;
     let pool = nrc_harness::options::thread_pool(args.threads)?;
-    let start = std::time::Instant::now();
-    let mut out = None;
-    for (f, camera) in cameras.iter().enumerate() {
-        let input = FrameInput {
+    let rendered = pool.install(|| {
+        nrc_harness::run::render(nrc_harness::run::RenderJob {
             scene: &scene,
-            camera,
+            pass: &spec,
+            tracer,
+            cache: cache.as_ref().map(|(c, _)| c),
+            cameras: &cameras,
             width: args.width,
             height: args.height,
             spp: args.spp,
-            // One frame: the seed itself (images as before --frames existed).
-            seed: if args.frames == 1 {
-                args.seed
-            } else {
-                nrc_render::pass_seed(args.seed, f as u32)
-            },
-        };
-        out = Some(pool.install(|| match &cache {
-            Some((c, _)) => passes::run(pass.as_mut(), &input, &nrc_train::CacheSource::new(c)),
-            None => passes::run(pass.as_mut(), &input, &ZeroSource),
-        }));
-    }
-    let out = out.expect("at least one frame");
-    let seconds = start.elapsed().as_secs_f64() / args.frames as f64;
+            seed: args.seed,
+            variance: args.variance.is_some(),
+            // Batched counts: updating the bar from every tile would contend on its lock.
+            progress: Some(Box::new(move |n| {
+                progress_bar.set_position(done.fetch_add(n, Ordering::Relaxed) + n);
+            })),
+        })
+    })?;
+    let (out, seconds) = (rendered.output, rendered.seconds_per_frame);
     bar.finish_and_clear();
 
     out.image.write_exr(&args.out)?;
@@ -275,7 +255,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         args.width,
         args.height,
         args.spp,
-        pass.name(),
+        rendered.pass,
         pool.current_num_threads(),
         s.paths as f64 / seconds * 1e-6,
         s.rays as f64 / seconds * 1e-6

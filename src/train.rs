@@ -8,6 +8,7 @@ use anyhow::{Context, Result, bail, ensure};
 use indicatif::{ProgressBar, ProgressStyle};
 use nrc_render::PassSpec;
 use nrc_render::Termination;
+use nrc_render::passes::CacheTerminatedSettings;
 use nrc_scene::Scene;
 use nrc_train::{FrameStats, ProducerSpec};
 
@@ -84,10 +85,9 @@ pub struct TrainArgs {
     #[arg(long)]
     pub no_nee: bool,
 
-    /// The inference pass, instead of --termination/--no-nee: cache[-TERMINATION][-nonee]
-    /// (paths ending in the cache), or pt, pt-nonee, pt-light (the reference path tracer; the
-    /// cache is trained but not read).
-    #[arg(long, conflicts_with_all = ["termination", "no_nee"])]
+    /// The inference pass, instead of --termination/--no-nee (default: cache, paths ending in
+    /// the cache by the spread heuristic); `--help` lists every pass and its parameters.
+    #[arg(long, conflicts_with_all = ["termination", "no_nee"], long_help = nrc_render::passes::help())]
     pub pass: Option<PassSpec>,
 
     /// Fraction of training queries aimed at the previous frame's termination points.
@@ -147,9 +147,12 @@ pub fn run(args: &TrainArgs) -> Result<()> {
     }
     let settings = args.cache.method_settings(0, args.seed, true)?;
     let tracer = args.tracer.tracer();
-    let pass = args.pass.unwrap_or(PassSpec::CacheTerminated {
-        termination: args.termination,
-        nee: !args.no_nee,
+    let pass = args.pass.clone().unwrap_or_else(|| {
+        CacheTerminatedSettings {
+            termination: args.termination,
+            nee: !args.no_nee,
+        }
+        .into()
     });
     let mut trainer =
         nrc_harness::methods::scene_trainer(&scene, args.producer.clone(), pass, &settings, tracer)
@@ -222,12 +225,13 @@ pub fn run(args: &TrainArgs) -> Result<()> {
     }
     let n = all.len() as f64;
     let mean = |f: fn(&FrameStats) -> f64| all.iter().map(f).sum::<f64>() / n;
-    let dropped: usize = all
+    let dropped: u64 = all
         .iter()
-        .map(|s| s.dropped_nonfinite + s.dropped_absurd)
+        .map(|s| (s.dropped_nonfinite + s.dropped_absurd) as u64 + s.producer.dropped)
         .sum();
+    let skipped: u64 = all.iter().map(|s| s.producer.skipped).sum();
     println!(
-        "trained {} frames of {} ({} records/frame): produce {:.1} ms, train {:.1} ms, infer {:.1} ms per frame; final loss {:.5}; {} records dropped",
+        "trained {} frames of {} ({} records/frame): produce {:.1} ms, train {:.1} ms, infer {:.1} ms per frame; final loss {:.5}; {} records dropped, {} non-finite light-path contributions skipped",
         all.len(),
         args.producer,
         args.cache.records,
@@ -235,7 +239,8 @@ pub fn run(args: &TrainArgs) -> Result<()> {
         mean(|s| s.train_ms),
         mean(|s| s.infer_ms),
         all.last().map_or(0.0, |s| s.loss),
-        dropped
+        dropped,
+        skipped
     );
     Ok(())
 }

@@ -431,6 +431,43 @@ fn bad_references_and_arguments_are_clear_errors() {
         "--reference",
         entry_s,
     ]));
+    // Another scene's reference of the same size is refused; so is one from another camera.
+    let glossy = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/glossy.gltf");
+    let mut other = vec!["compare", "--scene", glossy.to_str().unwrap()];
+    other.extend_from_slice(&[
+        "--methods",
+        "pt-1spp",
+        "--equal-spp",
+        "1",
+        "--no-flip",
+        "--out",
+        o,
+        "--cache-dir",
+        c,
+        "--width",
+        "16",
+        "--height",
+        "16",
+        "--reference",
+        entry_s,
+    ]);
+    assert_clean_error(
+        &nrc(&other),
+        &["rendered from another scene", "glossy.gltf"],
+    );
+    assert_clean_error(
+        &compare(&[
+            "--width",
+            "16",
+            "--height",
+            "16",
+            "--reference",
+            entry_s,
+            "--camera-pos",
+            "0.3,0.3,-0.9",
+        ]),
+        &["other settings", "camera"],
+    );
     let mean = entry.join("mean.exr");
     assert_ok(&compare(&[
         "--width",
@@ -686,4 +723,65 @@ fn converge_counts_frames_to_the_targets_first_frame_error() {
     );
 
     assert_clean_error(&run(args("pt-4spp")), &["--converge-target", "pt-4spp"]);
+}
+
+/// Every stateful method's first timed frame of every run sees a history warmed by as many
+/// frames as `--train-frames`, at the comparison's size: the resampling passes that read no
+/// cache (their untimed warm-up per run) and those that read one (their pass rendered every
+/// training frame). Before this was checked, run 0 of the cache-reading ones started cold: an
+/// untimed 16 × 16 start-up frame after training replaced their history.
+#[test]
+fn stateful_methods_start_every_run_warm() {
+    let dir = tempfile::tempdir().unwrap();
+    let (cache, out) = (dir.path().join("cache"), dir.path().join("out"));
+    let o = nrc(&[
+        "compare",
+        "--scene",
+        &cornell(),
+        "--methods",
+        "pt-1spp,restir-di,restir-gi-nrc,nrc-restir,nrc-pt-sl",
+        "--equal-spp",
+        "1",
+        "--runs",
+        "2",
+        "--train-frames",
+        "3",
+        "--records",
+        "1024",
+        "--resolution",
+        "64",
+        "--width",
+        "24",
+        "--height",
+        "24",
+        "--reference-spp",
+        "16",
+        "--no-flip",
+        "--cache-dir",
+        cache.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert_ok(&o);
+    let runs = read_runs(&out).runs;
+    for method in ["restir-di", "restir-gi-nrc", "nrc-restir"] {
+        for r in 0..2 {
+            let rec = runs
+                .iter()
+                .find(|x| x.method == method && x.run == Some(r))
+                .unwrap_or_else(|| panic!("{method} run {r} in runs.json"));
+            assert!(
+                rec.warm_frames.is_some_and(|w| w >= 3),
+                "{method} run {r}: first timed frame after {:?} warm frames",
+                rec.warm_frames
+            );
+        }
+    }
+    // Stateless methods report none.
+    for rec in runs
+        .iter()
+        .filter(|x| x.method == "pt-1spp" || x.method == "nrc-pt-sl")
+    {
+        assert_eq!(rec.warm_frames, None, "{}", rec.method);
+    }
 }

@@ -75,14 +75,6 @@ impl RadianceCache {
         Self::with_path(config, SceneBox::default(), device, device.default_path())
     }
 
-    /// As [`RadianceCache::new`] on the automatically chosen device ([`CacheDevice::auto`]);
-    /// prints the choice to stderr.
-    pub fn new_auto(config: CacheConfig) -> Result<Self, CacheError> {
-        let (device, reason) = CacheDevice::auto();
-        eprintln!("nrc-cache: device {device} ({reason})");
-        Self::new(config, device)
-    }
-
     /// A cache sized for a scene (see [`CacheConfig::sized_for_scene`]): the finest resolution
     /// and table size follow from the box and the smallest feature to resolve.
     pub fn for_scene_extent(
@@ -169,11 +161,6 @@ impl RadianceCache {
     /// The scene box positions are normalised to.
     pub fn scene_box(&self) -> SceneBox {
         self.scene_box
-    }
-
-    /// Sets the scene box (stored in snapshots; use [`SceneBox::normalize`] on positions).
-    pub fn set_scene_box(&mut self, scene_box: SceneBox) {
-        self.scene_box = scene_box;
     }
 
     /// The content hash of the scene the cache is trained on (hex, as given to

@@ -39,8 +39,7 @@ fn default_seed() -> u64 {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct CompositeConfig {
-    /// Must be `"Composite"`.
-    pub otype: String,
+    pub otype: EncodingType,
     /// The nested encodings, in raw-input order.
     pub nested: Vec<NestedEncoding>,
     /// Output width is padded up to a multiple of this.
@@ -50,6 +49,35 @@ pub struct CompositeConfig {
 
 fn default_pad() -> u32 {
     16
+}
+
+/// The encoding's `"otype"`: `"Composite"`, the only one the cache takes (its 14 raw inputs go
+/// through the nested encodings).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub enum EncodingType {
+    #[default]
+    Composite,
+}
+
+/// The network's `"otype"`: `"FullyFusedMLP"` (64 wide, no biases).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub enum NetworkType {
+    #[default]
+    FullyFusedMLP,
+}
+
+/// The hidden layers' activation: `"ReLU"`.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub enum Activation {
+    #[default]
+    ReLU,
+}
+
+/// The loss's `"otype"`: `"RelativeL2Luminance"`.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub enum LossType {
+    #[default]
+    RelativeL2Luminance,
 }
 
 /// One nested encoding of the composite.
@@ -143,15 +171,14 @@ pub enum OutputActivation {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct NetworkConfig {
-    /// Must be `"FullyFusedMLP"`.
-    pub otype: String,
+    pub otype: NetworkType,
     /// Width; must be 64.
     pub n_neurons: u32,
     /// Hidden layers (weight matrices = hidden layers + 1).
     pub n_hidden_layers: u32,
-    /// Hidden activation; must be `"ReLU"`.
-    #[serde(default = "relu")]
-    pub activation: String,
+    /// Hidden activation.
+    #[serde(default)]
+    pub activation: Activation,
     /// Output mapping to non-negative radiance.
     #[serde(default = "exponential")]
     pub output_activation: OutputActivation,
@@ -185,9 +212,6 @@ impl MlpPrecision {
     }
 }
 
-fn relu() -> String {
-    "ReLU".into()
-}
 fn exponential() -> OutputActivation {
     OutputActivation::Exponential
 }
@@ -200,8 +224,7 @@ fn three() -> u32 {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct LossConfig {
-    /// Must be `"RelativeL2Luminance"`.
-    pub otype: String,
+    pub otype: LossType,
     /// ε of the denominator.
     #[serde(default = "loss_eps")]
     pub epsilon: f32,
@@ -403,15 +426,6 @@ impl CacheConfig {
     pub fn validate(&self) -> Result<(), CacheError> {
         let err = |field: String, message: String| Err(CacheError::Config { field, message });
         let e = &self.encoding;
-        if e.otype != "Composite" {
-            return err(
-                "encoding.otype".into(),
-                format!(
-                    "must be \"Composite\" (the cache encodes {RAW_INPUT_DIMS} raw inputs), got {:?}",
-                    e.otype
-                ),
-            );
-        }
         if e.nested.is_empty() {
             return err(
                 "encoding.nested".into(),
@@ -534,12 +548,6 @@ impl CacheConfig {
             );
         }
         let n = &self.network;
-        if n.otype != "FullyFusedMLP" {
-            return err(
-                "network.otype".into(),
-                format!("must be \"FullyFusedMLP\", got {:?}", n.otype),
-            );
-        }
         if n.n_neurons != 64 {
             return err(
                 "network.n_neurons".into(),
@@ -552,12 +560,6 @@ impl CacheConfig {
                 format!("must be in 1..=16, got {}", n.n_hidden_layers),
             );
         }
-        if n.activation != "ReLU" {
-            return err(
-                "network.activation".into(),
-                format!("must be \"ReLU\", got {:?}", n.activation),
-            );
-        }
         if n.n_output_dims != 3 {
             return err(
                 "network.n_output_dims".into(),
@@ -565,12 +567,6 @@ impl CacheConfig {
             );
         }
         let l = &self.loss;
-        if l.otype != "RelativeL2Luminance" {
-            return err(
-                "loss.otype".into(),
-                format!("must be \"RelativeL2Luminance\", got {:?}", l.otype),
-            );
-        }
         if !(l.epsilon.is_finite() && l.epsilon > 0.0) {
             return err(
                 "loss.epsilon".into(),

@@ -48,19 +48,6 @@ pub fn hash_grid(grid: &HashGrid, table: Tensor<1>, positions: Tensor<2>) -> Ten
     ))
 }
 
-/// The op's backward kernel alone (no autodiff): the table gradient for `grad_encoded`.
-pub fn hash_grid_table_gradient(
-    grid: &HashGrid,
-    positions: Tensor<2>,
-    grad_encoded: Tensor<2>,
-) -> Tensor<1> {
-    Tensor::from_dispatch(Dispatch::hash_grid_backward(
-        positions.into_dispatch(),
-        grad_encoded.into_dispatch(),
-        grid.clone(),
-    ))
-}
-
 impl HashGridOps for CubeBackend {
     fn hash_grid_forward(
         positions: FloatTensor<Self>,

@@ -105,11 +105,6 @@ impl ModelLayout {
         self.total_params - self.grid_params
     }
 
-    /// Entries of the hash table (rows of F features).
-    pub fn grid_entries(&self) -> usize {
-        self.encoding.grid().map_or(0, |(g, _)| g.total_entries)
-    }
-
     /// Bytes the cache holds: weights, two Adam moments and EMA (4 × 4 bytes per parameter),
     /// the half-precision copy of
     /// the table the training forward reads (2 bytes per parameter, with

@@ -136,6 +136,20 @@ fn malformed_documents_name_the_field() {
     let (_, m) = field_of(CacheConfig::from_json_str(&v.to_string()));
     assert!(m.contains("loss"), "{m}");
 
+    // The single-valued tags are enums: another value names its field and the choice.
+    for (pointer, field, choice) in [
+        ("/encoding/otype", "encoding.otype", "Composite"),
+        ("/network/otype", "network.otype", "FullyFusedMLP"),
+        ("/network/activation", "network.activation", "ReLU"),
+        ("/loss/otype", "loss.otype", "RelativeL2Luminance"),
+    ] {
+        let mut v = preset_json();
+        *v.pointer_mut(pointer).unwrap() = "Tanh".into();
+        let (f, m) = field_of(CacheConfig::from_json_str(&v.to_string()));
+        assert_eq!(f, field, "{m}");
+        assert!(m.contains(choice), "{m}");
+    }
+
     let (f, _) = field_of(CacheConfig::from_json_str("{ not json"));
     assert!(!f.is_empty());
 }

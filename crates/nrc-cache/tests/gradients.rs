@@ -40,7 +40,7 @@ fn small_grid() -> HashGrid {
 
 fn composite(nested: Vec<NestedEncoding>) -> InputEncoding {
     InputEncoding::new(&CompositeConfig {
-        otype: "Composite".into(),
+        otype: nrc_cache::config::EncodingType::Composite,
         nested,
         pad_to_multiple: 16,
     })

@@ -35,6 +35,10 @@ pub struct ConvergencePoint {
 pub struct ConvergenceSeries {
     pub method: String,
     pub points: Vec<ConvergencePoint>,
+    /// Milliseconds of the untimed warm-up before the first frame (a stateful method's
+    /// history, probes or trained cache); zero for stateless methods.
+    #[serde(default)]
+    pub warm_up_ms: f64,
 }
 
 impl ConvergenceSeries {
@@ -132,6 +136,12 @@ pub struct FramesToErrorRow {
     pub frame_ms: f64,
     /// This method's time to the target over the target method's (> 1: slower).
     pub time_ratio: Option<f64>,
+    /// Its warm-up's milliseconds.
+    #[serde(default)]
+    pub warm_up_ms: f64,
+    /// The same ratio with each method charged its warm-up (the target's too).
+    #[serde(default)]
+    pub time_ratio_with_warm_up: Option<f64>,
 }
 
 /// Frames and milliseconds each method needs to reach the error of `target_method`'s first frame.
@@ -206,11 +216,12 @@ pub fn frames_to_error_table(
         .iter()
         .map(|s| frames_to_reach(s, metric, target_error))
         .collect();
-    let target_ms = series
+    let target = series
         .iter()
         .zip(&reach)
-        .find(|(s, _)| s.method == target_method)
-        .and_then(|(_, r)| r.time_ms());
+        .find(|(s, _)| s.method == target_method);
+    let target_ms = target.and_then(|(_, r)| r.time_ms());
+    let target_warm_ms = target.and_then(|(s, r)| r.time_ms().map(|t| t + s.warm_up_ms));
     let rows = series
         .iter()
         .zip(reach)
@@ -225,6 +236,11 @@ pub fn frames_to_error_table(
                 .unwrap_or(f64::NAN),
             frame_ms: s.frame_ms().unwrap_or(f64::NAN),
             time_ratio: reach.time_ms().zip(target_ms).map(|(t, t0)| t / t0),
+            warm_up_ms: s.warm_up_ms,
+            time_ratio_with_warm_up: reach
+                .time_ms()
+                .zip(target_warm_ms)
+                .map(|(t, t0)| (t + s.warm_up_ms) / t0),
         })
         .collect();
     Ok(FramesToErrorTable {
@@ -262,6 +278,7 @@ mod tests {
                     },
                 })
                 .collect(),
+            warm_up_ms: 0.0,
         }
     }
 
@@ -293,6 +310,13 @@ mod tests {
             }
         );
         assert!((t.rows[1].time_ratio.unwrap() - 1.6).abs() < 1e-12);
+        // Charged their warm-ups (the target 90 ms, pt none): (16 + 0) / (10 + 90).
+        let mut warm = s.clone();
+        warm[0].warm_up_ms = 90.0;
+        let tw = frames_to_error_table(&warm, Metric::Mape, "fast").unwrap();
+        assert!((tw.rows[1].time_ratio_with_warm_up.unwrap() - 0.16).abs() < 1e-12);
+        assert!((tw.rows[0].time_ratio_with_warm_up.unwrap() - 1.0).abs() < 1e-12);
+        assert_eq!(tw.rows[1].time_ratio, t.rows[1].time_ratio);
         match t.rows[2].reach {
             FramesToReach::Extrapolated {
                 frames,

@@ -289,7 +289,7 @@ fn frames_to_error_markdown(t: &FramesToErrorTable, md: &mut String) {
     );
     let _ = writeln!(
         md,
-        "| method | frames | time (ms) | × {}'s time | ms per frame | frames run | {} of their mean |\n|---|---:|---:|---:|---:|---:|---:|",
+        "| method | frames | time (ms) | × {}'s time | warm-up (ms) | × with warm-ups | ms per frame | frames run | {} of their mean |\n|---|---:|---:|---:|---:|---:|---:|---:|---:|",
         t.target_method,
         t.metric.label()
     );
@@ -311,9 +311,12 @@ fn frames_to_error_markdown(t: &FramesToErrorTable, md: &mut String) {
         };
         let _ = writeln!(
             md,
-            "| {} | {frames} | {time} | {} | {} | {} | {} |",
+            "| {} | {frames} | {time} | {} | {} | {} | {} | {} | {} |",
             r.method,
             r.time_ratio
+                .map_or("–".to_string(), |x| format!("{}×", fmt_num(x))),
+            fmt_num(r.warm_up_ms),
+            r.time_ratio_with_warm_up
                 .map_or("–".to_string(), |x| format!("{}×", fmt_num(x))),
             fmt_num(r.frame_ms),
             r.frames_run,
@@ -325,7 +328,8 @@ fn frames_to_error_markdown(t: &FramesToErrorTable, md: &mut String) {
         "\nEach method renders consecutive frames of the static view from one state after its untimed warm-up, averaged \
          progressively; \"frames\" is the first count whose mean is at or below the target, \"time\" their timed milliseconds. \
          A method still above the target is extrapolated along the power law of its curve's second half when that still \
-         falls faster than frames^{}, else \"not reached\" (its bias).\n",
+         falls faster than frames^{}, else \"not reached\" (its bias). \"Warm-up\" is the untimed start of the method's state \
+         (its history, probes or online-trained cache); \"× with warm-ups\" charges every method its own, the target's too.\n",
         crate::convergence::PLATEAU_SLOPE
     );
 }

@@ -28,6 +28,9 @@ pub struct Estimate {
     pub image: Image,
     /// Samples whose estimate was NaN or infinite (counted as black).
     pub invalid_samples: u64,
+    /// Stateful methods: frames of this size the method's state rendered before this one
+    /// since it was last reset (how warm its history was).
+    pub warm_frames: Option<u32>,
 }
 
 /// A rendering method with its state (for the path tracer, just its settings; for cache-based
@@ -49,6 +52,13 @@ pub trait Method: Send {
         _height: u32,
     ) -> Result<(), String> {
         Ok(())
+    }
+
+    /// Whether [`Method::prepare`] already rendered at the comparison's size (so thread pool
+    /// and caches are warm, and an untimed start-up frame of another size would only shrink a
+    /// stateful pass's history). Default: no.
+    fn warm_after_prepare(&self) -> bool {
+        false
     }
 
     /// Starts independent run `run` (seeded `seed`), untimed: a stateful method forgets the
@@ -133,6 +143,8 @@ pub struct Frame {
     pub longest_pass: Duration,
     /// Samples whose estimate was NaN or infinite (counted as black).
     pub invalid_samples: u64,
+    /// The first pass's [`Estimate::warm_frames`].
+    pub warm_frames: Option<u32>,
 }
 
 /// Why a frame could not be rendered.
@@ -172,8 +184,12 @@ pub fn render_frame(
     let mut invalid_samples = 0;
     let mut longest_pass = Duration::ZERO;
     let mut last_check = Duration::ZERO;
+    let mut warm_frames = None;
     loop {
         let pass = method.render_estimate(scene, camera, w, h, pass_seed(request.seed, passes));
+        if passes == 0 {
+            warm_frames = pass.warm_frames;
+        }
         for (s, p) in sum.iter_mut().zip(&pass.image.data) {
             *s += p.as_dvec3();
         }
@@ -202,6 +218,7 @@ pub fn render_frame(
         elapsed: start.elapsed(),
         longest_pass,
         invalid_samples,
+        warm_frames,
     })
 }
 
@@ -241,6 +258,7 @@ mod tests {
             Estimate {
                 image,
                 invalid_samples: 0,
+                warm_frames: None,
             }
         }
     }

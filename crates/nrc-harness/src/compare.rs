@@ -14,6 +14,7 @@
 //! `<method>-flip.png` (per-pixel HDR-FLIP, magma, 0…1). Every file is written atomically.
 
 use std::path::PathBuf;
+use std::time::Instant;
 
 use anyhow::{Context, Result};
 use nrc_eval::convergence::{ConvergencePoint, ConvergenceSeries, frames_to_error_table};
@@ -26,6 +27,7 @@ use nrc_eval::{
     ScalarImage, SweepPoint, SweepSeries, hdr_flip, write_report,
 };
 use nrc_render::emitters::{emitter_pixels, exclude};
+use nrc_render::sampler::Stream;
 use nrc_render::{PathTracer, pass_seed};
 use nrc_scene::{Image, Scene};
 use serde::{Deserialize, Serialize};
@@ -112,6 +114,10 @@ pub struct RunRecord {
     pub time_ms: f64,
     pub longest_pass_ms: f64,
     pub invalid_samples: u64,
+    /// Stateful methods: frames of this size their state rendered before this frame since it
+    /// was last reset (untimed warm-up included), i.e. how warm the history was.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub warm_frames: Option<u32>,
     pub metrics: ErrorMetrics,
 }
 
@@ -197,6 +203,7 @@ fn record(
         time_ms: f.elapsed.as_secs_f64() * 1e3,
         longest_pass_ms: f.longest_pass.as_secs_f64() * 1e3,
         invalid_samples: f.invalid_samples,
+        warm_frames: f.warm_frames,
         metrics: m,
     }
 }
@@ -275,8 +282,11 @@ pub fn compare(
         let name = method.name().to_string();
         progress(Progress::Method(&name));
         // Untimed warm-up pass on a small image (thread pool, caches), so that the first
-        // timed frame is not charged for start-up.
-        method.render_estimate(scene, &scene.camera, w.min(16), h.min(16), u64::MAX);
+        // timed frame is not charged for start-up; not where `prepare` rendered at this size
+        // (a frame of another size would leave a stateful pass's history cold).
+        if !method.warm_after_prepare() {
+            method.render_estimate(scene, &scene.camera, w.min(16), h.min(16), u64::MAX);
+        }
 
         // One measured frame: rendered within its budget, the excluded pixels set to the
         // reference, its errors (and HDR-FLIP map) against the reference.
@@ -355,7 +365,7 @@ pub fn compare(
                 metrics: first_metrics,
             });
             for step in 1..steps {
-                let seed = pass_seed(base ^ 0x5EE9_5EE9_5EE9_5EE9, step);
+                let seed = Stream::SweepStep(step).seed(base);
                 let b = scaled_budget(budget, step);
                 let (frame, m, _) = measure(method.as_mut(), seed, b)?;
                 runs.push(record(&name, None, Some(step), seed, b, &frame, m));
@@ -381,19 +391,29 @@ pub fn compare(
         plot_series.push(series);
 
         if let Some(cv) = &c.converge {
+            let warm = Instant::now();
             method
-                .restart(scene, &scene.camera, w, h, c.runs, base ^ 0xC0_4E26E)
+                .restart(
+                    scene,
+                    &scene.camera,
+                    w,
+                    h,
+                    c.runs,
+                    Stream::ConvergeRestart.seed(base),
+                )
                 .map_err(|e| anyhow::anyhow!("{name}: {e}"))?;
+            let warm_up_ms = warm.elapsed().as_secs_f64() * 1e3;
             // f64 sums: thousands of frames.
             let mut sum = vec![glam::DVec3::ZERO; (w * h) as usize];
             let mut curve = ConvergenceSeries {
                 method: name.clone(),
                 points: Vec::new(),
+                warm_up_ms,
             };
             let mut time_ms = 0.0;
             let mut stop_at = cv.frames;
             for f in 1..=cv.frames {
-                let seed = pass_seed(base ^ 0xC0_4E26E_C0_4E26E, f);
+                let seed = Stream::ConvergeFrame(f).seed(base);
                 let (frame, _, _) = measure(method.as_mut(), seed, budget)?;
                 time_ms += frame.elapsed.as_secs_f64() * 1e3;
                 for (s, x) in sum.iter_mut().zip(&frame.image.data) {

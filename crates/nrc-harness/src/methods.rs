@@ -1,7 +1,7 @@
 //! The method registry: every name `nrc compare` accepts, as one [`MethodSpec`] (a pass × a
 //! radiance source × the producers that train it).
 //!
-//! - `pt-<N>spp[-nonee]`: the reference path tracer ([`PassSpec::PathTraced`]) at N samples
+//! - `pt-<N>spp[-nonee]`: the reference path tracer ([`PathTracedSettings`]) at N samples
 //!   per pixel per estimate, NEE and BSDF sampling by MIS (or BSDF sampling only); no source.
 //! - `nrc-<producer>[-<termination>]`: a cache trained online by a producer (`pt`, `pt-sl`,
 //!   `bt`, `lt`, `sppc`), rendered at 1 sample per pixel by the cache-terminated pass with paths
@@ -16,7 +16,10 @@ use std::fmt;
 use std::str::FromStr;
 
 use nrc_cache::{CacheConfig, CacheDevice, RadianceCache};
-use nrc_render::passes::{self, FrameInput, RenderPass, TERMINATION_NAMES, Termination};
+use nrc_render::passes::{
+    self, CacheTerminatedSettings, FrameInput, PathTracedSettings, RenderPass, TERMINATION_NAMES,
+    Termination, Warmth,
+};
 use nrc_render::{LightStrategy, PassSpec, PathTracer, ZeroSource};
 use nrc_scene::{Camera, Scene};
 use nrc_train::online::{OnlineSettings, OnlineTrainer};
@@ -35,10 +38,15 @@ pub fn method_names() -> String {
         "pt-<N>spp (reference path tracer, N samples per pixel per estimate, NEE and BSDF sampling combined by MIS), \
          pt-<N>spp-nonee (the same with next-event estimation off: BSDF sampling only), \
          nrc-<producer>[-<termination>] (a cache trained online, 1 spp; producers: {PRODUCER_NAMES}; terminations: {TERMINATION_NAMES}), \
-         restir-di[-biased][:PARAMS], restir-gi[-biased][-nrc][:PARAMS], wsrestir-gi[-biased][-nrc][:PARAMS] \
-         ddgi-TERMINATION[:PARAMS], ddgi-restir, nrc-restir, ddgi-nrc-restir [:PARAMS] \
-         (the resampling and probe passes at 1 spp, see `--pass`; -nrc and nrc-restir read a cache trained online by pt-sl), \
-         or in general <pass>@<N>spp[+<producer>] (any pass of `--pass`, e.g. pt-light@4spp, cache-first-nonee@2spp+pt-sl)"
+         {} \
+         (the resampling, probe and instant-radiosity passes by their names at 1 spp, see `--pass`; those reading a cache read one trained online by {DEFAULT_PASS_PRODUCER}), \
+         or in general <pass>@<N>spp[+<producer>] (any pass of `--pass`, e.g. pt-light@4spp, cache-first-nonee@2spp+pt-sl)",
+        passes::REGISTRY
+            .iter()
+            .filter(|k| k.method)
+            .map(|k| format!("{}[:PARAMS]", k.grammar))
+            .collect::<Vec<_>>()
+            .join(", ")
     )
 }
 
@@ -138,16 +146,10 @@ impl FromStr for MethodSpec {
         // The resampling and instant-radiosity passes by their pass names, at 1 sample per pixel.
         // `-nrc` variants read a cache trained online by `pt-sl` (other producers: the general
         // form, e.g. wsrestir-gi-nrc@1spp+bt).
-        if s.starts_with("restir-")
-            || s.starts_with("wsrestir-")
-            || s.starts_with("ddgi-")
-            || s == "nrc-restir"
-            || s.starts_with("nrc-restir:")
-            || s == "ir"
-            || s.starts_with("ir:")
-            || s.starts_with("smc-ir")
+        if let Some((kind, pass)) = passes::find(s)
+            && kind.method
         {
-            let pass: PassSpec = s.parse().map_err(|e: String| err(&e))?;
+            let pass = pass.map_err(|e| err(&e))?;
             let producer = pass.uses_source().then(|| {
                 DEFAULT_PASS_PRODUCER
                     .parse::<ProducerSpec>()
@@ -174,10 +176,11 @@ impl FromStr for MethodSpec {
             };
             let producer = producer.parse::<ProducerSpec>().map_err(|e| err(&e))?;
             return Ok(Self {
-                pass: PassSpec::CacheTerminated {
+                pass: CacheTerminatedSettings {
                     termination,
                     nee: true,
-                },
+                }
+                .into(),
                 spp: 1,
                 producer: Some(producer),
             });
@@ -213,7 +216,7 @@ impl FromStr for MethodSpec {
             return Err(err("too many parts"));
         }
         Ok(Self {
-            pass: PassSpec::PathTraced { strategy },
+            pass: PathTracedSettings { strategy }.into(),
             spp,
             producer: None,
         })
@@ -224,50 +227,24 @@ impl fmt::Display for MethodSpec {
     /// The canonical name (parses back to the same spec): the short names where they exist,
     /// else the general form.
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        match (&self.pass, &self.producer, self.spp) {
-            (
-                PassSpec::CacheTerminated {
-                    termination,
-                    nee: true,
-                },
-                Some(p),
-                1,
-            ) => {
-                if *termination == Termination::default() {
-                    write!(f, "nrc-{p}")
-                } else {
-                    write!(f, "nrc-{p}-{termination}")
-                }
-            }
-            (
-                PassSpec::PathTraced {
-                    strategy: LightStrategy::Mis,
-                },
-                None,
-                spp,
-            ) => {
-                write!(f, "pt-{spp}spp")
-            }
-            (
-                PassSpec::PathTraced {
-                    strategy: LightStrategy::BsdfOnly,
-                },
-                None,
-                spp,
-            ) => {
+        let cache = self.pass.get::<CacheTerminatedSettings>();
+        let traced = self.pass.get::<PathTracedSettings>().map(|p| p.strategy);
+        match (&self.producer, self.spp) {
+            (Some(p), 1) if cache.is_some_and(|c| c.nee) => match cache.map(|c| c.termination) {
+                Some(t) if t != Termination::default() => write!(f, "nrc-{p}-{t}"),
+                _ => write!(f, "nrc-{p}"),
+            },
+            (None, spp) if traced == Some(LightStrategy::Mis) => write!(f, "pt-{spp}spp"),
+            (None, spp) if traced == Some(LightStrategy::BsdfOnly) => {
                 write!(f, "pt-{spp}spp-nonee")
             }
             // The passes `from_str` takes by their own names.
-            (pass, None, 1)
-                if pass.is_stateful() || matches!(pass, PassSpec::InstantRadiosity(_)) =>
-            {
-                write!(f, "{pass}")
+            (None, 1) if self.pass.kind().method => write!(f, "{}", self.pass),
+            (Some(p), 1) if self.pass.kind().method && p.to_string() == DEFAULT_PASS_PRODUCER => {
+                write!(f, "{}", self.pass)
             }
-            (pass, Some(p), 1) if pass.is_stateful() && p.to_string() == DEFAULT_PASS_PRODUCER => {
-                write!(f, "{pass}")
-            }
-            (pass, None, spp) => write!(f, "{pass}@{spp}spp"),
-            (pass, Some(p), spp) => write!(f, "{pass}@{spp}spp+{p}"),
+            (None, spp) => write!(f, "{}@{spp}spp", self.pass),
+            (Some(p), spp) => write!(f, "{}@{spp}spp+{p}", self.pass),
         }
     }
 }
@@ -326,6 +303,8 @@ impl MethodSpec {
                 } else {
                     0
                 },
+                stateful: self.pass.is_stateful(),
+                warmth: Warmth::default(),
             }),
             Some(producer) => Box::new(CacheMethod {
                 name: self.to_string(),
@@ -348,6 +327,8 @@ struct PassMethod {
     pass: Box<dyn RenderPass>,
     /// Untimed frames before each run (stateful passes: as many as cache methods train).
     warm_up: u32,
+    stateful: bool,
+    warmth: Warmth,
 }
 
 impl Method for PassMethod {
@@ -369,6 +350,7 @@ impl Method for PassMethod {
         seed: u64,
     ) -> Result<(), String> {
         self.pass.reset();
+        self.warmth.reset();
         for f in 0..self.warm_up {
             self.render_estimate(
                 scene,
@@ -397,10 +379,12 @@ impl Method for PassMethod {
             spp: self.spp,
             seed,
         };
+        let warm = self.warmth.count(&input);
         let out = passes::run(self.pass.as_mut(), &input, &ZeroSource);
         Estimate {
             image: out.image,
             invalid_samples: out.stats.invalid_samples,
+            warm_frames: self.stateful.then_some(warm),
         }
     }
 }
@@ -460,7 +444,7 @@ impl CacheMethod {
             let mut t = scene_trainer(
                 scene,
                 self.producer.clone(),
-                self.spec.pass,
+                self.spec.pass.clone(),
                 &self.settings,
                 self.tracer,
             )?;
@@ -496,6 +480,11 @@ impl Method for CacheMethod {
         self.trainer(scene, camera, width, height).map(|_| ())
     }
 
+    /// A stateful pass rendered every training frame of `prepare` at this size.
+    fn warm_after_prepare(&self) -> bool {
+        self.spec.pass.is_stateful()
+    }
+
     fn restart(
         &mut self,
         scene: &Scene,
@@ -526,6 +515,7 @@ impl Method for CacheMethod {
         let online = self.settings.online;
         let name = self.name.clone();
         let spp = self.spec.spp;
+        let stateful = self.spec.pass.is_stateful();
         let trainer = match self.trainer(scene, camera, width, height) {
             Ok(t) => t,
             Err(e) => {
@@ -539,6 +529,7 @@ impl Method for CacheMethod {
                     )
                     .expect("one value per pixel"),
                     invalid_samples: width as u64 * height as u64,
+                    warm_frames: None,
                 };
             }
         };
@@ -556,6 +547,7 @@ impl Method for CacheMethod {
         Estimate {
             image: out.image,
             invalid_samples: out.stats.invalid_samples,
+            warm_frames: stateful.then(|| trainer.warm_frames()),
         }
     }
 }
@@ -618,9 +610,10 @@ mod tests {
         assert_eq!(
             "pt-4spp-nonee".parse::<MethodSpec>().unwrap(),
             MethodSpec {
-                pass: PassSpec::PathTraced {
+                pass: PathTracedSettings {
                     strategy: LightStrategy::BsdfOnly
-                },
+                }
+                .into(),
                 spp: 4,
                 producer: None
             }

@@ -413,6 +413,46 @@ pub fn load_entry(dir: &Path) -> Result<Reference> {
     })
 }
 
+/// Refuses a stored entry (`r` from [`load_given`]) that was not rendered for `req`: another
+/// scene's content, camera, size, environment or depth limits (its spp and seed may differ).
+/// A bare EXR carries no key, so only its size was checked.
+pub fn check_given(r: &Reference, req: &ReferenceRequest<'_>) -> Result<()> {
+    let Some(meta) = &r.meta else {
+        return Ok(());
+    };
+    let scene_content = scene_content_hash(req.scene_path)?;
+    ensure!(
+        meta.scene_content == scene_content,
+        "reference {} was rendered from another scene ({}, content {}), not {} (content {}); \
+         give this scene's reference or leave out --reference to render one",
+        r.location.display(),
+        meta.scene,
+        &meta.scene_content[..16.min(meta.scene_content.len())],
+        req.scene_path.display(),
+        &scene_content[..16]
+    );
+    let same = ReferenceRequest {
+        spp: meta.spp,
+        seed: meta.seed,
+        ..req.clone()
+    };
+    let camera = CameraRecord::from(&req.scene.camera);
+    ensure!(
+        meta.key == request_key(&same, &scene_content),
+        "reference {} was rendered with other settings than this comparison's (camera {:?} \
+         against {:?}; environment `{}` against `{}`; max depth {} against {}); leave out \
+         --reference to render one",
+        r.location.display(),
+        meta.camera,
+        camera,
+        meta.environment,
+        req.scene.environment().describe(),
+        meta.max_depth,
+        req.tracer.max_depth
+    );
+    Ok(())
+}
+
 /// A reference given by the user: a cache entry folder, or a bare EXR file (no variance).
 /// Its size must be `width × height`.
 pub fn load_given(path: &Path, width: u32, height: u32) -> Result<Reference> {

@@ -1,12 +1,18 @@
 //! A run of the online loop as a library: the camera of each frame (camera paths), the frame
-//! loop with its outputs (frames, statistics), and the snapshot's scene check before rendering
-//! from it. The CLI's `nrc train` and `nrc render --cache` parse their arguments into these.
+//! loop with its outputs (frames, statistics), the snapshot's scene check before rendering
+//! from it, and the render loop of a pass over a camera path. The CLI's `nrc train` and `nrc
+//! render` parse their arguments into these.
 
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
 use glam::Vec3;
 use nrc_cache::RadianceCache;
+use nrc_render::passes::{
+    self, FrameInput, PassOutput, PassSpec, PathTracedPass, PathTracedSettings, RenderPass,
+    path_traced::Progress,
+};
+use nrc_render::{PathTracer, ZeroSource};
 use nrc_scene::{Camera, Scene};
 use nrc_train::{FrameStats, OnlineTrainer, QueryMaker};
 
@@ -64,11 +70,11 @@ pub fn write_stats(path: &Path, stats: &[FrameStats]) -> Result<()> {
         serde_json::to_vec_pretty(stats)?
     } else {
         let mut s = String::from(
-            "frame,produce_ms,train_ms,infer_ms,records,used,dropped_nonfinite,dropped_absurd,steps,loss,target_mean,paths,rays,cache_queries,invalid_samples,producer_dropped\n",
+            "frame,produce_ms,train_ms,infer_ms,records,used,dropped_nonfinite,dropped_absurd,steps,loss,target_mean,paths,rays,cache_queries,invalid_samples,producer_dropped,producer_skipped\n",
         );
         for f in stats {
             s.push_str(&format!(
-                "{},{:.3},{:.3},{:.3},{},{},{},{},{},{},{},{},{},{},{},{}\n",
+                "{},{:.3},{:.3},{:.3},{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
                 f.frame,
                 f.produce_ms,
                 f.train_ms,
@@ -84,7 +90,8 @@ pub fn write_stats(path: &Path, stats: &[FrameStats]) -> Result<()> {
                 f.producer.rays + f.inference.rays,
                 f.inference.queries,
                 f.inference.invalid_samples,
-                f.producer.dropped
+                f.producer.dropped,
+                f.producer.skipped
             ));
         }
         s.into_bytes()
@@ -162,4 +169,102 @@ pub fn check_snapshot_scene(
         &content,
         scene_box,
     ))
+}
+
+/// What `nrc render` renders: a pass over the frames of a camera path, its queries answered by
+/// a cache (a snapshot) or by nothing.
+pub struct RenderJob<'a> {
+    pub scene: &'a Scene,
+    pub pass: &'a PassSpec,
+    /// Depth limit and Russian roulette (the light strategy is the pass's own).
+    pub tracer: PathTracer,
+    pub cache: Option<&'a RadianceCache>,
+    /// The camera of each frame; the last frame is the one returned.
+    pub cameras: &'a [Camera],
+    pub width: u32,
+    pub height: u32,
+    pub spp: u32,
+    pub seed: u64,
+    /// The path tracer's per-pixel variance (pt passes only).
+    pub variance: bool,
+    /// Told of the pixels done as the path tracer's tiles finish (pt passes only).
+    pub progress: Option<Progress>,
+}
+
+/// A rendered job: the last frame, the pass's name and the wall time per frame.
+pub struct Rendered {
+    pub output: PassOutput,
+    pub pass: String,
+    pub seconds_per_frame: f64,
+}
+
+/// Renders every frame of `job` on the current rayon pool. One frame is seeded by the seed
+/// itself (the image of a single render); frame `f` of several by `pass_seed(seed, f)`, so
+/// that stateful passes reuse across independent frames.
+pub fn render(job: RenderJob) -> Result<Rendered> {
+    if job.variance && job.pass.get::<PathTracedSettings>().is_none() {
+        bail!("--variance is only available with the pt passes");
+    }
+    let mut pass: Box<dyn RenderPass> = match job.pass.get::<PathTracedSettings>() {
+        Some(&PathTracedSettings { strategy }) => {
+            let mut p = PathTracedPass::new(PathTracer {
+                strategy,
+                ..job.tracer
+            });
+            p.variance = job.variance;
+            p.progress = job.progress;
+            Box::new(p)
+        }
+        None => job.pass.build(&job.tracer),
+    };
+    let frames = job.cameras.len();
+    let start = std::time::Instant::now();
+    let mut out = None;
+    for (f, camera) in job.cameras.iter().enumerate() {
+        let input = FrameInput {
+            scene: job.scene,
+            camera,
+            width: job.width,
+            height: job.height,
+            spp: job.spp,
+            seed: if frames == 1 {
+                job.seed
+            } else {
+                nrc_render::pass_seed(job.seed, f as u32)
+            },
+        };
+        out = Some(match job.cache {
+            Some(c) => passes::run(pass.as_mut(), &input, &nrc_train::CacheSource::new(c)),
+            None => passes::run(pass.as_mut(), &input, &ZeroSource),
+        });
+    }
+    Ok(Rendered {
+        output: out.context("no camera to render from")?,
+        pass: pass.name(),
+        seconds_per_frame: start.elapsed().as_secs_f64() / frames as f64,
+    })
+}
+
+/// Loads a cache snapshot to render `scene` (loaded from `scene_path`) with: refused when it
+/// was trained on another scene unless `allow_other_scene`, then with a warning returned.
+pub fn load_snapshot(
+    snapshot: &Path,
+    device: nrc_cache::CacheDevice,
+    scene: &Scene,
+    scene_path: &Path,
+    allow_other_scene: bool,
+) -> Result<(RadianceCache, Option<String>)> {
+    let cache = RadianceCache::load(snapshot, device)
+        .with_context(|| format!("cannot load the cache snapshot {}", snapshot.display()))?;
+    match check_snapshot_scene(&cache, scene, scene_path)? {
+        Ok(()) => Ok((cache, None)),
+        Err(e) if allow_other_scene => Ok((
+            cache,
+            Some(format!(
+                "{}: {e} (allowed by --allow-other-scene)",
+                snapshot.display()
+            )),
+        )),
+        Err(e) => bail!("{}: {e}", snapshot.display()),
+    }
 }

@@ -21,6 +21,7 @@ use nrc_eval::metrics::{MAPE_EPSILON, REL_MSE_EPSILON, mape, rel_mse};
 use nrc_eval::plot::plot_series;
 use nrc_eval::{ErrorMetrics, ImageView, SweepPoint, SweepSeries, TemporalAccumulator};
 use nrc_eval::{Metric, TrackedLuminance};
+use nrc_render::sampler::Stream;
 use nrc_render::{RenderSettings, render};
 use nrc_scene::{Camera, Image, Scene};
 
@@ -184,7 +185,7 @@ pub fn compare_sequence(
                 &FrameRequest {
                     width: w,
                     height: h,
-                    seed: c.seed ^ (f as u64).wrapping_mul(0x9e37_79b9_7f4a_7c15),
+                    seed: Stream::SequenceFrame(f as u32).seed(c.seed),
                     budget: c.budget,
                 },
             )?;

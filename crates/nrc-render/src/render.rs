@@ -48,18 +48,6 @@ pub struct RenderStats {
     pub elapsed: Duration,
 }
 
-impl RenderStats {
-    /// Paths per second.
-    pub fn samples_per_second(&self) -> f64 {
-        self.samples as f64 / self.elapsed.as_secs_f64().max(1e-9)
-    }
-
-    /// Rays per second.
-    pub fn rays_per_second(&self) -> f64 {
-        self.rays.rays() as f64 / self.elapsed.as_secs_f64().max(1e-9)
-    }
-}
-
 /// Per-pixel accumulator (Welford's algorithm in f64, stable for many samples).
 #[derive(Clone, Copy, Debug, Default)]
 struct PixelResult {

@@ -66,10 +66,51 @@ impl PixelSampler {
 /// finaliser) of both, so passes of a frame, and frames of nearby seeds, get unrelated random
 /// streams.
 pub fn pass_seed(seed: u64, pass: u32) -> u64 {
-    let mut z = seed ^ (pass as u64 + 1).wrapping_mul(0x9E37_79B9_7F4A_7C15);
-    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-    z ^ (z >> 31)
+    mix64(seed ^ (pass as u64 + 1).wrapping_mul(GOLDEN))
+}
+
+/// Named seeds derived from a frame's or a run's seed. Every seed that is not the frame's own
+/// comes from one of these (never from a raw XOR salt), so that two uses cannot share random
+/// numbers by accident and each draw says what it is for. Per-pixel streams within a frame
+/// are the resampling passes' [`crate::passes::screen::Phase`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Stream {
+    /// A DDGI volume's probe rays of a frame.
+    ProbeRays,
+    /// Instant radiosity's light paths, candidates and camera-visible points of a frame.
+    Vpls,
+    /// Training rays re-entering along the previous frame's terminations.
+    TerminationRays,
+    /// The inference render inside an online training frame.
+    TrainingRender,
+    /// Producer `k` of a mixture, within a training frame.
+    Producer(u32),
+    /// Frame `k` of an animated sequence.
+    SequenceFrame(u32),
+    /// Step `k` of `nrc compare --sweep`.
+    SweepStep(u32),
+    /// The fresh state of a `nrc compare --converge` run.
+    ConvergeRestart,
+    /// Frame `k` of a `nrc compare --converge` run.
+    ConvergeFrame(u32),
+}
+
+impl Stream {
+    /// The seed of this stream within `seed`.
+    pub fn seed(self, seed: u64) -> u64 {
+        let (id, k) = match self {
+            Self::ProbeRays => (1, 0),
+            Self::Vpls => (2, 0),
+            Self::TerminationRays => (3, 0),
+            Self::TrainingRender => (4, 0),
+            Self::Producer(k) => (5, k),
+            Self::SequenceFrame(k) => (6, k),
+            Self::SweepStep(k) => (7, k),
+            Self::ConvergeRestart => (8, 0),
+            Self::ConvergeFrame(k) => (9, k),
+        };
+        mix64(mix64(seed ^ (id as u64).wrapping_mul(0xD1B5_4A32_D192_ED03)) ^ k as u64)
+    }
 }
 
 #[cfg(test)]

@@ -175,20 +175,6 @@ impl Environment {
         ))
     }
 
-    /// Whether no light comes from outside.
-    pub fn is_black(&self) -> bool {
-        self.scale == Vec3::ZERO
-            || self
-                .map
-                .as_ref()
-                .is_some_and(|m| m.luminance_integral <= 0.0)
-    }
-
-    /// Whether the environment is a constant.
-    pub fn is_constant(&self) -> bool {
-        self.map.is_none()
-    }
-
     /// The constant radiance (or the map's scale).
     pub fn scale(&self) -> Vec3 {
         self.scale

@@ -240,6 +240,11 @@ struct Chi2Outcome {
 /// χ² of `sample` against `pdf` on a 32 × 64 (cos θ, φ) histogram plus one cell for samples
 /// that are lost (`None`) or delta, whose expected share is `1 − ∫ pdf`.
 fn run_chi2(c: &Case, seed: u64) -> Chi2Outcome {
+    run_chi2_against(c, &c.bsdf, seed)
+}
+
+/// [`run_chi2`] with the density of `pdf_of` (the case's own BSDF but for negative controls).
+fn run_chi2_against(c: &Case, pdf_of: &Bsdf, seed: u64) -> Chi2Outcome {
     let start = std::time::Instant::now();
     let bins = SphereBins {
         cos_bins: 32,
@@ -274,7 +279,7 @@ fn run_chi2(c: &Case, seed: u64) -> Chi2Outcome {
         .log2()
         .ceil()
         .clamp(1.0, 5.0) as u32;
-    let mass = bins.integrate(&|w| f64::from(c.bsdf.pdf(c.wo, w)), 1e-7, 1e-4, &|k| {
+    let mass = bins.integrate(&|w| f64::from(pdf_of.pdf(c.wo, w)), 1e-7, 1e-4, &|k| {
         if hot(k) { fine_depth } else { 1 }
     });
     let integral: f64 = mass.iter().sum();
@@ -374,6 +379,31 @@ fn chi2_group(keep: impl Fn(&Bsdf) -> bool) {
         cases.len()
     );
     assert!(failures.is_empty(), "{failures:#?}");
+}
+
+/// The negative control of the χ² cases: a rough conductor's samples scored against the
+/// density of a conductor 10 % rougher (α 0.09 against 0.099) must be rejected at the level
+/// every case passes.
+#[test]
+fn chi2_rejects_a_slightly_wrong_pdf() {
+    let c = chi2_cases()
+        .into_iter()
+        .find(|c| c.name == "conductor r=0.3 θo=45")
+        .expect("the case exists");
+    let Bsdf::Conductor { f0, alpha } = c.bsdf else {
+        unreachable!()
+    };
+    let rougher = Bsdf::Conductor {
+        f0,
+        alpha: alpha * 1.1,
+    };
+    let level = sidak(0.01, chi2_cases().len());
+    let o = run_chi2_against(&c, &rougher, 1000);
+    assert!(
+        o.p_value < level,
+        "the χ² test accepted a wrong pdf: p = {:.3} ≥ {level:.2e}",
+        o.p_value
+    );
 }
 
 #[test]

@@ -4,7 +4,8 @@
 use std::time::Instant;
 
 use nrc_cache::{CacheError, RadianceCache};
-use nrc_render::passes::{self, FrameInput, PassOutput, PassSpec, PassStats, RenderPass};
+use nrc_render::passes::{self, FrameInput, PassOutput, PassSpec, PassStats, RenderPass, Warmth};
+use nrc_render::sampler::Stream;
 use nrc_render::{PathTracer, PixelSampler, pass_seed};
 use nrc_scene::{Camera, Scene};
 
@@ -116,6 +117,10 @@ pub struct OnlineTrainer {
     pub settings: OnlineSettings,
     mix: ProducerMix,
     pass: Box<dyn RenderPass>,
+    /// The inference pass's frames (how warm its history is).
+    warmth: Warmth,
+    /// Frames of its size the pass had rendered before the last one.
+    warm_frames: u32,
     previous: Vec<TerminationPoint>,
     frame: u64,
 }
@@ -135,6 +140,8 @@ impl OnlineTrainer {
             cache,
             mix,
             pass: settings.pass.build(&settings.tracer),
+            warmth: Warmth::default(),
+            warm_frames: 0,
             settings,
             previous: Vec::new(),
             frame: 0,
@@ -147,7 +154,14 @@ impl OnlineTrainer {
             cache: &self.cache,
             queries: self.settings.queries,
         };
+        self.warm_frames = self.warmth.count(input);
         passes::run(self.pass.as_mut(), input, &source)
+    }
+
+    /// Frames of its size the inference pass had rendered (since it was built) before the last
+    /// one: how warm the history of a stateful pass was.
+    pub fn warm_frames(&self) -> u32 {
+        self.warm_frames
     }
 
     /// Frames run so far.
@@ -230,12 +244,13 @@ impl OnlineTrainer {
                 width,
                 height,
                 spp: s.spp,
-                seed: seed ^ 0x1F3D_5B79,
+                seed: Stream::TrainingRender.seed(seed),
             };
             let source = CacheSource {
                 cache: &self.cache,
                 queries: s.queries,
             };
+            self.warm_frames = self.warmth.count(&input);
             let out = passes::run(self.pass.as_mut(), &input, &source);
             stats.infer_ms = t.elapsed().as_secs_f64() * 1e3;
             stats.inference = out.stats;

@@ -4,6 +4,7 @@ use std::fmt;
 use std::str::FromStr;
 
 use nrc_cache::TrainingBatch;
+use nrc_render::sampler::Stream;
 use nrc_render::{PathTracer, RadianceSource};
 use nrc_scene::{Camera, Scene};
 
@@ -37,6 +38,9 @@ pub struct ProducerStats {
     pub rays: u64,
     /// Records whose target was not finite or was negative, left out of the batch.
     pub dropped: u64,
+    /// Light-path contributions (BT connections, SPPC photon hits) that were NaN or infinite
+    /// and were left out of their targets.
+    pub skipped: u64,
 }
 
 impl ProducerStats {
@@ -44,6 +48,7 @@ impl ProducerStats {
         self.paths += o.paths;
         self.rays += o.rays;
         self.dropped += o.dropped;
+        self.skipped += o.skipped;
     }
 }
 
@@ -297,11 +302,7 @@ impl ProducerMix {
                 ((budget as f32 * *share).round() as usize).min(left)
             };
             left -= b;
-            let p = producer.produce(
-                ctx,
-                b,
-                seed ^ (i as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15),
-            );
+            let p = producer.produce(ctx, b, Stream::Producer(i as u32).seed(seed));
             out.batch.append(p.batch);
             out.stats.add(&p.stats);
         }

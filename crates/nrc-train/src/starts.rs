@@ -9,6 +9,7 @@
 use glam::Vec2;
 use nrc_render::PixelSampler;
 pub use nrc_render::passes::TerminationPoint;
+use nrc_render::sampler::Stream;
 use nrc_scene::{Camera, Ray};
 
 /// A training path's first segment.
@@ -88,7 +89,7 @@ pub fn predict(
     } else {
         ((n as f32 * from_terminations.clamp(0.0, 1.0)).round() as usize).min(n)
     };
-    let mut rays = termination_rays(previous, k, seed ^ 0x7E57);
+    let mut rays = termination_rays(previous, k, Stream::TerminationRays.seed(seed));
     rays.extend(camera_tiles(camera, width, height, n - rays.len(), seed));
     rays
 }

@@ -93,7 +93,8 @@ fn cache_pass(
     spp: u32,
     seed: u64,
 ) -> PassOutput {
-    let mut pass = PassSpec::CacheTerminated { termination, nee }.build(&PathTracer::default());
+    let spec: PassSpec = passes::CacheTerminatedSettings { termination, nee }.into();
+    let mut pass = spec.build(&PathTracer::default());
     let input = FrameInput {
         scene,
         camera: &scene.camera,

@@ -482,24 +482,6 @@ pub fn backward_table(grid: &HashGrid, positions: &[f32], dout: &[f32], grad: &m
     });
 }
 
-/// Gradient of the positions for `dout`: `[N][3]`.
-pub fn backward_positions(
-    grid: &HashGrid,
-    table: &[f32],
-    positions: &[f32],
-    dout: &[f32],
-) -> Vec<f32> {
-    let d = grid.output_dims();
-    let mut out = vec![0f32; positions.len()];
-    out.par_chunks_mut(3)
-        .zip(positions.par_chunks(3))
-        .zip(dout.par_chunks(d))
-        .for_each(|((o, p), g)| {
-            o.copy_from_slice(&grid.backward_input_one(table, [p[0], p[1], p[2]], g));
-        });
-    out
-}
-
 /// Scatters level `l`'s gradient of `n` samples into that level's table gradient `grad`
 /// (level-local entries), marking referenced entries in `touched` when given. Pipelined like
 /// [`encode_tile`]: the gradient lines of sample `i + AHEAD` are prefetched while sample `i`

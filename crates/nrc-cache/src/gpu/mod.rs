@@ -85,10 +85,3 @@ pub fn adapters() -> Vec<wgpu::AdapterInfo> {
         .map(wgpu::Adapter::get_info)
         .collect()
 }
-
-/// Whether a hardware GPU adapter (not a software rasteriser) is present.
-pub fn hardware_gpu_available() -> bool {
-    adapters()
-        .iter()
-        .any(|info| info.device_type != wgpu::DeviceType::Cpu)
-}

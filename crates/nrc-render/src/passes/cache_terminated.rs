@@ -20,7 +20,9 @@ use std::str::FromStr;
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
 
-use super::{FrameInput, PassOutput, PassSpec, PassStats, RenderPass};
+use super::params::{self, Params};
+use super::spec::{PassConfig, PassKind};
+use super::frame::{FrameInput, PassOutput, PassStats, RenderPass, TerminationPoint};
 use crate::path_tracer::{LightStrategy, PathStats, PathTracer};
 use crate::sampler::PixelSampler;
 use crate::source::RadianceQuery;
@@ -111,12 +113,89 @@ impl fmt::Display for Termination {
     }
 }
 
-/// Where an inference path ended in the source: the vertex and the point the segment reaching
-/// it came from (the next frame's training queries re-enter along it).
+pub const KIND: PassKind = PassKind {
+    grammar: "cache[-TERMINATION][-nonee]",
+    about: "camera paths ending in the radiance source where the termination says (default: \
+            spread; first, secondary, diffuse[:ROUGHNESS] (default 0.3), spread[:C] (default \
+            0.01), bth[:K] (default 4)); -nonee: BSDF sampling only before it",
+    method: false,
+    variants: || {
+        let first = Termination::FirstVertex;
+        [(Termination::default(), true), (first, true), (Termination::Secondary, true)]
+            .into_iter()
+            .chain([(Termination::default(), false)])
+            .map(|(termination, nee)| CacheTerminatedSettings { termination, nee }.into())
+            .collect()
+    },
+    parse: |name| {
+        let rest = match name.strip_prefix("cache")? {
+            "" => "",
+            r if r.starts_with(':') || r.contains('=') => {
+                return Some(Err(format!(
+                    "pass `{name}`: takes no KEY=VALUE parameters (a termination takes its own \
+                     after its colon, e.g. cache-bth:8)"
+                )));
+            }
+            r => r.strip_prefix('-').filter(|t| !t.is_empty())?,
+        };
+        let (rest, nee) = match rest.strip_suffix("nonee") {
+            Some(r) if r.is_empty() || r.ends_with('-') => (r.trim_end_matches('-'), false),
+            _ => (rest, true),
+        };
+        Some(
+            match rest {
+                "" => Ok(Termination::default()),
+                t => t.parse().map_err(|e| format!("pass `{name}`: {e}")),
+            }
+            .map(|termination| CacheTerminatedSettings { termination, nee }.into()),
+        )
+    },
+};
+
+/// The cache-terminated pass's settings.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct TerminationPoint {
-    pub from: Vec3,
-    pub to: Vec3,
+pub struct CacheTerminatedSettings {
+    pub termination: Termination,
+    /// NEE (with MIS) at the vertices before the path ends; off: BSDF sampling only.
+    pub nee: bool,
+}
+
+impl Default for CacheTerminatedSettings {
+    fn default() -> Self {
+        Self {
+            termination: Termination::default(),
+            nee: true,
+        }
+    }
+}
+
+impl Params for CacheTerminatedSettings {
+    fn visit(&mut self, _: &mut dyn FnMut(&params::Key, &mut dyn params::Value)) {}
+}
+
+impl PassConfig for CacheTerminatedSettings {
+    fn kind(&self) -> &'static PassKind {
+        &KIND
+    }
+
+    fn name(&self) -> String {
+        let mut name = String::from("cache");
+        if self.termination != Termination::default() {
+            name += &format!("-{}", self.termination);
+        }
+        if !self.nee {
+            name += "-nonee";
+        }
+        name
+    }
+
+    fn build(&self, tracer: &PathTracer) -> Box<dyn RenderPass> {
+        Box::new(CacheTerminatedPass::new(self.termination, self.nee, tracer))
+    }
+
+    fn uses_source(&self) -> bool {
+        true
+    }
 }
 
 /// One camera sample before the source is asked.
@@ -260,11 +339,11 @@ impl CacheTerminatedPass {
 
 impl RenderPass for CacheTerminatedPass {
     fn name(&self) -> String {
-        PassSpec::CacheTerminated {
+        CacheTerminatedSettings {
             termination: self.termination,
             nee: self.tracer.strategy != LightStrategy::BsdfOnly,
         }
-        .to_string()
+        .name()
     }
 
     fn trace(&mut self, input: &FrameInput) -> Vec<RadianceQuery> {

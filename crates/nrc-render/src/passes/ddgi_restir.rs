@@ -57,9 +57,13 @@ use nrc_scene::{LightSample, Scene, sampling::luminance, spawn_ray};
 
 use super::restir_di;
 use super::screen::{GBuffer, Phase, Primary, combine, par_map, stream, visible_between};
-use super::{FrameInput, PassOutput, PassSpec, PhaseTimes, RenderPass};
+use super::params::{Key, Params, Value};
+use super::screen::MAX;
+use super::spec::{PassConfig, PassKind, parse_variant};
+use super::frame::{FrameInput, PassOutput, PhaseTimes, RenderPass};
 use crate::ddgi::{DdgiSettings, ProbeRadiance, ProbeRays, ProbeVolume};
 use crate::path_tracer::{PathStats, PathTracer};
+use crate::sampler::Stream;
 use crate::reservoir::Reservoir;
 use crate::sampler::PixelSampler;
 use crate::source::RadianceQuery;
@@ -76,6 +80,27 @@ pub enum SurfaceLight {
     Cache,
     /// A DDGI volume whose rays ask the radiance source at their hits (`ddgi-nrc-restir`).
     CacheProbes,
+}
+
+pub const KIND: PassKind = PassKind {
+    grammar: "ddgi-restir, nrc-restir, ddgi-nrc-restir",
+    about: "DDGI resampling: at the primary vertex, light-sampler and BSDF-sampled surface \
+            points resampled by their emission plus the radiance they reflect (eq. 6) from \
+            probes (ddgi-restir), the cache (nrc-restir) or cache-fed probes \
+            (ddgi-nrc-restir), the geometry term clamped at 1/(clamp · diagonal)² with the \
+            residual of eq. 9; spatial and temporal reuse, one shadow ray",
+    method: true,
+    variants: || variants().into_iter().map(|(_, s)| s.into()).collect(),
+    parse: |name| parse_variant(name, &variants(), DdgiRestirSettings::validate),
+};
+
+fn variants() -> [(&'static str, DdgiRestirSettings); 3] {
+    let d = DdgiRestirSettings::default();
+    [
+        ("ddgi-restir", d),
+        ("nrc-restir", DdgiRestirSettings { light: SurfaceLight::Cache, ..d }),
+        ("ddgi-nrc-restir", DdgiRestirSettings { light: SurfaceLight::CacheProbes, ..d }),
+    ]
 }
 
 /// DDGI resampling's parameters.
@@ -176,6 +201,63 @@ impl DdgiRestirSettings {
 
     fn uses_probes(&self) -> bool {
         self.light != SurfaceLight::Cache
+    }
+}
+
+impl Params for DdgiRestirSettings {
+    fn visit(&mut self, f: &mut dyn FnMut(&Key, &mut dyn Value)) {
+        let light = Key::new("light", "light-sampler candidates per pixel sample");
+        f(&light.range(0.0, MAX), &mut self.light_candidates);
+        let bsdf = Key::new("bsdf", "BSDF-sampled candidates (the first also for the residual)");
+        f(&bsdf.range(1.0, MAX), &mut self.bsdf_candidates);
+        let (k, radius) = (&mut self.spatial_neighbours, &mut self.spatial_radius);
+        super::screen::visit_reuse(f, k, radius, &mut self.m_cap, &mut self.temporal);
+        let clamp = Key::new("clamp", "G_max = 1/(clamp · diagonal)²; 0: no clamp");
+        f(&clamp.range(0.0, 10.0), &mut self.clamp);
+        let residual = Key::new("residual", "estimate the clamped-away transport (eq. 9)");
+        f(&residual, &mut self.residual);
+        if self.uses_probes() {
+            let requery = Key::new("requery", "evaluate the probes toward each receiver (§3.7)");
+            f(&requery, &mut self.requery);
+        }
+        f(&Key::new("jitter", "jitter camera rays in the pixel"), &mut self.jitter);
+        let smooth = Key::new("smooth", "primaries smoother than this are path traced");
+        f(&smooth.range(0.0, 1.0), &mut self.smooth);
+        let footprint = Key::new("footprint", "eqs. 7-8's near-specular recursion, c (0: off)");
+        f(&footprint.range(0.0, 1e3), &mut self.footprint);
+        if self.uses_probes() {
+            self.ddgi.visit(f);
+        }
+    }
+}
+
+impl PassConfig for DdgiRestirSettings {
+    fn kind(&self) -> &'static PassKind {
+        &KIND
+    }
+
+    fn name(&self) -> String {
+        let (base, defaults) = variants()
+            .into_iter()
+            .find(|(_, d)| d.light == self.light)
+            .expect("every light is a variant");
+        super::params::name(base, self, &defaults)
+    }
+
+    fn build(&self, tracer: &PathTracer) -> Box<dyn RenderPass> {
+        Box::new(DdgiRestirPass::new(*self, tracer))
+    }
+
+    fn is_stateful(&self) -> bool {
+        true
+    }
+
+    fn uses_source(&self) -> bool {
+        self.light != SurfaceLight::Probes
+    }
+
+    fn params(&self) -> Vec<super::params::Param> {
+        super::params::list(self)
     }
 }
 
@@ -623,7 +705,7 @@ impl DdgiRestirPass {
 
 impl RenderPass for DdgiRestirPass {
     fn name(&self) -> String {
-        PassSpec::DdgiRestir(self.settings).to_string()
+        self.settings.name()
     }
 
     fn reset(&mut self) {
@@ -647,7 +729,7 @@ impl RenderPass for DdgiRestirPass {
         if self.settings.light == SurfaceLight::Probes
             && let Some(v) = &mut self.volume
         {
-            v.update(input.scene, input.seed ^ 0xDD61);
+            v.update(input.scene, Stream::ProbeRays.seed(input.seed));
         }
         self.update_ms = t.elapsed().as_secs_f64() * 1e3;
     }
@@ -683,7 +765,7 @@ impl RenderPass for DdgiRestirPass {
             SurfaceLight::CacheProbes => {
                 let t = Instant::now();
                 if let Some(v) = &self.volume {
-                    let r = v.trace_rays(scene, seed ^ 0xDD61);
+                    let r = v.trace_rays(scene, Stream::ProbeRays.seed(seed));
                     queries = r.queries.clone();
                     rays = Some(r);
                 }
@@ -789,7 +871,7 @@ impl RenderPass for DdgiRestirPass {
         if let Some(vol) = self.volume.as_ref().filter(|_| set.uses_probes()) {
             let eye = input.camera.position;
             traced.par_iter_mut().enumerate().for_each(|(i, tr)| {
-                let mut s = stream(seed, i, Phase::Extra);
+                let mut s = stream(seed, i, Phase::SourceLookup);
                 for c in &mut tr.candidates {
                     if let (DdgiSample::Surface(y), Some(at)) = (&mut c.y, &c.at) {
                         y.l = self.probe_radiance(scene, vol, eye, None, at, &mut s).0;
@@ -801,7 +883,7 @@ impl RenderPass for DdgiRestirPass {
                 let fresh: Vec<Vec3> = refresh
                     .par_iter()
                     .map(|(j, at)| {
-                        let mut s = stream(seed ^ 0x5EED, *j, Phase::Extra);
+                        let mut s = stream(seed, *j, Phase::HistoryRefresh);
                         self.probe_radiance(scene, vol, hg.camera.position, None, at, &mut s)
                             .0
                     })
@@ -834,7 +916,7 @@ impl RenderPass for DdgiRestirPass {
                 return (r, aux, stats);
             };
             let v = &p.v;
-            let mut s = stream(seed, i, Phase::Temporal);
+            let mut s = stream(seed, i, Phase::Resample);
             let mut chosen_bsdf = false;
             for (k, c) in tr.candidates.iter().enumerate() {
                 if tr.aux.is_some_and(|a| a.delta && a.candidate == k) {
@@ -926,7 +1008,7 @@ impl RenderPass for DdgiRestirPass {
             };
             let mut prev = h.res[j];
             prev.cap(cap);
-            let mut s = stream(seed, i, Phase::Shading);
+            let mut s = stream(seed, i, Phase::Temporal);
             let target =
                 |v: &Vertex, y: &DdgiSample| contribution(&ctx, v, y).map_or(0.0, |c| c.target);
             let (r, _) = combine(&p.v, &own, &[(prev, pv)], false, &mut s, target, |ov, y| {
@@ -955,7 +1037,7 @@ impl RenderPass for DdgiRestirPass {
                                 // point's radiance through the near-specular recursion.
                                 let c = match (y, recursion) {
                                     (DdgiSample::Surface(sp), Some(vol)) => {
-                                        let mut s = stream(seed ^ 0xF007, i, Phase::Extra);
+                                        let mut s = stream(seed, i, Phase::Footprint);
                                         let y = DdgiSample::Surface(self.recursed(
                                             scene, vol, eye, &p.v, sp, &mut s, &mut stats,
                                         ));

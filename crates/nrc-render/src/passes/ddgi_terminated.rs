@@ -7,10 +7,146 @@
 use glam::Vec3;
 
 use super::cache_terminated::{CacheTerminatedPass, Termination};
-use super::{FrameInput, PassOutput, PassSpec, RenderPass};
+use super::params::{Key, Params, Value};
+use super::spec::{PassConfig, PassKind};
+use super::frame::{FrameInput, PassOutput, RenderPass};
 use crate::ddgi::{DdgiSettings, ProbeRadiance, ProbeRays, ProbeVolume};
 use crate::path_tracer::PathTracer;
+use crate::sampler::Stream;
 use crate::source::{RadianceQuery, RadianceSource};
+
+pub const KIND: PassKind = PassKind {
+    grammar: "ddgi-TERMINATION",
+    about: "camera paths ending in a DDGI probe volume updated every frame, by a termination \
+            of cache[-TERMINATION] (e.g. ddgi-secondary: the primary vertex's direct light \
+            traced, the rest from the probes); radiance=nrc: the probe rays' radiance from the \
+            cache",
+    method: true,
+    variants: || {
+        [Termination::Secondary, Termination::FirstVertex]
+            .into_iter()
+            .map(|termination| {
+                let volume = DdgiSettings::default();
+                DdgiTerminatedSettings { termination, volume }.into()
+            })
+            .collect()
+    },
+    parse: |name| {
+        let rest = name.strip_prefix("ddgi-")?;
+        let (term, params) = rest.split_once(':').unwrap_or((rest, ""));
+        let termination = term.parse::<Termination>().ok()?;
+        let mut set = DdgiTerminatedSettings {
+            termination,
+            volume: DdgiSettings::default(),
+        };
+        Some(
+            super::params::set(name, &mut set, params)
+                .and_then(|()| {
+                    validate_volume(&set.volume).map_err(|e| format!("pass `{name}`: {e}"))
+                })
+                .map(|()| set.into()),
+        )
+    },
+};
+
+/// The DDGI-terminated pass's settings: where paths end, and the volume.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct DdgiTerminatedSettings {
+    pub termination: Termination,
+    pub volume: DdgiSettings,
+}
+
+/// Errors for volume settings that cannot work (checked on a unit box).
+pub(super) fn validate_volume(volume: &DdgiSettings) -> Result<(), String> {
+    let unit = nrc_scene::Aabb {
+        min: Vec3::ZERO,
+        max: Vec3::ONE,
+    };
+    ProbeVolume::new(&unit, *volume).map(|_| ())
+}
+
+/// The probe volume's keys, shared by every pass that keeps one.
+impl Params for DdgiSettings {
+    fn visit(&mut self, f: &mut dyn FnMut(&Key, &mut dyn Value)) {
+        let probes = Key::new("probes", "probes per axis (auto: 8 along the longest axis)");
+        f(&probes.range(1.0, 64.0), &mut self.counts);
+        let rays = Key::new("rays", "rays per probe and frame");
+        f(&rays.range(1.0, 16384.0), &mut self.rays_per_probe);
+        let hysteresis = Key::new("hysteresis", "weight of the old irradiance in each update");
+        f(&hysteresis.range(0.0, 1.0), &mut self.hysteresis);
+        let relocate = Key::new("relocate", "move probes out of geometry");
+        f(&relocate, &mut self.relocate);
+        let classify = Key::new("classify", "switch off probes that see no surface");
+        f(&classify, &mut self.classify);
+        let attenuation = Key::new("attenuation", "§3.3's attenuation of emission (0: off)");
+        f(&attenuation.range(0.0, f64::INFINITY), &mut self.attenuation);
+    }
+}
+
+/// What probe rays bring back, as text.
+impl Value for ProbeRadiance {
+    fn read(&mut self, text: &str) -> Option<()> {
+        *self = match text {
+            "full" => Self::Full,
+            "indirect" => Self::Indirect,
+            "nrc" => Self::Source,
+            _ => return None,
+        };
+        Some(())
+    }
+    fn write(&self) -> String {
+        match self {
+            Self::Full => "full",
+            Self::Indirect => "indirect",
+            Self::Source => "nrc",
+        }
+        .into()
+    }
+    fn grammar(&self) -> &'static str {
+        "full|indirect|nrc"
+    }
+}
+
+impl Params for DdgiTerminatedSettings {
+    fn visit(&mut self, f: &mut dyn FnMut(&Key, &mut dyn Value)) {
+        self.volume.visit(f);
+        let radiance = Key::new(
+            "radiance",
+            "probe rays bring eq. 5's full, eq. 4's indirect or the cache's radiance",
+        );
+        f(&radiance, &mut self.volume.radiance);
+    }
+}
+
+impl PassConfig for DdgiTerminatedSettings {
+    fn kind(&self) -> &'static PassKind {
+        &KIND
+    }
+
+    fn name(&self) -> String {
+        let defaults = DdgiTerminatedSettings {
+            volume: DdgiSettings::default(),
+            ..*self
+        };
+        super::params::name(&format!("ddgi-{}", self.termination), self, &defaults)
+    }
+
+    fn build(&self, tracer: &PathTracer) -> Box<dyn RenderPass> {
+        Box::new(DdgiTerminatedPass::new(self.termination, self.volume, tracer))
+    }
+
+    fn is_stateful(&self) -> bool {
+        true
+    }
+
+    fn uses_source(&self) -> bool {
+        self.volume.radiance == ProbeRadiance::Source
+    }
+
+    fn params(&self) -> Vec<super::params::Param> {
+        super::params::list(self)
+    }
+}
 
 /// The pass: its volume (built at the first frame, over that frame's scene box) and the
 /// cache-terminated path logic, its queries answered by the volume.
@@ -45,11 +181,11 @@ impl DdgiTerminatedPass {
 
 impl RenderPass for DdgiTerminatedPass {
     fn name(&self) -> String {
-        PassSpec::DdgiTerminated {
+        DdgiTerminatedSettings {
             termination: self.inner.termination,
-            settings: self.settings,
+            volume: self.settings,
         }
-        .to_string()
+        .name()
     }
 
     fn reset(&mut self) {
@@ -66,9 +202,9 @@ impl RenderPass for DdgiTerminatedPass {
         if let Some(v) = &mut self.volume {
             if self.settings.radiance == ProbeRadiance::Source {
                 // The rays' queries go to the source with the frame's batch (`trace`).
-                self.rays = Some(v.trace_rays(input.scene, input.seed ^ 0xDD61));
+                self.rays = Some(v.trace_rays(input.scene, Stream::ProbeRays.seed(input.seed)));
             } else {
-                v.update(input.scene, input.seed ^ 0xDD61);
+                v.update(input.scene, Stream::ProbeRays.seed(input.seed));
             }
         }
         self.update_ms = t.elapsed().as_secs_f64() * 1e3;

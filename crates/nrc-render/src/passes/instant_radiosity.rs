@@ -37,11 +37,13 @@ use nrc_scene::{Scene, SurfaceInteraction};
 use rayon::prelude::*;
 
 use super::screen::{GBuffer, Phase, stream, visible_between};
-use super::{FrameInput, PassOutput, RenderPass};
+use super::params::{Key, Params, Value};
+use super::spec::{PassConfig, PassKind, parse_variant};
+use super::frame::{FrameInput, PassOutput, RenderPass};
 use crate::knn::PointGrid;
 use crate::light_path::trace_light_path;
 use crate::path_tracer::{PathStats, PathTracer};
-use crate::sampler::PixelSampler;
+use crate::sampler::{PixelSampler, Stream};
 use crate::source::RadianceQuery;
 use crate::transport::Vertex;
 
@@ -133,47 +135,76 @@ impl IrSettings {
         Ok(())
     }
 
-    /// The pass's name with its non-default parameters.
-    pub fn name(&self) -> String {
-        let base = match self.mode {
-            VplMode::Classic => "ir",
-            VplMode::Smc => "smc-ir",
-            VplMode::SmcSource => "smc-ir-nrc",
-        };
-        let d = Self::default();
-        let mut p = Vec::new();
-        let mut put = |k: &str, v: String, dv: String| {
-            if v != dv {
-                p.push(format!("{k}={v}"));
-            }
-        };
-        put("vpls", self.vpls.to_string(), d.vpls.to_string());
-        put("mmax", self.m_max.to_string(), d.m_max.to_string());
-        put(
-            "per_pixel",
-            self.per_pixel.to_string(),
-            d.per_pixel.to_string(),
-        );
-        put("clamp", self.clamp.to_string(), d.clamp.to_string());
-        put("residual", (self.residual as u8).to_string(), "0".into());
-        put(
-            "spp",
-            self.radiosity_spp.to_string(),
-            d.radiosity_spp.to_string(),
-        );
-        put("rate", self.rate.to_string(), d.rate.to_string());
-        put("warmup", self.warmup.to_string(), d.warmup.to_string());
-        put(
-            "points",
-            self.visible_points.to_string(),
-            d.visible_points.to_string(),
-        );
-        put("indirect", (self.indirect as u8).to_string(), "0".into());
-        if p.is_empty() {
-            base.to_string()
-        } else {
-            format!("{base}:{}", p.join(","))
-        }
+}
+
+pub const KIND: PassKind = PassKind {
+    grammar: "ir, smc-ir, smc-ir-nrc",
+    about: "instant radiosity: VPLs traced from the lights each frame (ir), sequential Monte \
+            Carlo VPLs kept across frames with path-traced (smc-ir) or cache (smc-ir-nrc) \
+            radiosities",
+    method: true,
+    variants: || variants().into_iter().map(|(_, s)| s.into()).collect(),
+    parse: |name| parse_variant(name, &variants(), IrSettings::validate),
+};
+
+fn variants() -> [(&'static str, IrSettings); 3] {
+    let d = IrSettings::default();
+    [
+        ("ir", IrSettings { mode: VplMode::Classic, ..d }),
+        ("smc-ir", IrSettings { mode: VplMode::Smc, ..d }),
+        ("smc-ir-nrc", IrSettings { mode: VplMode::SmcSource, ..d }),
+    ]
+}
+
+impl Params for IrSettings {
+    fn visit(&mut self, f: &mut dyn FnMut(&Key, &mut dyn Value)) {
+        let at_most = |key: &'static str, help, max: f64| Key::new(key, help).range(0.0, max);
+        let count = |key: &'static str, help, max: f64| Key::new(key, help).range(1.0, max);
+        f(&count("vpls", "I, the VPL budget", 1048576.0), &mut self.vpls);
+        let m_max = at_most("mmax", "M_max, the most VPLs replaced per frame", 1048576.0);
+        f(&m_max, &mut self.m_max);
+        let per_pixel = at_most("per_pixel", "VPLs per pixel sample (0: all)", 1048576.0);
+        f(&per_pixel, &mut self.per_pixel);
+        let clamp = Key::new("clamp", "G_max = 1/(clamp · scene diagonal)²");
+        f(&clamp.positive(f64::INFINITY), &mut self.clamp);
+        let residual = Key::new("residual", "the clamped-away part by one BSDF-sampled ray");
+        f(&residual, &mut self.residual);
+        let spp = count("spp", "path-traced samples per VPL radiosity", 4096.0);
+        f(&spp, &mut self.radiosity_spp);
+        f(&count("rate", "points per candidate", 64.0), &mut self.rate);
+        let warmup = at_most("warmup", "Algorithm 1 iterations before the first frame", 1e4);
+        f(&warmup, &mut self.warmup);
+        let points = count("points", "camera-visible points sampled per frame", 1048576.0);
+        f(&points, &mut self.visible_points);
+        let indirect = Key::new("indirect", "only the VPLs' light: no emission, no direct light");
+        f(&indirect, &mut self.indirect);
+    }
+}
+
+impl PassConfig for IrSettings {
+    fn kind(&self) -> &'static PassKind {
+        &KIND
+    }
+
+    fn name(&self) -> String {
+        let (base, defaults) = variants()[self.mode as usize];
+        super::params::name(base, self, &defaults)
+    }
+
+    fn build(&self, tracer: &PathTracer) -> Box<dyn RenderPass> {
+        Box::new(InstantRadiosityPass::new(*self, *tracer))
+    }
+
+    fn is_stateful(&self) -> bool {
+        self.mode != VplMode::Classic
+    }
+
+    fn uses_source(&self) -> bool {
+        self.mode == VplMode::SmcSource
+    }
+
+    fn params(&self) -> Vec<super::params::Param> {
+        super::params::list(self)
     }
 }
 
@@ -777,7 +808,7 @@ impl RenderPass for InstantRadiosityPass {
     }
 
     fn trace(&mut self, input: &FrameInput) -> Vec<RadianceQuery> {
-        let seed = input.seed ^ 0x5151_0000_0000_0000;
+        let seed = Stream::Vpls.seed(input.seed);
         self.gbuffer = Some(GBuffer::trace(
             input.scene,
             input.camera,

@@ -4,10 +4,57 @@
 
 use glam::Vec3;
 
-use super::{FrameInput, PassOutput, PassSpec, PassStats, RenderPass};
-use crate::path_tracer::PathTracer;
+use super::params::{self, Params};
+use super::spec::{PassConfig, PassKind};
+use super::frame::{FrameInput, PassOutput, PassStats, RenderPass};
+use crate::path_tracer::{LightStrategy, PathTracer};
 use crate::render::{RenderOutput, RenderSettings, render};
 use crate::source::RadianceQuery;
+
+pub const KIND: PassKind = PassKind {
+    grammar: "pt, pt-nonee, pt-light",
+    about: "the reference path tracer: NEE and BSDF sampling by MIS, BSDF sampling only, NEE only",
+    method: false,
+    variants: || STRATEGIES.iter().map(|(_, s)| (*s).into()).collect(),
+    parse: |name| super::spec::parse_variant(name, STRATEGIES, |_| Ok(())),
+};
+
+const STRATEGIES: &[(&str, PathTracedSettings)] = &[
+    ("pt", PathTracedSettings { strategy: LightStrategy::Mis }),
+    ("pt-nonee", PathTracedSettings { strategy: LightStrategy::BsdfOnly }),
+    ("pt-light", PathTracedSettings { strategy: LightStrategy::LightOnly }),
+];
+
+/// The reference path tracer's settings: its light strategy (the rest is the tracer's).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PathTracedSettings {
+    pub strategy: LightStrategy,
+}
+
+impl Params for PathTracedSettings {
+    fn visit(&mut self, _: &mut dyn FnMut(&params::Key, &mut dyn params::Value)) {}
+}
+
+impl PassConfig for PathTracedSettings {
+    fn kind(&self) -> &'static PassKind {
+        &KIND
+    }
+
+    fn name(&self) -> String {
+        let (name, _) = STRATEGIES
+            .iter()
+            .find(|(_, s)| s == self)
+            .expect("every strategy is named");
+        name.to_string()
+    }
+
+    fn build(&self, tracer: &PathTracer) -> Box<dyn RenderPass> {
+        Box::new(PathTracedPass::new(PathTracer {
+            strategy: self.strategy,
+            ..*tracer
+        }))
+    }
+}
 
 /// Called with the number of pixels just finished, as tiles finish (progress bars).
 pub type Progress = Box<dyn Fn(u64) + Send + Sync>;
@@ -44,10 +91,10 @@ impl PathTracedPass {
 
 impl RenderPass for PathTracedPass {
     fn name(&self) -> String {
-        PassSpec::PathTraced {
+        PathTracedSettings {
             strategy: self.tracer.strategy,
         }
-        .to_string()
+        .name()
     }
 
     fn trace(&mut self, input: &FrameInput) -> Vec<RadianceQuery> {

@@ -32,16 +32,30 @@ use std::time::Instant;
 use glam::Vec3;
 use nrc_scene::{LightSample, Scene, light::Incident, sampling::luminance, spawn_ray};
 
-use super::screen::{GBuffer, Phase, Primary, par_map, stream};
-use super::{FrameInput, PassOutput, PassSpec, PhaseTimes, RenderPass};
+use super::screen::{GBuffer, MAX, Phase, Primary, par_map, stream};
+use super::params::{Key, Params, Value};
+use super::spec::{PassConfig, PassKind, parse_variant};
+use super::frame::{FrameInput, PassOutput, PhaseTimes, RenderPass};
 use crate::path_tracer::{PathStats, PathTracer};
 use crate::reservoir::Reservoir;
 use crate::sampler::PixelSampler;
 use crate::source::RadianceQuery;
 use crate::transport::Vertex;
 
-/// The largest candidate or neighbour count a resampling pass accepts.
-pub const MAX_COUNT: u32 = 1024;
+pub const KIND: PassKind = PassKind {
+    grammar: "restir-di[-biased]",
+    about: "ReSTIR DI at the primary vertex (light-sampler and BSDF candidates by RIS, temporal \
+            and spatial reuse, unbiased 1/Z with a visibility ray per reused reservoir, or \
+            -biased 1/M); the rest of the path traced",
+    method: true,
+    variants: || variants().into_iter().map(|(_, s)| s.into()).collect(),
+    parse: |name| parse_variant(name, &variants(), RestirDiSettings::validate),
+};
+
+fn variants() -> [(&'static str, RestirDiSettings); 2] {
+    let d = RestirDiSettings::default();
+    [("restir-di", d), ("restir-di-biased", RestirDiSettings { biased: true, ..d })]
+}
 
 /// ReSTIR DI's parameters (defaults: Bitterli et al. 2020's interactive settings).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -97,6 +111,41 @@ impl RestirDiSettings {
             return Err("restir-di: at least one candidate (light or BSDF) is needed".into());
         }
         Ok(())
+    }
+}
+
+impl Params for RestirDiSettings {
+    fn visit(&mut self, f: &mut dyn FnMut(&Key, &mut dyn Value)) {
+        let light = Key::new("light", "light-sampler candidates per pixel sample");
+        f(&light.range(0.0, MAX), &mut self.light_candidates);
+        let bsdf = Key::new("bsdf", "BSDF-sampled candidates (a ray each)");
+        f(&bsdf.range(0.0, MAX), &mut self.bsdf_candidates);
+        let (k, radius) = (&mut self.spatial_neighbours, &mut self.spatial_radius);
+        super::screen::visit_reuse(f, k, radius, &mut self.m_cap, &mut self.temporal);
+        f(&Key::new("jitter", "jitter camera rays in the pixel"), &mut self.jitter);
+    }
+}
+
+impl PassConfig for RestirDiSettings {
+    fn kind(&self) -> &'static PassKind {
+        &KIND
+    }
+
+    fn name(&self) -> String {
+        let (base, defaults) = variants()[self.biased as usize];
+        super::params::name(base, self, &defaults)
+    }
+
+    fn build(&self, tracer: &PathTracer) -> Box<dyn RenderPass> {
+        Box::new(RestirDiPass::new(*self, tracer))
+    }
+
+    fn is_stateful(&self) -> bool {
+        true
+    }
+
+    fn params(&self) -> Vec<super::params::Param> {
+        super::params::list(self)
     }
 }
 
@@ -281,7 +330,7 @@ impl RestirDiPass {
 
 impl RenderPass for RestirDiPass {
     fn name(&self) -> String {
-        PassSpec::RestirDi(self.settings).to_string()
+        self.settings.name()
     }
 
     fn reset(&mut self) {

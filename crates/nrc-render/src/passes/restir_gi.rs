@@ -36,8 +36,10 @@ use glam::Vec3;
 use nrc_scene::{Scene, sampling::luminance, spawn_ray};
 
 use super::hash_grid::{CellRule, HashGrid};
-use super::screen::{GBuffer, Phase, Primary, par_map, stream, visible_between};
-use super::{FrameInput, PassOutput, PassSpec, PhaseTimes, RenderPass};
+use super::screen::{GBuffer, MAX, Phase, Primary, par_map, stream, visible_between};
+use super::params::{Key, Params, Value};
+use super::spec::{PassConfig, PassKind, parse_variant};
+use super::frame::{FrameInput, PassOutput, PhaseTimes, RenderPass};
 use crate::nee::next_event;
 use crate::path_tracer::{PathStats, PathTracer};
 use crate::reservoir::Reservoir;
@@ -67,26 +69,86 @@ fn bounded_jacobian(receiver: Vec3, donor: Vec3, y: &GiSample) -> f32 {
 /// Cosine of the largest normal difference between a grid entry's owner and the receiver.
 const GRID_NORMAL_COS: f32 = 0.966; // 15°
 
+pub const KIND: PassKind = PassKind {
+    grammar: "restir-gi[-biased][-nrc], wsrestir-gi[-biased][-nrc]",
+    about: "ReSTIR GI in screen space (restir-gi: screen neighbours) or world space \
+            (wsrestir-gi: a hash grid of cells sized by eq. 11): the reconnection vertex and its \
+            outgoing radiance, shifted with the reconnection Jacobian; -biased: Z = sum M \
+            without visibility rays; -nrc: the reconnection vertex's radiance from the cache",
+    method: true,
+    variants: || variants().into_iter().map(|(_, s)| s.into()).collect(),
+    parse: |name| parse_variant(name, &variants(), RestirGiSettings::validate),
+};
+
+/// Every variant's name and default settings.
+fn variants() -> Vec<(String, RestirGiSettings)> {
+    let mut out = Vec::new();
+    for reuse in [GiReuse::screen(), GiReuse::world()] {
+        for biased in [false, true] {
+            for cache in [false, true] {
+                let set = RestirGiSettings {
+                    reuse,
+                    biased,
+                    cache,
+                    ..Default::default()
+                };
+                out.push((set.base_name(), set));
+            }
+        }
+    }
+    out
+}
+
+/// Where spatial reuse finds its donors, with that kind's parameters.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum GiReuse {
+    /// Screen space (`restir-gi`): neighbours in a disc around the pixel.
+    Screen {
+        /// Spatial neighbours per pixel (0: none).
+        neighbours: u32,
+        /// Radius of the neighbourhood, pixels.
+        radius: f32,
+    },
+    /// World space (`wsrestir-gi`): the previous frame's hash grid.
+    World {
+        /// Samples drawn from the cell (Alg. 2: 3).
+        samples: u32,
+        /// Projected cell size as a fraction of the image width (eq. 11's `s`: 10 %).
+        cell_scale: f32,
+        /// The smallest cell as a fraction of the scene box's smallest extent (1 %).
+        d_min: f32,
+    },
+}
+
+impl GiReuse {
+    /// Screen-space reuse with the defaults (Ouyang et al.: 3 neighbours in 30 pixels).
+    pub fn screen() -> Self {
+        Self::Screen {
+            neighbours: 3,
+            radius: 30.0,
+        }
+    }
+
+    /// World-space reuse with the seed paper's defaults.
+    pub fn world() -> Self {
+        Self::World {
+            samples: 3,
+            cell_scale: 0.1,
+            d_min: 0.01,
+        }
+    }
+}
+
 /// ReSTIR GI's parameters; defaults from Ouyang et al. 2021 and the seed paper.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct RestirGiSettings {
-    /// World space (`wsrestir-gi`): spatial reuse from the hash grid.
-    pub world: bool,
+    /// Screen- or world-space spatial reuse.
+    pub reuse: GiReuse,
     /// The reconnection vertex's radiance from the radiance source (`-nrc`).
     pub cache: bool,
     /// `Z = Σ M`: biased.
     pub biased: bool,
     pub temporal: bool,
-    /// Screen space: spatial neighbours per pixel (0: none).
-    pub spatial_neighbours: u32,
-    /// Screen space: radius of the neighbourhood, pixels.
-    pub spatial_radius: f32,
-    /// World space: samples drawn from the cell (Alg. 2: 3).
-    pub grid_samples: u32,
-    /// World space: projected cell size as a fraction of the image width (eq. 11's `s`: 10 %).
-    pub cell_scale: f32,
-    /// World space: the smallest cell as a fraction of the scene box's smallest extent (1 %).
-    pub d_min: f32,
     /// The history's `M` cap (Ouyang et al.: 30 frames).
     pub m_cap: f32,
     /// Jitter camera rays in the pixel.
@@ -99,15 +161,10 @@ pub struct RestirGiSettings {
 impl Default for RestirGiSettings {
     fn default() -> Self {
         Self {
-            world: false,
+            reuse: GiReuse::screen(),
             cache: false,
             biased: false,
             temporal: true,
-            spatial_neighbours: 3,
-            spatial_radius: 30.0,
-            grid_samples: 3,
-            cell_scale: 0.1,
-            d_min: 0.01,
             m_cap: 30.0,
             jitter: true,
             jacobian: true,
@@ -118,27 +175,105 @@ impl Default for RestirGiSettings {
 impl RestirGiSettings {
     /// Errors for settings that cannot work.
     pub fn validate(&self) -> Result<(), String> {
-        let positive = |x: f32| x > 0.0 && x.is_finite();
-        let max = super::restir_di::MAX_COUNT;
-        if self.spatial_neighbours > max || self.grid_samples > max {
-            return Err(format!("neighbour and sample counts must be at most {max}"));
+        match self.reuse {
+            GiReuse::Screen { neighbours, radius } => {
+                super::screen::validate_reuse(&[neighbours], radius, self.m_cap)
+            }
+            GiReuse::World {
+                samples,
+                cell_scale,
+                d_min,
+            } => {
+                super::screen::validate_reuse(&[samples], 0.0, self.m_cap)?;
+                if !(cell_scale > 0.0 && d_min > 0.0) {
+                    return Err(format!(
+                        "cell scale and d_min must be positive, got {cell_scale} and {d_min}"
+                    ));
+                }
+                Ok(())
+            }
         }
-        if !(self.spatial_radius >= 0.0 && self.spatial_radius.is_finite()) {
-            return Err(format!(
-                "spatial radius must be finite and ≥ 0, got {}",
-                self.spatial_radius
-            ));
+    }
+
+    /// World-space reuse.
+    pub fn is_world(&self) -> bool {
+        matches!(self.reuse, GiReuse::World { .. })
+    }
+
+    /// The variant's name, without parameters.
+    fn base_name(&self) -> String {
+        format!(
+            "{}restir-gi{}{}",
+            if self.is_world() { "ws" } else { "" },
+            if self.biased { "-biased" } else { "" },
+            if self.cache { "-nrc" } else { "" }
+        )
+    }
+}
+
+impl Params for RestirGiSettings {
+    fn visit(&mut self, f: &mut dyn FnMut(&Key, &mut dyn Value)) {
+        match &mut self.reuse {
+            GiReuse::Screen { neighbours, radius } => {
+                let k = Key::new("k", "spatial neighbours per pixel (0: none)");
+                f(&k.range(0.0, MAX), neighbours);
+                let r = Key::new("radius", "radius of the neighbourhood, pixels");
+                f(&r.range(0.0, f64::INFINITY), radius);
+            }
+            GiReuse::World {
+                samples,
+                cell_scale,
+                d_min,
+            } => {
+                let k = Key::new("samples", "samples drawn from the cell (Alg. 2)");
+                f(&k.range(0.0, MAX), samples);
+                let c = Key::new("cell", "projected cell size, fraction of the image width");
+                f(&c.positive(f64::INFINITY), cell_scale);
+                let d = Key::new("dmin", "smallest cell, fraction of the scene's smallest extent");
+                f(&d.positive(f64::INFINITY), d_min);
+            }
         }
-        if !positive(self.m_cap) {
-            return Err(format!("M-cap must be positive, got {}", self.m_cap));
-        }
-        if !positive(self.cell_scale) || !positive(self.d_min) {
-            return Err(format!(
-                "cell scale and d_min must be positive, got {} and {}",
-                self.cell_scale, self.d_min
-            ));
-        }
-        Ok(())
+        let mcap = Key::new("mcap", "the history's M cap, frames");
+        f(&mcap.positive(f64::INFINITY), &mut self.m_cap);
+        f(&Key::new("temporal", "reuse the previous frame's reservoirs"), &mut self.temporal);
+        let jacobian = Key::new("jacobian", "shift W by the reconnection Jacobian (0: biased)");
+        f(&jacobian, &mut self.jacobian);
+        f(&Key::new("jitter", "jitter camera rays in the pixel"), &mut self.jitter);
+    }
+}
+
+impl PassConfig for RestirGiSettings {
+    fn kind(&self) -> &'static PassKind {
+        &KIND
+    }
+
+    fn name(&self) -> String {
+        let base = RestirGiSettings {
+            reuse: match self.reuse {
+                GiReuse::Screen { .. } => GiReuse::screen(),
+                GiReuse::World { .. } => GiReuse::world(),
+            },
+            biased: self.biased,
+            cache: self.cache,
+            ..Default::default()
+        };
+        super::params::name(&self.base_name(), self, &base)
+    }
+
+    fn build(&self, tracer: &PathTracer) -> Box<dyn RenderPass> {
+        Box::new(RestirGiPass::new(*self, tracer))
+    }
+
+    fn is_stateful(&self) -> bool {
+        true
+    }
+
+    fn uses_source(&self) -> bool {
+        self.cache
+    }
+
+    fn params(&self) -> Vec<super::params::Param> {
+        super::params::list(self)
     }
 }
 
@@ -225,6 +360,11 @@ struct Entry {
 struct History {
     g: GBuffer,
     res: Vec<GiReservoir>,
+    /// World space: the frame's hash grid of reservoirs.
+    world: Option<WorldHistory>,
+}
+
+struct WorldHistory {
     grid: HashGrid,
     entries: Vec<Entry>,
     rule: CellRule,
@@ -260,7 +400,8 @@ impl RestirGiPass {
 
     /// Whether `v` is rough enough to be the shading vertex.
     fn is_rough(&self, v: &Vertex) -> bool {
-        !v.bsdf.is_delta() && (!self.settings.world || v.bsdf.roughness() >= SPECULAR_ROUGHNESS)
+        !v.bsdf.is_delta()
+            && (!self.settings.is_world() || v.bsdf.roughness() >= SPECULAR_ROUGHNESS)
     }
 
     /// The trace phase of one pixel sample: the path to `x₁`, NEE there, the initial
@@ -283,7 +424,7 @@ impl RestirGiPass {
         // The path to the first rough vertex.
         let (mut v, mut throughput, mut segments) = (p.v, Vec3::ONE, 1u32);
         if !self.is_rough(&v) {
-            if !self.settings.world {
+            if !self.settings.is_world() {
                 out.radiance +=
                     self.tracer
                         .reflected(scene, &v.si, v.wo_world, 1, &mut s, &mut out.stats);
@@ -368,7 +509,7 @@ impl RestirGiPass {
                         // x₁ it is right only when depth is unlimited (Russian roulette alone).
                         let unlimited = self.tracer.segment_limit() == u32::MAX;
                         out.second = second
-                            .filter(|_| self.settings.world && unlimited && segments == 1)
+                            .filter(|_| self.settings.is_world() && unlimited && segments == 1)
                             .map(|y3| (y, y3));
                     }
                     shading.candidate = Some((sample, bs.pdf));
@@ -471,7 +612,7 @@ impl RestirGiPass {
 
 impl RenderPass for RestirGiPass {
     fn name(&self) -> String {
-        PassSpec::RestirGi(self.settings).to_string()
+        self.settings.name()
     }
 
     fn reset(&mut self) {
@@ -592,14 +733,14 @@ impl RenderPass for RestirGiPass {
             };
             let mut s = stream(seed, i, Phase::Spatial);
             let mut others: Vec<(GiReservoir, &Vertex)> = Vec::new();
-            if set.world {
-                if let Some(h) = &history {
+            if let GiReuse::World { samples, .. } = set.reuse {
+                if let Some(h) = history.as_ref().and_then(|h| h.world.as_ref()) {
                     let jitter =
                         Vec3::new(s.next_1d(), s.next_1d(), s.next_1d()) - Vec3::splat(0.5);
                     let cell = h.grid.find(h.rule.key(sh.v.si.p, sh.v.si.ns, jitter));
                     let count = cell.len();
-                    if count > 0 && set.grid_samples > 0 {
-                        let step = count.div_ceil(set.grid_samples as usize).max(1);
+                    if count > 0 && samples > 0 {
+                        let step = count.div_ceil(samples as usize).max(1);
                         let off = ((s.next_1d() * step as f32) as usize).min(step - 1);
                         for k in (0..count).step_by(step) {
                             let e = &h.entries[cell[(k + off) % count] as usize];
@@ -612,18 +753,12 @@ impl RenderPass for RestirGiPass {
                         }
                     }
                 }
-            } else if set.spatial_neighbours > 0
+            } else if let GiReuse::Screen { neighbours, radius } = set.reuse
+                && neighbours > 0
                 && let Some(p) = g.primary[i].as_ref().filter(|_| sh.primary)
             {
                 let mut near = Vec::new();
-                g.neighbours(
-                    i,
-                    p,
-                    set.spatial_neighbours,
-                    set.spatial_radius,
-                    &mut s,
-                    &mut near,
-                );
+                g.neighbours(i, p, neighbours, radius, &mut s, &mut near);
                 for q in near {
                     if let Some(qs) = traced[q].shading.as_ref().filter(|qs| qs.primary) {
                         others.push((temporal[q].0, &qs.v));
@@ -662,42 +797,63 @@ impl RenderPass for RestirGiPass {
         // The grid for the next frame: temporal reservoirs keyed at x₁, second samples at x₂
         // (its build is counted in the spatial phase).
         let t0 = Instant::now();
+        let world = match set.reuse {
+            GiReuse::World {
+                cell_scale, d_min, ..
+            } => Some(Self::world_history(input, &traced, &temporal, cell_scale, d_min)),
+            GiReuse::Screen { .. } => None,
+        };
+        times.spatial_ms += t0.elapsed().as_secs_f64() * 1e3;
+
+        let (out, res) = super::screen::assemble(&g, input, shaded, times);
+        self.history = Some(History { g, res, world });
+        out
+    }
+}
+
+impl RestirGiPass {
+    /// World space: the grid for the next frame, temporal reservoirs keyed at x₁ and second
+    /// samples at x₂. Empty reservoirs go in too: a donor that found nothing still counts in Z
+    /// (leaving them out made reuse select only lucky donors and brightened dark regions 2×).
+    fn world_history(
+        input: &FrameInput,
+        traced: &[Traced],
+        temporal: &[(GiReservoir, PathStats)],
+        cell_scale: f32,
+        d_min: f32,
+    ) -> WorldHistory {
         let rule = CellRule::new(
             input.camera,
             input.width,
             input.height,
-            &scene.bounds(),
-            set.cell_scale,
-            set.d_min,
+            &input.scene.bounds(),
+            cell_scale,
+            d_min,
         );
         let mut entries = Vec::new();
-        // Empty reservoirs go in too: a donor that found nothing still counts in Z (leaving
-        // them out made reuse select only lucky donors and brightened dark regions 2×).
-        if set.world {
-            for (i, t) in traced.iter().enumerate() {
-                if let Some(sh) = &t.shading {
-                    entries.push(Entry {
-                        owner: sh.v,
-                        res: temporal[i].0,
-                        primary: sh.primary,
-                    });
-                }
-                if let Some((owner, sample)) = t.second {
-                    let mut res = GiReservoir::new();
-                    match sample {
-                        Some((y, pdf)) => {
-                            let target = target_at(&owner, &y);
-                            res.update(y, target / pdf, target, 0.5);
-                        }
-                        None => res.m = 1.0,
+        for (i, t) in traced.iter().enumerate() {
+            if let Some(sh) = &t.shading {
+                entries.push(Entry {
+                    owner: sh.v,
+                    res: temporal[i].0,
+                    primary: sh.primary,
+                });
+            }
+            if let Some((owner, sample)) = t.second {
+                let mut res = GiReservoir::new();
+                match sample {
+                    Some((y, pdf)) => {
+                        let target = target_at(&owner, &y);
+                        res.update(y, target / pdf, target, 0.5);
                     }
-                    res.finish(1.0);
-                    entries.push(Entry {
-                        owner,
-                        res,
-                        primary: false,
-                    });
+                    None => res.m = 1.0,
                 }
+                res.finish(1.0);
+                entries.push(Entry {
+                    owner,
+                    res,
+                    primary: false,
+                });
             }
         }
         let keys: Vec<u64> = entries
@@ -705,16 +861,10 @@ impl RenderPass for RestirGiPass {
             .map(|e| rule.key(e.owner.si.p, e.owner.si.ns, Vec3::ZERO))
             .collect();
         let grid = HashGrid::build(&keys);
-        times.spatial_ms += t0.elapsed().as_secs_f64() * 1e3;
-
-        let (out, res) = super::screen::assemble(&g, input, shaded, times);
-        self.history = Some(History {
-            g,
-            res,
+        WorldHistory {
             grid,
             entries,
             rule,
-        });
-        out
+        }
     }
 }

@@ -11,7 +11,8 @@ use glam::{Vec2, Vec3};
 use nrc_scene::{Camera, Ray, Scene};
 use rayon::prelude::*;
 
-use super::{FrameInput, PassOutput, PassStats, PhaseTimes};
+use super::frame::{FrameInput, PassOutput, PassStats, PhaseTimes};
+use super::params::{Key, Value};
 use crate::path_tracer::PathStats;
 use crate::reservoir::Reservoir;
 use crate::sampler::PixelSampler;
@@ -21,6 +22,11 @@ use crate::transport::Vertex;
 pub const NORMAL_COS: f32 = 0.906; // 25°
 /// Largest relative difference of two vertices' camera distances that may share samples.
 pub const DEPTH_TOLERANCE: f32 = 0.1;
+
+/// The largest candidate or neighbour count a resampling pass accepts.
+pub const MAX_COUNT: u32 = 1024;
+/// [`MAX_COUNT`] as a parameter's bound.
+pub const MAX: f64 = MAX_COUNT as f64;
 
 /// Stream ids of a pixel sample's random numbers, one per phase of a frame, so that a phase's
 /// numbers do not depend on how many another drew.
@@ -34,6 +40,14 @@ pub enum Phase {
     Shading = 4,
     Path = 5,
     Extra = 6,
+    /// The choice among a pixel's initial candidates (resampled importance sampling).
+    Resample = 7,
+    /// Lookups of the radiance a candidate reflects (probes with stochastic offsets).
+    SourceLookup = 8,
+    /// The history's radiance asked again toward its owner.
+    HistoryRefresh = 9,
+    /// The near-specular recursion at shading (DDGI resampling's eqs. 7–8).
+    Footprint = 10,
 }
 
 /// The random stream of pixel sample `i` in `phase` of the frame seeded `seed`.
@@ -324,10 +338,34 @@ pub fn assemble<R>(
     (out, states)
 }
 
+/// The keys of the screen-space reuse every resampling pass of the primary vertex shares:
+/// `k` neighbours in a disc of `radius` pixels, the history's `mcap`, and `temporal`.
+pub(super) fn visit_reuse(
+    f: &mut dyn FnMut(&Key, &mut dyn Value),
+    neighbours: &mut u32,
+    radius: &mut f32,
+    m_cap: &mut f32,
+    temporal: &mut bool,
+) {
+    let k = Key::new("k", "spatial neighbours (0: no spatial reuse)");
+    f(&k.range(0.0, MAX), neighbours);
+    let r = Key::new("radius", "radius of the spatial neighbourhood, pixels");
+    f(&r.range(0.0, f64::INFINITY), radius);
+    let mcap = Key::new(
+        "mcap",
+        "the history's M capped at this multiple of the candidates",
+    );
+    f(&mcap.positive(f64::INFINITY), m_cap);
+    f(
+        &Key::new("temporal", "reuse the previous frame's reservoirs"),
+        temporal,
+    );
+}
+
 /// The bounds every resampling pass puts on its reuse settings (`counts`: its candidate and
 /// neighbour counts; absurd values would be loops per pixel).
 pub(super) fn validate_reuse(counts: &[u32], radius: f32, m_cap: f32) -> Result<(), String> {
-    let max = super::restir_di::MAX_COUNT;
+    let max = MAX_COUNT;
     if counts.iter().any(|&c| c > max) {
         return Err(format!(
             "candidate and neighbour counts must be at most {max}"

@@ -29,6 +29,8 @@
 //! variance grows without bound for queries near such edges; the regression's loss sees the
 //! occasional large target.
 
+use std::sync::atomic::{AtomicU64, Ordering};
+
 use glam::Vec3;
 use nrc_render::{PathStats, PixelSampler};
 use nrc_scene::{SurfaceInteraction, bsdf::Bsdf, sampling::Frame, spawn_ray_between};
@@ -71,6 +73,7 @@ fn connect(
     path: &LightPath,
     max_j: u32,
     stats: &mut PathStats,
+    skipped: &AtomicU64,
 ) -> Vec3 {
     let scene = ctx.scene;
     let mut sum = Vec3::ZERO;
@@ -82,7 +85,9 @@ fn connect(
         let wi = x.frame.to_local(inc.wi);
         let fx = x.bsdf.eval(x.wo, wi) * wi.z.abs();
         let c = fx * inc.li / inc.pdf;
-        if c.max_element() > 0.0 && c.is_finite() {
+        if !c.is_finite() {
+            skipped.fetch_add(1, Ordering::Relaxed);
+        } else if c.max_element() > 0.0 {
             stats.shadow_rays += 1;
             if !scene.occluded(&ls.shadow_ray(x.si.p, x.si.ng, &inc)) {
                 sum += c;
@@ -105,7 +110,9 @@ fn connect(
         let fy = y.bsdf.eval(y.frame.to_local(-w), y.wo_local);
         let cos_y = y.si.ng.dot(w).abs();
         let c = fx * fy * y.beta * (cos_y / dist2);
-        if c.max_element() > 0.0 && c.is_finite() {
+        if !c.is_finite() {
+            skipped.fetch_add(1, Ordering::Relaxed);
+        } else if c.max_element() > 0.0 {
             stats.shadow_rays += 1;
             if !scene.occluded(&spawn_ray_between(x.si.p, x.si.ng, y.si.p, y.si.ng)) {
                 sum += c;
@@ -138,6 +145,7 @@ impl Producer for BidirectionalProducer {
             Some(max_j)
         };
         // Query i: start i mod len, light path from stream (i, 0).
+        let skipped = AtomicU64::new(0);
         let rounds = fill_rounds(budget, |i| {
             let mut ps = PathStats::default();
             ps.closest_rays += 1;
@@ -162,13 +170,14 @@ impl Producer for BidirectionalProducer {
                 Some(max_j) => {
                     let mut sampler = PixelSampler::new(seed, i as u64, 0);
                     let path = trace_light_path(scene, &ctx.tracer, max_j, &mut sampler, &mut ps);
-                    connect(ctx, &x, &path, max_j, &mut ps)
+                    connect(ctx, &x, &path, max_j, &mut ps, &skipped)
                 }
             };
             (vec![(ctx.queries.query(&si, &bsdf), target)], ps.rays())
         });
         stats.paths = rounds.tried as u64;
         stats.rays = rounds.rays;
+        stats.skipped = skipped.into_inner();
         let mut out = Produced::default();
         push_records(
             &mut out.batch,

@@ -207,7 +207,16 @@ impl SppcProducer {
     }
 
     /// The contributions `(ball, f β)` of one photon hit to the balls containing it.
-    fn gather(&self, bvh: &Bvh2, v: &LightVertex, normal_reject: bool, out: &mut Vec<(u32, Vec3)>) {
+    /// The balls `v` falls in, with its contributions; returns how many were NaN or infinite
+    /// (left out).
+    fn gather(
+        &self,
+        bvh: &Bvh2,
+        v: &LightVertex,
+        normal_reject: bool,
+        out: &mut Vec<(u32, Vec3)>,
+    ) -> u64 {
+        let mut skipped = 0;
         let p = v.si.p;
         bvh.point_traverse(Vec3A::from(p), |bvh, node_index| {
             let node = &bvh.nodes[node_index as usize];
@@ -222,12 +231,15 @@ impl SppcProducer {
                 }
                 let f = ball.bsdf.eval(ball.wo_local, ball.frame.to_local(v.si.wo));
                 let c = f * v.beta;
-                if c.max_element() > 0.0 && c.is_finite() {
+                if !c.is_finite() {
+                    skipped += 1;
+                } else if c.max_element() > 0.0 {
                     out.push((b, c));
                 }
             }
             true
         });
+        skipped
     }
 }
 
@@ -311,7 +323,9 @@ impl Producer for SppcProducer {
         let max_vertices = light_vertex_limit(&ctx.tracer, 1);
         let normal_reject = self.normal_reject;
         let this = &*self;
-        let gathered: Vec<(Vec<(u32, Vec3)>, u64)> = (0..n_photons)
+        // Per photon: its (ball, contribution) pairs, its rays, its contributions skipped.
+        type Gathered = (Vec<(u32, Vec3)>, u64, u64);
+        let gathered: Vec<Gathered> = (0..n_photons)
             .into_par_iter()
             .map(|i| {
                 let mut sampler = PixelSampler::new(seed, i as u64, 0);
@@ -319,17 +333,19 @@ impl Producer for SppcProducer {
                 let path =
                     trace_light_path(ctx.scene, &ctx.tracer, max_vertices, &mut sampler, &mut ps);
                 let mut out = Vec::new();
+                let mut skipped = 0;
                 for v in path.vertices.iter().filter(|v| !v.bsdf.is_delta()) {
-                    this.gather(&bvh, v, normal_reject, &mut out);
+                    skipped += this.gather(&bvh, v, normal_reject, &mut out);
                 }
-                (out, ps.rays())
+                (out, ps.rays(), skipped)
             })
             .collect();
         stats.paths += n_photons as u64;
         let mut count = vec![0u32; self.balls.len()];
         let mut flux = vec![Vec3::ZERO; self.balls.len()];
-        for (contributions, rays) in gathered {
+        for (contributions, rays, skipped) in gathered {
             stats.rays += rays;
+            stats.skipped += skipped;
             for (b, c) in contributions {
                 count[b as usize] += 1;
                 flux[b as usize] += c;

@@ -1,0 +1,151 @@
+//! What every pass shares: a frame's input, its output and statistics, the [`RenderPass`]
+//! trait, and [`run`], one frame of a pass with its radiance source.
+
+use std::time::Instant;
+
+use glam::Vec3;
+use nrc_scene::{Camera, Image, Scene};
+
+use crate::source::{RadianceQuery, RadianceSource};
+
+/// Where an inference path ended in the source: the vertex and the point the segment reaching
+/// it came from (the next frame's training queries re-enter along it).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TerminationPoint {
+    pub from: Vec3,
+    pub to: Vec3,
+}
+
+/// What a pass renders this frame.
+#[derive(Clone, Copy, Debug)]
+pub struct FrameInput<'a> {
+    pub scene: &'a Scene,
+    pub camera: &'a Camera,
+    pub width: u32,
+    pub height: u32,
+    /// Samples per pixel, at least 1.
+    pub spp: u32,
+    /// Seed of the frame's random streams: the image is a function of it alone, whatever the
+    /// thread count.
+    pub seed: u64,
+}
+
+/// What a pass counted in a frame.
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
+pub struct PassStats {
+    /// Camera paths traced (pixels × samples).
+    pub paths: u64,
+    /// Rays traced (closest-hit and shadow).
+    pub rays: u64,
+    /// Queries sent to the radiance source.
+    pub queries: u64,
+    /// Samples whose value was NaN or infinite (counted as black).
+    pub invalid_samples: u64,
+    /// Milliseconds in the trace phase.
+    pub trace_ms: f64,
+    /// Milliseconds in the radiance source's call.
+    pub cache_ms: f64,
+    /// The resampling passes' phases (zero for the others).
+    pub phases: PhaseTimes,
+}
+
+/// Milliseconds per phase of a resampling pass's frame.
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
+pub struct PhaseTimes {
+    /// The probe volume's update (its rays traced and blended), for the DDGI passes.
+    pub probes_ms: f64,
+    /// Camera rays and initial candidates.
+    pub candidates_ms: f64,
+    pub temporal_ms: f64,
+    pub spatial_ms: f64,
+    /// Final visibility, shading and the rest of the path.
+    pub shading_ms: f64,
+}
+
+/// A rendered frame.
+#[derive(Clone, Debug)]
+pub struct PassOutput {
+    /// Per-pixel mean radiance.
+    pub image: Image,
+    /// Per-pixel sample variance of one sample's estimate, where the pass computes it.
+    pub variance: Option<Image>,
+    /// Where paths ended in the source (the next frame's training-query prediction).
+    pub terminations: Vec<TerminationPoint>,
+    pub stats: PassStats,
+}
+
+/// An inference pass with its state across frames (see the module documentation).
+pub trait RenderPass: Send {
+    /// The pass's canonical name (parses back to its spec).
+    fn name(&self) -> String;
+
+    /// Per-frame upkeep before tracing. Default: nothing.
+    fn prepare(&mut self, _input: &FrameInput) {}
+
+    /// Forgets the state kept across frames (history, reservoirs), as at the start of an
+    /// independent run. Default: nothing (stateless passes).
+    fn reset(&mut self) {}
+
+    /// Traces the frame's paths; returns the queries the radiance source must answer.
+    fn trace(&mut self, input: &FrameInput) -> Vec<RadianceQuery>;
+
+    /// Combines the answers (one per query of [`RenderPass::trace`], in order) into the frame.
+    fn resolve(&mut self, input: &FrameInput, answers: &[Vec3]) -> PassOutput;
+}
+
+/// Consecutive frames of one size a pass has rendered since its state was last reset: how
+/// many frames its history holds (a resampling pass's history is of the frame's size, and is
+/// dropped at a frame of another).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Warmth {
+    size: (u32, u32),
+    frames: u32,
+}
+
+impl Warmth {
+    /// Counts a frame of `input`'s size; returns how many frames of that size came before it.
+    pub fn count(&mut self, input: &FrameInput) -> u32 {
+        let size = (input.width, input.height);
+        let before = if size == self.size { self.frames } else { 0 };
+        *self = Self {
+            size,
+            frames: before + 1,
+        };
+        before
+    }
+
+    /// Forgets every frame (the pass's state was reset).
+    pub fn reset(&mut self) {
+        *self = Self::default();
+    }
+}
+
+/// One frame of `pass`: prepare, trace, one batch call of `source`, resolve; the trace and
+/// source phases timed in the output's statistics.
+pub fn run(
+    pass: &mut dyn RenderPass,
+    input: &FrameInput,
+    source: &dyn RadianceSource,
+) -> PassOutput {
+    pass.prepare(input);
+    let t0 = Instant::now();
+    let queries = pass.trace(input);
+    let trace_ms = t0.elapsed().as_secs_f64() * 1e3;
+    let t1 = Instant::now();
+    let answers = if queries.is_empty() {
+        Vec::new()
+    } else {
+        source.radiance(&queries)
+    };
+    assert_eq!(
+        answers.len(),
+        queries.len(),
+        "a radiance source answers every query"
+    );
+    let cache_ms = t1.elapsed().as_secs_f64() * 1e3;
+    let mut out = pass.resolve(input, &answers);
+    out.stats.trace_ms = trace_ms;
+    out.stats.cache_ms = cache_ms;
+    out.stats.queries = queries.len() as u64;
+    out
+}
