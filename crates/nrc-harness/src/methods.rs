@@ -22,8 +22,8 @@ use nrc_render::passes::{
 };
 use nrc_render::{LightStrategy, PassSpec, PathTracer, ZeroSource};
 use nrc_scene::{Camera, Scene};
+use nrc_train::mix::{PRODUCER_NAMES, ProducerOptions, ProducerSpec};
 use nrc_train::online::{OnlineSettings, OnlineTrainer};
-use nrc_train::producer::{PRODUCER_NAMES, ProducerOptions, ProducerSpec};
 use nrc_train::query::QueryMaker;
 
 use crate::budget::{Estimate, Method};

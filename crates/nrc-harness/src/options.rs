@@ -10,7 +10,7 @@ use glam::Vec3;
 use nrc_cache::{CacheConfig, CacheDevice};
 use nrc_render::{LightStrategy, PathTracer, Termination};
 use nrc_scene::{Camera, Scene};
-use nrc_train::producer::ProducerOptions;
+use nrc_train::mix::ProducerOptions;
 
 use crate::methods::CacheMethodSettings;
 

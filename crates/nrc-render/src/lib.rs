@@ -26,12 +26,14 @@ pub mod light_path;
 pub mod nee;
 pub mod passes;
 pub mod path_tracer;
+pub mod query;
 pub mod render;
 pub mod reservoir;
 pub mod sampler;
 pub mod source;
 pub mod spread;
 pub mod tiles;
+pub mod tracer;
 pub mod transport;
 
 pub use passes::{FrameInput, PassOutput, PassSpec, PassStats, RenderPass, Termination};

@@ -9,8 +9,8 @@ use nrc_scene::{
     sampling::{Frame, power_heuristic},
 };
 
-use crate::path_tracer::PathStats;
 use crate::sampler::PixelSampler;
+use crate::tracer::PathStats;
 
 /// The MIS weight (power heuristic) of emission found at `si` by a ray of length `dist` that
 /// BSDF sampling at the previous vertex chose with solid-angle density `prev_pdf`, against NEE

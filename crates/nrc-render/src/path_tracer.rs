@@ -15,79 +15,10 @@ use glam::Vec3;
 use nrc_scene::{Ray, Scene, SurfaceInteraction};
 
 use crate::sampler::PixelSampler;
+pub use crate::tracer::{LightStrategy, PathStats, PathTracer};
 use crate::transport::{Arrival, PathWalk, Vertex};
 
-/// Which estimators of direct illumination a path uses.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub enum LightStrategy {
-    /// NEE and BSDF sampling combined by multiple importance sampling (the default).
-    #[default]
-    Mis,
-    /// BSDF sampling alone: emitters count only when a scattered ray hits them (NEE off).
-    BsdfOnly,
-    /// NEE alone: emitters hit by rays scattered from non-delta surfaces are ignored (they
-    /// are accounted for by the light sample). Emitters seen by the camera or through delta
-    /// scattering still count, as no light sample can reach them.
-    LightOnly,
-}
-
-/// Settings of the path tracer (per-path behaviour, not the image).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct PathTracer {
-    /// Maximum number of path segments, Mitsuba's convention: 1 = emitters seen directly,
-    /// 2 = plus direct illumination, ... `0` or negative: unlimited (Russian roulette ends
-    /// paths).
-    pub max_depth: i32,
-    /// Depth (in scattering events) from which Russian roulette may end a path; Mitsuba's
-    /// `rr_depth` (default 5).
-    pub rr_depth: u32,
-    /// Estimators of direct illumination.
-    pub strategy: LightStrategy,
-}
-
-impl Default for PathTracer {
-    fn default() -> Self {
-        Self {
-            max_depth: -1,
-            rr_depth: 5,
-            strategy: LightStrategy::Mis,
-        }
-    }
-}
-
-/// Counters a path adds to (for rays/s statistics).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct PathStats {
-    /// Closest-hit rays traced.
-    pub closest_rays: u64,
-    /// Shadow (occlusion) rays traced.
-    pub shadow_rays: u64,
-}
-
-impl PathStats {
-    /// All rays traced.
-    pub fn rays(&self) -> u64 {
-        self.closest_rays + self.shadow_rays
-    }
-
-    /// Adds another set of counters to this one.
-    pub fn add(&mut self, o: &PathStats) {
-        self.closest_rays += o.closest_rays;
-        self.shadow_rays += o.shadow_rays;
-    }
-}
-
 impl PathTracer {
-    /// The maximum number of segments as an unsigned bound (`u32::MAX` for unlimited): the
-    /// one place where `max_depth` is interpreted.
-    pub fn segment_limit(&self) -> u32 {
-        if self.max_depth <= 0 {
-            u32::MAX
-        } else {
-            self.max_depth as u32
-        }
-    }
-
     /// One sample of the radiance arriving at `ray.o` along `-ray.d`: the estimate of one
     /// path started with `ray`. Allocation-free; the random numbers come from `sampler`.
     ///

@@ -19,9 +19,9 @@ use glam::Vec3;
 use nrc_scene::{Ray, Scene, SurfaceInteraction, bsdf::Bsdf, sampling::Frame, spawn_ray};
 
 use crate::nee::{emission_mis_weight, environment_mis_weight, next_event};
-use crate::path_tracer::{LightStrategy, PathStats, PathTracer};
+use crate::query::RadianceQuery;
 use crate::sampler::PixelSampler;
-use crate::source::RadianceQuery;
+use crate::tracer::{LightStrategy, PathStats, PathTracer};
 
 /// A surface vertex of a path, with its BSDF in its shading frame.
 #[derive(Clone, Copy, Debug)]

@@ -258,13 +258,6 @@ pub struct AnimatedScene {
 }
 
 impl AnimatedScene {
-    /// Loads a `.gltf` or `.glb` with its animations (a scene without any has none: every
-    /// time gives the rest pose).
-    pub fn load(path: &std::path::Path) -> crate::error::Result<Self> {
-        let (rest, animation) = crate::gltf_load::load_animated(path)?;
-        Ok(Self { rest, animation })
-    }
-
     /// Whether anything moves.
     pub fn is_animated(&self) -> bool {
         !self.animation.channels.is_empty()

@@ -19,9 +19,11 @@ mod fresnel;
 mod layer_albedo;
 mod metallic_roughness;
 mod microfacet;
+mod sample;
 
 pub use fresnel::{f0_from_ior, fresnel_dielectric, reflect, refract, schlick};
 pub use microfacet::{ALPHA_DELTA, Ggx};
+pub use sample::BsdfSample;
 
 use crate::sampling::{cosine_hemisphere_pdf, sample_cosine_hemisphere};
 use glam::{Vec2, Vec3};
@@ -59,22 +61,6 @@ impl Default for PbrParams {
             specular_color: Vec3::ONE,
         }
     }
-}
-
-/// One sampled scattering direction.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct BsdfSample {
-    /// Sampled direction (local frame), pointing away from the surface.
-    pub wi: Vec3,
-    /// Throughput weight: `f(wo, wi) |cos θi| / pdf(wo, wi)` for non-delta samples; for a
-    /// delta sample, the delta lobe's weight divided by the probability of choosing it.
-    pub weight: Vec3,
-    /// Solid-angle density of `wi` for non-delta samples (equal to `Bsdf::pdf(wo, wi)`);
-    /// for delta samples the discrete probability of the chosen delta event (MIS must give
-    /// delta samples weight 1).
-    pub pdf: f32,
-    /// The sample came from a Dirac delta lobe (mirror or smooth refraction).
-    pub delta: bool,
 }
 
 /// Surface scattering model at one point. A closed set of variants; see the module docs for

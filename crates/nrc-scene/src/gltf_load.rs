@@ -14,7 +14,9 @@ use glam::{Mat3, Mat4, Quat, Vec2, Vec3, Vec4};
 use gltf::accessor::{DataType, Dimensions};
 use gltf::mesh::Mode;
 
-use crate::animation::{Animation, Binding, Channel, Interpolation, Local, Property};
+use crate::animation::{
+    AnimatedScene, Animation, Binding, Channel, Interpolation, Local, Property,
+};
 use crate::camera::Camera;
 use crate::error::{Result, SceneError};
 use crate::light::{PunctualKind, PunctualLight};
@@ -1168,6 +1170,22 @@ fn image_texels(data: &gltf::image::Data, srgb: bool) -> Option<Vec<Vec4>> {
         .map(|t| if t.is_finite() { t } else { Vec4::ZERO })
         .collect();
     Some(texels)
+}
+
+impl Scene {
+    /// Loads a glTF 2.0 scene (`.gltf` with its buffers and images, or `.glb`).
+    pub fn load(path: &Path) -> Result<Scene> {
+        load(path)
+    }
+}
+
+impl AnimatedScene {
+    /// Loads a `.gltf` or `.glb` with its animations (a scene without any has none: every
+    /// time gives the rest pose).
+    pub fn load(path: &Path) -> Result<Self> {
+        let (rest, animation) = load_animated(path)?;
+        Ok(Self { rest, animation })
+    }
 }
 
 #[cfg(test)]

@@ -2,7 +2,7 @@
 //! materials, textures, lights, camera and background, and the ray queries on them.
 
 use std::fmt;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use glam::{Vec2, Vec3, Vec4};
 
@@ -162,11 +162,6 @@ impl fmt::Display for SceneSummary {
 }
 
 impl Scene {
-    /// Loads a glTF 2.0 scene (`.gltf` with its buffers and images, or `.glb`).
-    pub fn load(path: &Path) -> Result<Scene> {
-        crate::gltf_load::load(path)
-    }
-
     /// Builds a scene from world-space meshes: validates indices and positions, drops
     /// zero-area triangles (counted in the summary), builds the BVH and the light sampler.
     pub fn from_description(desc: SceneDescription) -> Result<Scene> {

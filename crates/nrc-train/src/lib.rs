@@ -17,6 +17,7 @@
 //! [`nrc_cache::CacheQuery`]. The inference passes, the path-vertex step, light paths and the
 //! area-spread heuristic live in [`nrc_render`].
 
+pub mod mix;
 pub mod online;
 pub mod producer;
 pub mod producers;
@@ -24,7 +25,8 @@ pub mod query;
 pub mod source;
 pub mod starts;
 
+pub use mix::ProducerSpec;
 pub use online::{FrameStats, OnlineSettings, OnlineTrainer};
-pub use producer::{Produced, Producer, ProducerContext, ProducerSpec};
+pub use producer::{Produced, Producer, ProducerContext};
 pub use query::QueryMaker;
 pub use source::CacheSource;

@@ -9,7 +9,8 @@ use nrc_render::sampler::Stream;
 use nrc_render::{PathTracer, PixelSampler, pass_seed};
 use nrc_scene::{Camera, Scene};
 
-use crate::producer::{ProducerContext, ProducerMix, ProducerOptions, ProducerSpec, ProducerStats};
+use crate::mix::{ProducerMix, ProducerOptions, ProducerSpec};
+use crate::producer::{ProducerContext, ProducerStats};
 use crate::query::QueryMaker;
 use crate::source::CacheSource;
 use crate::starts::{self, TerminationPoint};

@@ -6,9 +6,9 @@
 //! `conductor_fresnel`). Below [`ALPHA_DELTA`] the lobe is a perfect mirror.
 //! Directions are local with `wo.z > 0` (the caller mirrors two-sided lookups).
 
-use super::BsdfSample;
 use super::fresnel::schlick;
 use super::microfacet::{ALPHA_DELTA, Ggx};
+use super::sample::BsdfSample;
 use glam::{Vec2, Vec3};
 
 #[inline]

@@ -19,9 +19,9 @@
 //! materials) multiplies transmission only. An index within 1e-4 of 1 is index-matched: the
 //! interface is invisible and transmits straight through (a delta pass-through).
 
-use super::BsdfSample;
 use super::fresnel::{fresnel_dielectric, reflect, refract};
 use super::microfacet::{ALPHA_DELTA, Ggx};
+use super::sample::BsdfSample;
 use glam::{Vec2, Vec3};
 
 #[inline]

@@ -28,11 +28,11 @@
 //! Reflection lobes are two-sided (a direction below the surface sees the mirrored
 //! configuration); the transmission lobe uses the side of `wo`.
 
-use super::BsdfSample;
 use super::dielectric::{half_vector, refraction_jacobian};
 use super::fresnel::{f0_from_ior, refract, schlick};
 use super::layer_albedo;
 use super::microfacet::{ALPHA_DELTA, Ggx};
+use super::sample::BsdfSample;
 use crate::sampling::{cosine_hemisphere_pdf, luminance, sample_cosine_hemisphere};
 use glam::{Vec2, Vec3};
 use std::f32::consts::FRAC_1_PI;

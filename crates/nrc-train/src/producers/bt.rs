@@ -37,8 +37,9 @@ use nrc_scene::{SurfaceInteraction, bsdf::Bsdf, sampling::Frame, spawn_ray_betwe
 
 use nrc_render::light_path::{LightPath, light_vertex_limit, trace_light_path};
 
-use super::lt::{fill_rounds, push_records};
-use crate::producer::{Produced, Producer, ProducerContext, ProducerStats};
+use crate::producer::{
+    Produced, Producer, ProducerContext, ProducerStats, fill_rounds, push_records,
+};
 
 /// The bidirectional-training producer: one record per camera primary hit. It has no
 /// settings (depth and Russian roulette come from the context's tracer).

@@ -23,7 +23,7 @@
 //! The light paths come from [`nrc_render::light_path`].
 
 use glam::Vec3;
-use nrc_cache::{CacheQuery, TrainingBatch};
+use nrc_cache::TrainingBatch;
 use nrc_render::light_path::{light_vertex_limit, trace_light_path};
 use nrc_render::{LightStrategy, PathStats, PathTracer, PixelSampler};
 use nrc_scene::{
@@ -32,13 +32,10 @@ use nrc_scene::{
     bsdf::Bsdf,
     sampling::{Frame, sample_cosine_hemisphere, sample_uniform_triangle},
 };
-use rayon::prelude::*;
 
-use crate::producer::{Produced, Producer, ProducerContext, ProducerStats};
-
-/// Items produced per parallel round (each index has its own random stream, so the result does
-/// not depend on the thread count).
-pub(crate) const ROUND: usize = 1024;
+use crate::producer::{
+    Produced, Producer, ProducerContext, ProducerStats, Rounds, fill_rounds, push_records,
+};
 
 /// The light-training producer.
 #[derive(Clone, Debug)]
@@ -98,9 +95,6 @@ impl LightProducer {
         (budget - surface - camera, surface, camera)
     }
 }
-
-/// One training record before filtering.
-type Record = (CacheQuery, Vec3);
 
 impl Producer for LightProducer {
     fn name(&self) -> &str {
@@ -198,70 +192,6 @@ impl Producer for LightProducer {
         }
         Produced { batch, stats }
     }
-}
-
-/// Appends records with finite, non-negative targets; counts the others as dropped.
-pub(crate) fn push_records(
-    batch: &mut TrainingBatch,
-    stats: &mut ProducerStats,
-    records: impl Iterator<Item = Record>,
-) {
-    for (q, t) in records {
-        if t.is_finite() && t.min_element() >= 0.0 {
-            batch.queries.push(q);
-            batch.targets.push(t.to_array());
-        } else {
-            stats.dropped += 1;
-        }
-    }
-}
-
-/// What [`fill_rounds`] collected.
-#[derive(Debug)]
-pub(crate) struct Rounds<T> {
-    /// The items, in index order.
-    pub items: Vec<T>,
-    /// Indices tried.
-    pub tried: usize,
-    /// Rays traced.
-    pub rays: u64,
-}
-
-impl<T> Default for Rounds<T> {
-    fn default() -> Self {
-        Self {
-            items: Vec::new(),
-            tried: 0,
-            rays: 0,
-        }
-    }
-}
-
-/// Calls `f(i)` for `i = 0, 1, ...` in parallel rounds of [`ROUND`] indices and concatenates
-/// the items in index order until there are at least `want`. Deterministic whatever the thread
-/// count. Stops early when a round yields nothing (after at least four rounds: nothing in the
-/// scene produces items, e.g. no lights or starts that miss).
-pub(crate) fn fill_rounds<T: Send>(
-    want: usize,
-    f: impl Fn(usize) -> (Vec<T>, u64) + Sync,
-) -> Rounds<T> {
-    let mut out = Rounds::default();
-    let mut round = 0;
-    while out.items.len() < want {
-        let first = out.tried;
-        let results: Vec<(Vec<T>, u64)> = (first..first + ROUND).into_par_iter().map(&f).collect();
-        out.tried += ROUND;
-        let before = out.items.len();
-        for (items, rays) in results {
-            out.items.extend(items);
-            out.rays += rays;
-        }
-        round += 1;
-        if out.items.len() == before && round >= 4 {
-            break;
-        }
-    }
-    out
 }
 
 /// A path-traced estimate of the radiance leaving the surface point `si` toward `wo` (unit,

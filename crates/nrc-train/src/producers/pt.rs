@@ -24,7 +24,7 @@ use nrc_render::transport::{Arrival, PathWalk};
 use nrc_render::{LightStrategy, PathStats, PathTracer, PixelSampler, RadianceQuery};
 use rayon::prelude::*;
 
-use crate::producer::{Produced, Producer, ProducerContext, ProducerStats};
+use crate::producer::{Produced, Producer, ProducerContext, ProducerStats, ROUND};
 use crate::starts::StartRay;
 
 /// The path-tracing producer.
@@ -151,9 +151,6 @@ impl PathProducer {
         out
     }
 }
-
-/// Paths traced per parallel round.
-const ROUND: usize = 1024;
 
 impl Producer for PathProducer {
     fn name(&self) -> &str {

@@ -46,8 +46,7 @@ use rayon::prelude::*;
 
 use nrc_render::light_path::{LightVertex, light_vertex_limit, trace_light_path};
 
-use super::lt::push_records;
-use crate::producer::{Produced, Producer, ProducerContext, ProducerStats};
+use crate::producer::{Produced, Producer, ProducerContext, ProducerStats, push_records};
 
 /// One persistent query of progressive photon collection.
 #[derive(Clone, Copy, Debug)]
