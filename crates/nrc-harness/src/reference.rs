@@ -440,15 +440,17 @@ pub fn check_given(r: &Reference, req: &ReferenceRequest<'_>) -> Result<()> {
     ensure!(
         meta.key == request_key(&same, &scene_content),
         "reference {} was rendered with other settings than this comparison's (camera {:?} \
-         against {:?}; environment `{}` against `{}`; max depth {} against {}); leave out \
-         --reference to render one",
+         against {:?}; environment `{}` against `{}`; max depth {} against {}; Russian roulette \
+         from depth {} against {}); leave out --reference to render one",
         r.location.display(),
         meta.camera,
         camera,
         meta.environment,
         req.scene.environment().describe(),
         meta.max_depth,
-        req.tracer.max_depth
+        req.tracer.max_depth,
+        meta.rr_depth,
+        req.tracer.rr_depth
     );
     Ok(())
 }

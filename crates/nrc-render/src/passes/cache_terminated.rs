@@ -138,9 +138,13 @@ pub const KIND: PassKind = PassKind {
             }
             r => r.strip_prefix('-').filter(|t| !t.is_empty())?,
         };
-        let (rest, nee) = match rest.strip_suffix("nonee") {
-            Some(r) if r.is_empty() || r.ends_with('-') => (r.trim_end_matches('-'), false),
-            _ => (rest, true),
+        let (rest, nee) = match rest {
+            "nonee" => ("", false),
+            r => match r.strip_suffix("-nonee") {
+                Some(t) if !t.is_empty() => (t, false),
+                Some(_) => return None,
+                None => (r, true),
+            },
         };
         Some(
             match rest {

@@ -123,6 +123,10 @@ impl Value for bool {
 /// Counts per axis: `N` (the same along each) or `XxYxZ`; `auto` when chosen elsewhere.
 impl Value for Option<UVec3> {
     fn read(&mut self, text: &str) -> Option<()> {
+        if text == "auto" {
+            *self = None;
+            return Some(());
+        }
         let n: Vec<u32> = text
             .split('x')
             .map(|p| p.parse().ok())
@@ -142,10 +146,11 @@ impl Value for Option<UVec3> {
         }
     }
     fn grammar(&self) -> &'static str {
-        "N|XxYxZ"
+        "N|XxYxZ|auto"
     }
     fn number(&self) -> Option<f64> {
-        self.map(|c| c.min_element() as f64)
+        // The largest axis, so that no axis exceeds the key's bound.
+        self.map(|c| c.max_element() as f64)
     }
 }
 
@@ -346,5 +351,11 @@ mod tests {
         c.read("2x3x4").unwrap();
         assert_eq!(c.write(), "2x3x4");
         assert!(c.read("2x3").is_none() && c.read("x").is_none());
+        c.read("auto").unwrap();
+        assert_eq!(c, None);
+        // The bound applies to every axis.
+        let key = Key::new("probes", "").range(1.0, 64.0);
+        c.read("1x1x500").unwrap();
+        assert!(!key.admits(c.number().unwrap()));
     }
 }

@@ -57,6 +57,8 @@ fn names_parse_print_and_round_trip_through_json() {
         "",
         "ptx",
         "cache-",
+        "cache--nonee",
+        "cache-first--nonee",
         "cache-last",
         "cachefirst",
         "cache-spread:0",
@@ -115,7 +117,7 @@ fn another(p: &Param) -> String {
             let x: f32 = v.parse().unwrap();
             if x > 0.0 { x * 0.5 } else { 0.5 }.to_string()
         }
-        "N|XxYxZ" => "4".into(),
+        "N|XxYxZ|auto" => "4".into(),
         "full|indirect|nrc" => "indirect".into(),
         g => panic!("no alternative for grammar {g}"),
     }
