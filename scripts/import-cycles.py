@@ -26,7 +26,9 @@ def module_path(src: Path, f: Path):
 
 
 def strip_comments(text: str) -> str:
+    """Comments and visibility paths (`pub(in crate::a)` names a scope, not a dependency)."""
     text = re.sub(r"//[^\n]*", "", text)
+    text = re.sub(r"\bpub\(in [\w:]+\)", "pub", text)
     return re.sub(r"/\*.*?\*/", "", text, flags=re.S)
 
 

@@ -338,11 +338,9 @@ pub fn run(options: &BenchOptions) -> Vec<BenchFigure> {
         if device == CacheDevice::Wgpu {
             match crate::gpu::wgpu_device() {
                 Ok(_) => {
-                    let names: Vec<String> = crate::gpu::adapters()
-                        .iter()
-                        .map(|a| format!("{} ({:?}, {:?})", a.name, a.device_type, a.backend))
-                        .collect();
-                    println!("wgpu adapters: {}", names.join("; "));
+                    for line in crate::gpu::describe_adapters() {
+                        println!("wgpu adapter: {line}");
+                    }
                 }
                 Err(e) => {
                     println!("wgpu: skipped ({e})");

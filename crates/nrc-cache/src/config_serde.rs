@@ -11,7 +11,12 @@ use serde::ser::SerializeMap;
 use serde::{Deserialize, Deserializer, Serialize, Serializer};
 use serde_json::{Map, Value};
 
-use crate::config::{NestedEncoding, OptimizerConfig, adam_eps, beta1, beta2, ema_decay, lr, one};
+use std::path::Path;
+
+use crate::config::{
+    CacheConfig, NestedEncoding, OptimizerConfig, adam_eps, beta1, beta2, ema_decay, lr, one,
+};
+use crate::error::CacheError;
 use crate::encoding::hash_grid::TablePrecision;
 
 /// Splits a path-tracked error into (field path, message), joining an inner `@path@` prefix.
@@ -287,5 +292,28 @@ impl Serialize for OptimizerConfig {
             }
         }
         m.end()
+    }
+}
+
+impl CacheConfig {
+    /// Parses and validates a JSON document.
+    pub fn from_json_str(json: &str) -> Result<Self, CacheError> {
+        let de = &mut serde_json::Deserializer::from_str(json);
+        let config: Self = serde_path_to_error::deserialize(de).map_err(|e| {
+            let (field, message) =
+                split_error(&e.path().to_string(), &e.inner().to_string());
+            CacheError::Config { field, message }
+        })?;
+        config.validate()?;
+        Ok(config)
+    }
+
+    /// Reads, parses and validates a JSON file.
+    pub fn from_file(path: &Path) -> Result<Self, CacheError> {
+        let text = std::fs::read_to_string(path).map_err(|e| CacheError::Io {
+            path: path.display().to_string(),
+            message: e.to_string(),
+        })?;
+        Self::from_json_str(&text)
     }
 }

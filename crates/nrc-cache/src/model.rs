@@ -16,7 +16,9 @@
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64Mcg;
 
-use crate::config::{CacheConfig, MlpPrecision, OutputActivation};
+use crate::config::{CacheConfig, MlpPrecision, NestedEncoding, OutputActivation, Sizing};
+use crate::error::CacheError;
+use crate::config::SceneBox;
 use crate::encoding::InputEncoding;
 use crate::encoding::hash_grid::TablePrecision;
 
@@ -141,5 +143,89 @@ impl ModelLayout {
             }
         }
         (grid, mlp)
+    }
+}
+
+impl CacheConfig {
+    /// Sizes the model for a scene: the finest resolvable feature is `min_feature_size` (world
+    /// units) along the box's longest axis.
+    ///
+    /// * Hash grid: finest resolution `N_max = ceil(longest extent / min_feature_size)`, the
+    ///   per-level scale spreads the configured levels from the base resolution to `N_max`
+    ///   (`b = (N_max/N_min)^(1/(L−1))`), and the table holds the finest level's *surface* cells:
+    ///   `T = next_pow2(2·(n_x n_y + n_y n_z + n_z n_x))` (the box's surface area in finest cells,
+    ///   a proxy for the scene's surfaces), at least 2^14 and at most the configured
+    ///   `log2_hashmap_size`, which acts as the memory budget.
+    /// * Triangle wave: octaves so that the finest period is about `min_feature_size`
+    ///   (`n = ceil(log2 N_max) + 1`, at most the configured count).
+    pub fn sized_for_scene(
+        &self,
+        scene: &SceneBox,
+        min_feature_size: f32,
+    ) -> Result<(Self, Sizing), CacheError> {
+        let ext = scene.extent();
+        if !ext.iter().all(|e| e.is_finite() && *e >= 0.0) || ext.iter().all(|e| *e <= 0.0) {
+            return Err(CacheError::Config {
+                field: "scene_box".into(),
+                message: format!("invalid extent {ext:?}"),
+            });
+        }
+        if !(min_feature_size.is_finite() && min_feature_size > 0.0) {
+            return Err(CacheError::Config {
+                field: "min_feature_size".into(),
+                message: format!("must be finite and > 0, got {min_feature_size}"),
+            });
+        }
+        let longest = ext.iter().cloned().fold(0.0f32, f32::max);
+        let n_max = (longest / min_feature_size).ceil().clamp(2.0, 1_048_576.0);
+        let mut out = self.clone();
+        let mut sizing = Sizing {
+            finest_resolution: n_max as u32,
+            per_level_scale: None,
+            log2_hashmap_size: None,
+            n_frequencies: None,
+            param_count: 0,
+            memory_bytes: 0,
+        };
+        for n in out.encoding.nested.iter_mut() {
+            match n {
+                NestedEncoding::HashGrid {
+                    n_levels,
+                    log2_hashmap_size,
+                    base_resolution,
+                    per_level_scale,
+                    ..
+                } => {
+                    let n_max = n_max.max(*base_resolution);
+                    *per_level_scale = if *n_levels > 1 {
+                        (n_max / *base_resolution).powf(1.0 / (*n_levels - 1) as f32)
+                    } else {
+                        1.0
+                    };
+                    let cells: [f64; 3] = std::array::from_fn(|k| {
+                        (f64::from(ext[k] / longest) * f64::from(n_max))
+                            .ceil()
+                            .max(1.0)
+                    });
+                    let surface =
+                        2.0 * (cells[0] * cells[1] + cells[1] * cells[2] + cells[2] * cells[0]);
+                    let log2 = (surface.log2().ceil() as u32).clamp(14, *log2_hashmap_size);
+                    *log2_hashmap_size = log2;
+                    sizing.per_level_scale = Some(*per_level_scale);
+                    sizing.log2_hashmap_size = Some(log2);
+                }
+                NestedEncoding::TriangleWave { n_frequencies, .. } => {
+                    let n = ((n_max.log2().ceil() as u32) + 1).clamp(1, *n_frequencies);
+                    *n_frequencies = n;
+                    sizing.n_frequencies = Some(n);
+                }
+                _ => {}
+            }
+        }
+        out.validate()?;
+        let layout = ModelLayout::new(&out);
+        sizing.param_count = layout.param_count();
+        sizing.memory_bytes = layout.training_memory_bytes();
+        Ok((out, sizing))
     }
 }

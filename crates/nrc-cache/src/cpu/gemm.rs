@@ -244,7 +244,7 @@ impl<T> Block<T> {
 
 #[cfg(target_arch = "x86_64")]
 pub(super) mod avx2 {
-    use super::{Block, Rows, Store, Strided};
+    use crate::cpu::gemm::{Block, Rows, Store, Strided};
     use std::arch::x86_64::*;
 
     #[target_feature(enable = "avx2,fma")]
@@ -349,7 +349,7 @@ pub(super) mod avx2 {
 
 #[cfg(target_arch = "x86_64")]
 pub(super) mod avx512 {
-    use super::{Block, Rows, Store, Strided};
+    use crate::cpu::gemm::{Block, Rows, Store, Strided};
     use std::arch::x86_64::*;
 
     /// Rows in blocks of 12 and columns in blocks of 32 (24 accumulators in the 32 zmm
@@ -389,7 +389,7 @@ pub(super) mod avx512 {
                     data: &mut c.data[n32..],
                     stride: ldc,
                 };
-                super::avx2::gemm(m12, n - n32, k, a, b, c, store);
+                crate::cpu::gemm::avx2::gemm(m12, n - n32, k, a, b, c, store);
             }
             if m12 < m {
                 let a = Strided {
@@ -400,7 +400,7 @@ pub(super) mod avx512 {
                     data: &mut c.data[m12 * ldc..],
                     stride: ldc,
                 };
-                super::avx2::gemm(m - m12, n, k, a, b, c, store);
+                crate::cpu::gemm::avx2::gemm(m - m12, n, k, a, b, c, store);
             }
         }
     }

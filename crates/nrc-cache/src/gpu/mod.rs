@@ -85,3 +85,75 @@ pub fn adapters() -> Vec<wgpu::AdapterInfo> {
         .map(wgpu::Adapter::get_info)
         .collect()
 }
+
+/// One line per adapter wgpu can see, with what the fused kernels care about: the graphics API
+/// and driver, the shader features (f16, subgroups and their sizes, float atomics, 64-bit
+/// integers, timestamp queries, cooperative matrices and their shapes) and the limits
+/// (workgroup memory, invocations per workgroup, storage binding and buffer sizes).
+pub fn describe_adapters() -> Vec<String> {
+    let instance = wgpu::Instance::default();
+    let adapters =
+        burn::cubecl::future::block_on(instance.enumerate_adapters(wgpu::Backends::all()));
+    adapters.iter().map(describe).collect()
+}
+
+fn describe(adapter: &wgpu::Adapter) -> String {
+    use wgpu::Features as F;
+    let info = adapter.get_info();
+    let features = adapter.features();
+    let limits = adapter.limits();
+    let named = [
+        (F::SHADER_F16, "shader-f16"),
+        (F::SUBGROUP, "subgroup"),
+        (F::SHADER_FLOAT32_ATOMIC, "f32-atomics"),
+        (F::SHADER_INT64, "int64"),
+        (F::TIMESTAMP_QUERY, "timestamp-query"),
+        (F::EXPERIMENTAL_COOPERATIVE_MATRIX, "cooperative-matrix"),
+    ];
+    let has: Vec<&str> = named
+        .iter()
+        .filter(|(f, _)| features.contains(*f))
+        .map(|(_, n)| *n)
+        .collect();
+    let lacks: Vec<&str> = named
+        .iter()
+        .filter(|(f, _)| !features.contains(*f))
+        .map(|(_, n)| *n)
+        .collect();
+    let shapes: Vec<String> = if features.contains(F::EXPERIMENTAL_COOPERATIVE_MATRIX) {
+        adapter
+            .cooperative_matrix_properties()
+            .iter()
+            .map(|p| {
+                format!(
+                    "{}x{}x{} {:?}->{:?}",
+                    p.m_size, p.n_size, p.k_size, p.ab_type, p.cr_type
+                )
+            })
+            .collect()
+    } else {
+        Vec::new()
+    };
+    format!(
+        "{} ({:?}, {:?}, driver {} {}); features: {}; lacks: {}; subgroup size {}..{}; \
+         workgroup memory {} B, {} invocations per workgroup, storage binding {} MiB, buffer {} MiB{}",
+        info.name,
+        info.device_type,
+        info.backend,
+        info.driver,
+        info.driver_info,
+        if has.is_empty() { "none".into() } else { has.join(", ") },
+        if lacks.is_empty() { "nothing".into() } else { lacks.join(", ") },
+        info.subgroup_min_size,
+        info.subgroup_max_size,
+        limits.max_compute_workgroup_storage_size,
+        limits.max_compute_invocations_per_workgroup,
+        limits.max_storage_buffer_binding_size >> 20,
+        limits.max_buffer_size >> 20,
+        if shapes.is_empty() {
+            String::new()
+        } else {
+            format!("; cooperative-matrix shapes: {}", shapes.join(", "))
+        }
+    )
+}

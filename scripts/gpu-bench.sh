@@ -1,0 +1,123 @@
+#!/usr/bin/env bash
+# The cache's figures on a lent GPU, in one call of the device tool (issue 32, item 5).
+#
+#   scripts/gpu-bench.sh --prepare       # here: strip and compress the built binaries into .bench/
+#   scripts/gpu-bench.sh OUT             # there (or here on lavapipe): write the figures to OUT
+#
+# --prepare copies, stripped, from "$CARGO_TARGET_DIR/release" (after `cargo build --release
+# --locked --workspace --all-targets`): the `nrc` binary, the `gpu_bench` example of nrc-cache
+# and nrc-cache's `backends` and `wgpu_training` test binaries (the device self-check: every wgpu
+# kernel against the CPU path). `.bench/` and the Vulkan loaders `.gl/` are ignored by git and
+# travel with `carry` (the device README's recipe for `.gl`).
+#
+# OUT receives, each step under its own time limit (the whole run under 5 minutes on a GPU):
+#   adapter.txt     the adapters, their features and limits (f16, subgroups, float atomics,
+#                   cooperative matrices, workgroup memory), nvidia-smi where it exists
+#   selfcheck.txt   the wgpu kernels against the CPU path (the two test binaries)
+#   bench-wgpu.txt  `nrc bench cache --device wgpu`: training samples/s and inference queries/s
+#                   of the hash-grid preset at each batch, custom-ops against generic tensor ops
+#   bench-cpu.txt   the same on the machine's CPU cores (the fused CPU path), for the ratio
+#   kernels.txt     gpu_bench: the WGSL MLP and hash-grid kernels against the burn ops they replace
+#   profile.txt     per-kernel GPU time, totalled, of 3 s of training steps and 3 s of inference at
+#                   2^16 (CubeCL's profile log; the first calls' matmul autotuning included)
+#   train-*.csv     short online `nrc train` runs on the Cornell box, wgpu and CPU, 4 096 and 65 536
+#                   records per frame (training batches of at most 2^14), per frame
+#   summary.txt     every step's exit status and duration
+# GPU_BENCH_BATCHES and GPU_BENCH_FRAMES override the batch list and the online run's frames (a
+# software rasteriser needs smaller ones). Worst case, every step at its limit: 595 s.
+set -uo pipefail
+cd "$(dirname "$0")/.."
+
+if [[ "${1:-}" == "--prepare" ]]; then
+  set -e
+  dir="${CARGO_TARGET_DIR:-target}/release"
+  mkdir -p .bench
+  newest() { ls -t "$dir"/deps/"$1"-* 2>/dev/null | grep -v '\.d$' | head -1; }
+  for pair in "nrc:$dir/nrc" "gpu_bench:$dir/examples/gpu_bench" \
+    "backends:$(newest backends)" "wgpu_training:$(newest wgpu_training)"; do
+    name=${pair%%:*} src=${pair#*:}
+    [[ -x "$src" ]] || { echo "error: $name not built ($src)"; exit 1; }
+    # Stripped, these are 54-62 MB each; xz brings the four under the device's 64 MiB carry.
+    strip -o ".bench/$name" "$src"
+    xz -9 -T2 -f ".bench/$name"
+  done
+  du -sh .bench/*
+  exit 0
+fi
+
+OUT=${1:?usage: scripts/gpu-bench.sh OUT | --prepare}
+mkdir -p "$OUT"
+BIN=${GPU_BENCH_BIN:-.bench}
+if ls "$BIN"/*.xz >/dev/null 2>&1; then
+  unpacked=$(mktemp -d)
+  for f in "$BIN"/*.xz; do xz -dc "$f" >"$unpacked/$(basename "$f" .xz)"; done
+  chmod +x "$unpacked"/*
+  BIN=$unpacked
+fi
+BATCHES=${GPU_BENCH_BATCHES:-16384 65536 262144 1048576}
+FRAMES=${GPU_BENCH_FRAMES:-60}
+batch_args=()
+for b in $BATCHES; do batch_args+=(--batch "$b"); done
+: >"$OUT/summary.txt"
+
+# step NAME LIMIT_S OUTFILE COMMAND...: runs one step under `timeout`, output to OUTFILE.
+step() {
+  local name=$1 limit=$2 file=$3
+  shift 3
+  local t0=$SECONDS
+  timeout "$limit" "$@" >"$OUT/$file" 2>&1
+  local rc=$?
+  echo "$name: exit $rc, $((SECONDS - t0)) s ($file)" | tee -a "$OUT/summary.txt"
+}
+
+{
+  date -u
+  uname -a
+  nproc
+  command -v nvidia-smi >/dev/null && nvidia-smi --query-gpu=name,driver_version,memory.total,clocks.max.sm --format=csv
+  ls /usr/share/vulkan/icd.d /etc/vulkan/icd.d /usr/local/nvidia/share/vulkan/icd.d 2>/dev/null
+} >"$OUT/adapter.txt" 2>&1
+# The adapter lines come from the benchmark's header (nrc_cache::gpu::describe_adapters).
+step adapters 40 adapter-lines.txt "$BIN/nrc" bench cache --device wgpu --config hashgrid \
+  --batch 1024 --min-ms 1 --no-compare
+grep '^wgpu' "$OUT/adapter-lines.txt" >>"$OUT/adapter.txt"
+
+NRC_SKIP_LOG="$OUT/skipped.txt" step selfcheck 90 selfcheck.txt bash -c "'$BIN/backends' --test-threads 1; a=\$?; '$BIN/wgpu_training' --test-threads 1 && exit \$a"
+step bench-wgpu 120 bench-wgpu.txt "$BIN/nrc" bench cache --device wgpu --config hashgrid \
+  "${batch_args[@]}" --min-ms 1000
+step bench-cpu 45 bench-cpu.txt "$BIN/nrc" bench cache --device cpu --config hashgrid \
+  --batch 16384 --batch 65536 --min-ms 1000 --no-compare
+step kernels 60 kernels.txt "$BIN/gpu_bench" 10
+# CubeCL logs each kernel's time and a summary at every device synchronisation.
+CUBECL_DEBUG_LOG="$OUT/profile.log" CUBECL_DEBUG_OPTION=profile \
+  step profile 60 profile-run.txt "$BIN/nrc" bench cache --device wgpu --config hashgrid \
+  --batch 65536 --min-ms 3000 --no-compare
+# Each logged kernel line is `| DURATION | NAME`: total them per kernel, largest first.
+if [[ -f "$OUT/profile.log" ]]; then
+  python3 - "$OUT/profile.log" >"$OUT/profile.txt" <<'PY'
+import re, sys, collections
+unit = {"ns": 1e-9, "µs": 1e-6, "us": 1e-6, "ms": 1e-3, "s": 1.0}
+total, count = collections.Counter(), collections.Counter()
+for line in open(sys.argv[1], encoding="utf-8", errors="replace"):
+    m = re.match(r"\|\s*([0-9.]+)(ns|µs|us|ms|s)\s*\|\s*(.+?)\s*$", line)
+    if m:
+        name = re.sub(r"\s+", " ", m.group(3))[:160]
+        total[name] += float(m.group(1)) * unit[m.group(2)]
+        count[name] += 1
+whole = sum(total.values()) or 1.0
+print(f"{'ms':>10} {'share':>6} {'launches':>8}  kernel (all launches of the profiled run)")
+for name, t in total.most_common(40):
+    print(f"{t * 1e3:10.3f} {100 * t / whole:5.1f}% {count[name]:8d}  {name}")
+print(f"{whole * 1e3:10.3f} 100.0% {sum(count.values()):8d}  total, {len(total)} kernels")
+PY
+  rm -f "$OUT/profile.log"
+fi
+for records in 4096 65536; do
+  for dev in wgpu cpu; do
+    step "train-$dev-$records" 45 "train-$dev-$records.txt" "$BIN/nrc" train \
+      --scene scenes/cornell-box.gltf --frames "$FRAMES" --resolution 128 --width 256 --height 256 \
+      --records "$records" --batch "$(( records < 16384 ? records : 16384 ))" --device "$dev" \
+      --stats "$OUT/train-$dev-$records.csv"
+  done
+done
+echo "total: $SECONDS s" | tee -a "$OUT/summary.txt"
