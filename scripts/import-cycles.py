@@ -124,7 +124,8 @@ def main():
         for comp in cycles(crate_graph(c)):
             found = True
             names = ", ".join("/".join(m) or "lib" for m in comp)
-            print(f"{c.relative_to(ROOT) if c != ROOT else '.'}: {names}")
+            where = c.relative_to(ROOT) if c.is_relative_to(ROOT) and c != ROOT else c
+            print(f"{where if c != ROOT else '.'}: {names}")
     sys.exit(1 if found else 0)
 
 

@@ -141,3 +141,44 @@ fn every_documented_command_runs_as_written() {
     assert!(check("cargo test --release --test online long").is_err());
     assert!(check("nrc render --scene scenes/none.gltf --spp 1 --out x.exr").is_err());
 }
+
+/// The README's claim that files depend only on files below them: `scripts/import-cycles.py`
+/// finds no file-level import cycle in any crate (it exits 1 and names the files otherwise).
+#[test]
+fn no_file_level_import_cycles() {
+    let out = match Command::new("python3")
+        .arg(root().join("scripts/import-cycles.py"))
+        .output()
+    {
+        Ok(out) => out,
+        Err(e) => {
+            nrc_scene::testing::skipped("no_file_level_import_cycles", &format!("python3: {e}"));
+            return;
+        }
+    };
+    assert!(
+        out.status.success(),
+        "import cycles: {}{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    // Control: a crate whose two files name each other is reported.
+    let dir = tempfile::tempdir().expect("temporary directory");
+    let src = dir.path().join("src");
+    std::fs::create_dir(&src).expect("src");
+    std::fs::write(src.join("lib.rs"), "mod a;\nmod b;\n").expect("lib.rs");
+    std::fs::write(src.join("a.rs"), "use crate::b::B;\npub struct A;\n").expect("a.rs");
+    std::fs::write(src.join("b.rs"), "use super::a::A;\npub struct B;\n").expect("b.rs");
+    let control = Command::new("python3")
+        .arg(root().join("scripts/import-cycles.py"))
+        .arg(dir.path())
+        .output()
+        .expect("python3 ran above");
+    let text = String::from_utf8_lossy(&control.stdout);
+    assert!(
+        control.status.code() == Some(1) && text.contains("a, b"),
+        "the cycle a <-> b is not reported: {:?} {text}{}",
+        control.status,
+        String::from_utf8_lossy(&control.stderr)
+    );
+}

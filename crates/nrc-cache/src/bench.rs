@@ -8,9 +8,8 @@ use burn::tensor::{Device, Tensor, TensorData, f16};
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64Mcg;
 
-use crate::cpu::infer::INFER_PHASE_NANOS;
-use crate::cpu::train::PHASE_NANOS;
 use crate::model::ModelLayout;
+use crate::profile::{InferProfile, TrainProfile};
 use crate::{
     CacheConfig, CacheDevice, CacheQuery, ComputePath, RadianceCache, SceneBox, TrainingBatch,
 };
@@ -371,23 +370,21 @@ pub fn run(options: &BenchOptions) -> Vec<BenchFigure> {
                 };
                 let batch = synthetic_batch(batch_size, 1);
                 let steps = if device == CacheDevice::Cpu { 4 } else { 2 };
-                for p in &PHASE_NANOS {
-                    p.store(0, std::sync::atomic::Ordering::Relaxed);
-                }
+                let mut trained = TrainProfile::default();
                 let t0 = Instant::now();
                 let train = rate(options.min_time, batch_size * steps as usize, || {
-                    cache.train(&batch, steps).expect("training");
+                    trained += cache.train(&batch, steps).expect("training").profile;
                 });
                 let wall = t0.elapsed().as_secs_f64();
                 let t_mat = Instant::now();
                 let _ = cache.inference_weights();
                 let materialise = t_mat.elapsed();
-                for p in &INFER_PHASE_NANOS {
-                    p.store(0, std::sync::atomic::Ordering::Relaxed);
-                }
+                let mut inferred = InferProfile::default();
                 let mut infer_calls = 0usize;
                 let infer = rate(options.min_time, batch_size, || {
-                    std::hint::black_box(cache.infer(&batch.queries));
+                    let (answers, profile) = cache.infer_profiled(&batch.queries);
+                    std::hint::black_box(answers);
+                    inferred += profile;
                     infer_calls += 1;
                 });
                 println!(
@@ -398,34 +395,30 @@ pub fn run(options: &BenchOptions) -> Vec<BenchFigure> {
                     materialise.as_secs_f64() * 1e3
                 );
                 if device == CacheDevice::Cpu {
-                    let ns = |i: usize| {
-                        INFER_PHASE_NANOS[i].load(std::sync::atomic::Ordering::Relaxed) as f64
-                            / (infer_calls * batch_size).max(1) as f64
+                    // Calls and sums both include the rate's warm-up call.
+                    let ns = |d: Duration| {
+                        d.as_nanos() as f64 / (infer_calls * batch_size).max(1) as f64
                     };
                     println!(
                         "    inference per query: encode {:.0} ns (hash grid {:.0} ns) + MLP {:.0} ns thread-time; kernel {:.0} ns wall of {:.0} ns per call (rest: packing and copies)",
-                        ns(0),
-                        ns(4),
-                        ns(1),
-                        ns(2),
-                        ns(3)
+                        ns(inferred.encode),
+                        ns(inferred.hash_grid),
+                        ns(inferred.mlp),
+                        ns(inferred.kernel),
+                        ns(inferred.call)
                     );
-                    let phases: Vec<f64> = PHASE_NANOS
-                        .iter()
-                        .map(|p| p.load(std::sync::atomic::Ordering::Relaxed) as f64 * 1e-9)
-                        .collect();
                     let samples = train.per_s * wall;
-                    let per_sample = |t: f64| t / samples * 1e9;
+                    let per_sample = |t: Duration| t.as_secs_f64() / samples * 1e9;
                     println!(
                         "    thread-time per sample: encode {:.0} ns, MLP+loss {:.0} ns ({:.1} GFLOP/s per thread), grid scatter {:.0} ns + sparse Adam/EMA {:.0} ns (phase wall {:.0} ns), MLP Adam {:.1} ns, packing {:.1} ns",
-                        per_sample(phases[0]),
-                        per_sample(phases[1]),
-                        2.0 * (fwd + train_macs) as f64 / per_sample(phases[1]),
-                        per_sample(phases[5]),
-                        per_sample(phases[6]),
-                        per_sample(phases[2]),
-                        per_sample(phases[3]),
-                        per_sample(phases[4]),
+                        per_sample(trained.encode),
+                        per_sample(trained.mlp),
+                        2.0 * (fwd + train_macs) as f64 / per_sample(trained.mlp),
+                        per_sample(trained.grid_scatter),
+                        per_sample(trained.grid_adam),
+                        per_sample(trained.grid_wall),
+                        per_sample(trained.mlp_adam),
+                        per_sample(trained.packing),
                     );
                 }
                 figures.push(BenchFigure {

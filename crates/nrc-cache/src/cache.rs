@@ -14,6 +14,7 @@ use crate::device::{CacheDevice, ComputePath};
 use crate::error::CacheError;
 use crate::model::ModelLayout;
 use crate::ops::{EmaConversion, NrcFusedOps, StepSpec};
+use crate::profile::{InferClock, InferProfile, TrainClock, TrainProfile};
 use crate::record::{CacheQuery, TrainingBatch};
 use crate::snapshot;
 use crate::state::{HostState, TensorState, tensor_vec, vec_tensor};
@@ -36,6 +37,8 @@ pub struct TrainStats {
     pub dropped_nonfinite: usize,
     /// Samples dropped: a negative or absurdly large target, or a negative weight.
     pub dropped_absurd: usize,
+    /// Where the call's time went.
+    pub profile: TrainProfile,
 }
 
 /// Inference weights, valid for one step count.
@@ -292,10 +295,8 @@ impl RadianceCache {
             TensorData::new(packed.rows, [packed.len, TRAIN_ROW]),
             &self.burn_device,
         );
-        crate::cpu::train::PHASE_NANOS[4].fetch_add(
-            t_pack.elapsed().as_nanos() as u64,
-            std::sync::atomic::Ordering::Relaxed,
-        );
+        let clock = Arc::new(TrainClock::default());
+        clock.packing.since(t_pack);
         if self.path == ComputePath::Fused && self.ema.is_some() && self.ema_base.is_none() {
             // The fused step keeps the table's EMA as a gap, based here at the current step.
             self.convert_ema(EmaConversion::ToGap);
@@ -318,6 +319,7 @@ impl RadianceCache {
                     first_step: self.step,
                     ema_base,
                     steps,
+                    clock: clock.clone(),
                 };
                 let out = <Dispatch as NrcFusedOps>::fused_train_steps(
                     state.into_dispatch(),
@@ -359,14 +361,21 @@ impl RadianceCache {
         stats.total_steps = self.step;
         stats.first_loss = losses.first().copied().unwrap_or(0.0) as f32;
         stats.loss = losses.last().copied().unwrap_or(0.0) as f32;
+        stats.profile = clock.profile();
         Ok(stats)
     }
 
     /// Outgoing radiance (emission excluded) at each query, from the EMA weights.
     pub fn infer(&self, queries: &[CacheQuery]) -> Vec<[f32; 3]> {
+        self.infer_profiled(queries).0
+    }
+
+    /// [`Self::infer`], with where the call's time went.
+    pub fn infer_profiled(&self, queries: &[CacheQuery]) -> (Vec<[f32; 3]>, InferProfile) {
         if queries.is_empty() {
-            return Vec::new();
+            return (Vec::new(), InferProfile::default());
         }
+        let clock = Arc::new(InferClock::default());
         let t_call = std::time::Instant::now();
         let rows = Tensor::<2>::from_data(
             TensorData::new(pack_queries(queries), [queries.len(), QUERY_ROW]),
@@ -380,6 +389,7 @@ impl RadianceCache {
                     mlp.into_dispatch(),
                     rows.into_dispatch(),
                     self.layout.clone(),
+                    clock.clone(),
                 ))
             }
             _ => crate::tensor_path::infer_tensor(
@@ -396,8 +406,8 @@ impl RadianceCache {
             .try_to_vec::<f32>()
             .expect("f32 output");
         let out = flat.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
-        crate::cpu::infer::add_infer_phase(3, t_call);
-        out
+        clock.call.since(t_call);
+        (out, clock.profile())
     }
 
     /// The bias-corrected EMA weights (the weights without EMA), computed once per step count.
@@ -681,6 +691,32 @@ mod tests {
         };
         cache.train(&batch, 2).expect("train");
         cache
+    }
+
+    /// Each call returns its own profile: the fused step's phases are measured, and a call's
+    /// figures are its own (a second cache's calls in between change nothing).
+    #[test]
+    fn each_call_returns_its_own_profile() {
+        let mut a = small_cache();
+        let mut b = small_cache();
+        let batch = crate::bench::synthetic_batch(4096, 7);
+        let first = a.train(&batch, 1).expect("train").profile;
+        for p in [first.encode, first.mlp, first.grid_wall, first.mlp_adam, first.packing] {
+            assert!(p > std::time::Duration::ZERO, "{first:?}");
+        }
+        // Many of b's steps between two of a's one-step calls: a cumulative (process-wide)
+        // clock would hand a's second call all of b's time too.
+        let b_stats = b.train(&batch, 8).expect("train");
+        let second = a.train(&batch, 1).expect("train").profile;
+        assert!(
+            second.mlp < b_stats.profile.mlp,
+            "a's second call {second:?} holds more than its own step (b: {:?})",
+            b_stats.profile
+        );
+        let (answers, infer) = a.infer_profiled(&batch.queries);
+        assert_eq!(answers.len(), batch.queries.len());
+        assert!(infer.call >= infer.kernel && infer.kernel > std::time::Duration::ZERO);
+        assert!(infer.encode >= infer.hash_grid && infer.mlp > std::time::Duration::ZERO);
     }
 
     #[test]

@@ -35,6 +35,7 @@ use crate::cpu::mlp::{
 };
 use crate::encoding::hash_grid::TablePrecision;
 use crate::model::{LayerShape, ModelLayout};
+use crate::profile::{InferClock, TrainClock};
 
 /// Which gradients a backward op must produce.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -125,6 +126,8 @@ pub struct StepSpec {
     pub ema_base: u32,
     /// Steps to take.
     pub steps: u32,
+    /// Where the steps' time goes.
+    pub clock: Arc<TrainClock>,
 }
 
 /// Inference weights derived from a [`TrainState`].
@@ -185,6 +188,7 @@ pub trait NrcFusedOps: burn::backend::Backend {
         mlp: FloatTensor<Self>,
         queries: FloatTensor<Self>,
         layout: Arc<ModelLayout>,
+        clock: Arc<InferClock>,
     ) -> FloatTensor<Self>;
 }
 
@@ -454,6 +458,7 @@ impl NrcFusedOps for Flex {
                     &rows,
                     &c,
                     spec.loss,
+                    &spec.clock,
                 ));
             }
             losses
@@ -526,6 +531,7 @@ impl NrcFusedOps for Flex {
         mlp: FlexTensor,
         queries: FlexTensor,
         layout: Arc<ModelLayout>,
+        clock: Arc<InferClock>,
     ) -> FlexTensor {
         let rows = flex_f32(&queries);
         let n = rows.len() / crate::batch::QUERY_ROW;
@@ -539,7 +545,7 @@ impl NrcFusedOps for Flex {
                 cpu::grid::Table::F32(&floats, f)
             }
         };
-        cpu::infer::infer(&layout, table, &flex_f32(&mlp), &rows, &mut out);
+        cpu::infer::infer(&layout, table, &flex_f32(&mlp), &rows, &mut out, &clock);
         flex_from(out, &[n, 3])
     }
 }

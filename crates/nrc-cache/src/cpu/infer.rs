@@ -1,6 +1,5 @@
 //! Fused CPU inference: encode and run the MLP per cache-resident tile, parallel over tiles.
 
-use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Instant;
 
 use rayon::prelude::*;
@@ -10,24 +9,22 @@ use super::mlp::{OUT_PAD, PreparedMlp, TILE, TileScratch, forward_tile};
 use crate::batch::{FACTOR_AT, QUERY_ROW};
 use crate::loss::activate;
 use crate::model::ModelLayout;
-
-/// Accumulated nanoseconds of inference, read by the benchmark: 0 encoding, 1 MLP forward
-/// (both summed over threads), 2 the fused kernel (wall), 3 the whole
-/// [`crate::RadianceCache::infer`] call including packing and copies (wall), 4 the hash-grid part
-/// of the encoding (included in 0).
-pub static INFER_PHASE_NANOS: [AtomicU64; 5] = [const { AtomicU64::new(0) }; 5];
-
-/// Adds the time since `since` to inference phase `i`.
-pub fn add_infer_phase(i: usize, since: Instant) {
-    INFER_PHASE_NANOS[i].fetch_add(since.elapsed().as_nanos() as u64, Ordering::Relaxed);
-}
+use crate::profile::InferClock;
 
 /// Radiance of the packed query rows (`n · QUERY_ROW` floats) into `out` (`n · 3`), with the
-/// hash table `grid` and MLP weights `mlp` (the bias-corrected EMA weights for inference).
-pub fn infer(layout: &ModelLayout, grid: Table, mlp: &[f32], rows: &[f32], out: &mut [f32]) {
+/// hash table `grid` and MLP weights `mlp` (the bias-corrected EMA weights for inference); the
+/// phases' times are added to `clock`.
+pub fn infer(
+    layout: &ModelLayout,
+    grid: Table,
+    mlp: &[f32],
+    rows: &[f32],
+    out: &mut [f32],
+    clock: &InferClock,
+) {
     let t_kernel = Instant::now();
     let prepared = PreparedMlp::new(&layout.layers, mlp, layout.mlp_precision);
-    let network_out = network_outputs(layout, &prepared, grid, rows);
+    let network_out = network_outputs(layout, &prepared, grid, rows, clock);
     out.par_chunks_mut(3)
         .zip(network_out.par_chunks(3))
         .zip(rows.par_chunks(QUERY_ROW))
@@ -36,7 +33,7 @@ pub fn infer(layout: &ModelLayout, grid: Table, mlp: &[f32], rows: &[f32], out: 
                 o[c] = activate(layout.output_activation, y[c]).0 * r[FACTOR_AT + c];
             }
         });
-    add_infer_phase(2, t_kernel);
+    clock.kernel.since(t_kernel);
 }
 
 /// The raw network outputs (before the output activation and reflectance factor), `[n][3]`.
@@ -45,6 +42,7 @@ pub fn network_outputs(
     prepared: &PreparedMlp,
     grid: Table,
     rows: &[f32],
+    clock: &InferClock,
 ) -> Vec<f32> {
     let n = rows.len() / QUERY_ROW;
     let k_in = prepared.inputs();
@@ -63,11 +61,11 @@ pub fn network_outputs(
                 let t_encode = Instant::now();
                 let grid_time =
                     super::encode_rows(layout, &fast, grid, r, QUERY_ROW, &mut s.x, k_in);
-                INFER_PHASE_NANOS[4].fetch_add(grid_time.as_nanos() as u64, Ordering::Relaxed);
-                add_infer_phase(0, t_encode);
+                clock.hash_grid.add(grid_time);
+                clock.encode.since(t_encode);
                 let t_mlp = Instant::now();
                 forward_tile(prepared, m, s);
-                add_infer_phase(1, t_mlp);
+                clock.mlp.since(t_mlp);
                 for i in 0..m {
                     o[i * 3..i * 3 + 3].copy_from_slice(&s.out[i * OUT_PAD..i * OUT_PAD + 3]);
                 }

@@ -2,8 +2,7 @@
 //! tile (parallel over tiles), then the hash-grid gradient scatter and sparse Adam + EMA per
 //! level (parallel over levels), then dense Adam + EMA of the MLP.
 
-use std::sync::atomic::{AtomicU64, Ordering};
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 use burn::tensor::f16;
 use rayon::prelude::*;
@@ -17,22 +16,12 @@ use crate::batch::{FACTOR_AT, TARGET_AT, TRAIN_ROW, WEIGHT_AT};
 use crate::config::OutputActivation;
 use crate::loss::sample_loss;
 use crate::model::ModelLayout;
-
-/// Accumulated nanoseconds per phase, read by the benchmark: 0 encode (summed over threads),
-/// 1 MLP forward + loss + backward (summed over threads), 2 hash-grid scatter + sparse
-/// Adam/EMA (wall), 3 MLP Adam/EMA (wall), 4 packing and upload of the batch (wall, counted by
-/// [`crate::RadianceCache::train`]), 5 hash-grid scatter and 6 sparse Adam/EMA (summed over
-/// threads).
-pub static PHASE_NANOS: [AtomicU64; 7] = [const { AtomicU64::new(0) }; 7];
+use crate::profile::TrainClock;
 
 thread_local! {
     /// Each thread's buffers for the binned gradient scatter, kept between steps (fresh
     /// megabyte-sized buffers would page-fault on every step).
     static SCRATCH: RefCell<BinScratch> = RefCell::default();
-}
-
-fn add_phase(i: usize, since: Instant) {
-    PHASE_NANOS[i].fetch_add(since.elapsed().as_nanos() as u64, Ordering::Relaxed);
 }
 
 /// Mutable training state of one parameter group.
@@ -87,6 +76,7 @@ fn forward_backward(
     mlp_w: &[f32],
     rows: &[f32],
     loss: LossSettings,
+    clock: &TrainClock,
 ) -> (f64, MlpGrad, Vec<f32>) {
     let n = rows.len() / TRAIN_ROW;
     let prepared = PreparedMlp::new(&layout.layers, mlp_w, layout.mlp_precision);
@@ -138,7 +128,7 @@ fn forward_backward(
                     let m = rows_t.len() / TRAIN_ROW;
                     let t_encode = Instant::now();
                     super::encode_rows(layout, &fast, table, rows_t, TRAIN_ROW, &mut s.x, k_in);
-                    add_phase(0, t_encode);
+                    clock.encode.since(t_encode);
                     let t_mlp = Instant::now();
                     forward_tile(&prepared, m, s);
                     for i in 0..m {
@@ -171,7 +161,7 @@ fn forward_backward(
                     };
                     let dx = (grid_dims > 0).then_some((grid_col, grid_dims, &mut to_levels as _));
                     backward_tile(&prepared, m, s, &mut grad, dx);
-                    add_phase(1, t_mlp);
+                    clock.mlp.since(t_mlp);
                 }
                 (loss_acc, grad)
             },
@@ -200,7 +190,8 @@ pub fn gradients(
     let n = rows.len() / TRAIN_ROW;
     let f = layout.encoding.grid().map_or(1, |(g, _)| g.features());
     let table = super::grid::Table::F32(grid_w, f);
-    let (loss_sum, mgrad, dxg) = forward_backward(layout, table, mlp_w, rows, loss);
+    let clock = TrainClock::default();
+    let (loss_sum, mgrad, dxg) = forward_backward(layout, table, mlp_w, rows, loss, &clock);
     let mut mlp = vec![0f32; mlp_w.len()];
     mgrad.write_flat(&layout.layers, &mut mlp);
     let mut grid = vec![0f32; grid_w.len()];
@@ -234,6 +225,7 @@ pub fn train_step(
     rows: &[f32],
     c: &StepConstants,
     loss: LossSettings,
+    clock: &TrainClock,
 ) -> f64 {
     let n = rows.len() / TRAIN_ROW;
     let grid_part = layout.encoding.grid();
@@ -244,7 +236,7 @@ pub fn train_step(
         Some(g) => super::grid::Table::F32(g.records, stride),
         None => super::grid::Table::F32(&[], stride),
     };
-    let (loss_sum, mgrad, dxg) = forward_backward(layout, table, mlp.w, rows, loss);
+    let (loss_sum, mgrad, dxg) = forward_backward(layout, table, mlp.w, rows, loss, clock);
 
     // Phase C: hash-grid scatter + sparse Adam/EMA, one task per level.
     let t_grid = Instant::now();
@@ -269,7 +261,7 @@ pub fn train_step(
         let level_step = |l: usize, rec: &mut [f32], mut hl: Option<&mut [f16]>| {
             SCRATCH.with_borrow_mut(|scratch| {
                 let t_scatter = Instant::now();
-                let mut adam_nanos = 0;
+                let mut adam = Duration::ZERO;
                 let per_bin = |first: usize, gr: &mut [f32], touched: &mut [u64]| {
                     let t_adam = Instant::now();
                     let len = gr.len() / f;
@@ -278,7 +270,7 @@ pub fn train_step(
                         .as_deref_mut()
                         .map(|h| &mut h[first * f..(first + len) * f]);
                     sparse_step(c, f, touched, rec, gr, half);
-                    adam_nanos += t_adam.elapsed().as_nanos() as u64;
+                    adam += t_adam.elapsed();
                 };
                 let dout = &dxg[l * n * f..(l + 1) * n * f];
                 match f {
@@ -288,9 +280,8 @@ pub fn train_step(
                     8 => scatter_binned::<8>(hg, l, xyz, dout, scratch, per_bin),
                     _ => panic!("unsupported features per level {f}"),
                 }
-                let all = t_scatter.elapsed().as_nanos() as u64;
-                PHASE_NANOS[5].fetch_add(all - adam_nanos, Ordering::Relaxed);
-                PHASE_NANOS[6].fetch_add(adam_nanos, Ordering::Relaxed);
+                clock.grid_scatter.add(t_scatter.elapsed().saturating_sub(adam));
+                clock.grid_adam.add(adam);
             });
         };
         // Largest levels first (longest-processing-time order): the tasks left when a thread
@@ -305,13 +296,13 @@ pub fn train_step(
         });
     }
 
-    add_phase(2, t_grid);
+    clock.grid_wall.since(t_grid);
     // Phase D: dense Adam + EMA of the MLP.
     let t_adam = Instant::now();
     let mut flat = vec![0f32; mlp.w.len()];
     mgrad.write_flat(&layout.layers, &mut flat);
     dense_step(c, mlp.w, mlp.m, mlp.v, mlp.ema, &flat);
-    add_phase(3, t_adam);
+    clock.mlp_adam.since(t_adam);
 
     loss_sum / (3.0 * n as f64)
 }
