@@ -701,7 +701,13 @@ mod tests {
         let mut b = small_cache();
         let batch = crate::bench::synthetic_batch(4096, 7);
         let first = a.train(&batch, 1).expect("train").profile;
-        for p in [first.encode, first.mlp, first.grid_wall, first.mlp_adam, first.packing] {
+        for p in [
+            first.encode,
+            first.mlp,
+            first.grid_wall,
+            first.mlp_adam,
+            first.packing,
+        ] {
             assert!(p > std::time::Duration::ZERO, "{first:?}");
         }
         // Many of b's steps between two of a's one-step calls: a cumulative (process-wide)

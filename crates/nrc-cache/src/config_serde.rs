@@ -16,8 +16,8 @@ use std::path::Path;
 use crate::config::{
     CacheConfig, NestedEncoding, OptimizerConfig, adam_eps, beta1, beta2, ema_decay, lr, one,
 };
-use crate::error::CacheError;
 use crate::encoding::hash_grid::TablePrecision;
+use crate::error::CacheError;
 
 /// Splits a path-tracked error into (field path, message), joining an inner `@path@` prefix.
 pub(crate) fn split_error(outer: &str, message: &str) -> (String, String) {
@@ -300,8 +300,7 @@ impl CacheConfig {
     pub fn from_json_str(json: &str) -> Result<Self, CacheError> {
         let de = &mut serde_json::Deserializer::from_str(json);
         let config: Self = serde_path_to_error::deserialize(de).map_err(|e| {
-            let (field, message) =
-                split_error(&e.path().to_string(), &e.inner().to_string());
+            let (field, message) = split_error(&e.path().to_string(), &e.inner().to_string());
             CacheError::Config { field, message }
         })?;
         config.validate()?;

@@ -16,11 +16,11 @@
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64Mcg;
 
-use crate::config::{CacheConfig, MlpPrecision, NestedEncoding, OutputActivation, Sizing};
-use crate::error::CacheError;
 use crate::config::SceneBox;
+use crate::config::{CacheConfig, MlpPrecision, NestedEncoding, OutputActivation, Sizing};
 use crate::encoding::InputEncoding;
 use crate::encoding::hash_grid::TablePrecision;
+use crate::error::CacheError;
 
 /// Width of every hidden layer.
 pub const WIDTH: usize = 64;

@@ -75,8 +75,10 @@ impl Phase {
 
     /// Adds `d`.
     pub fn add(&self, d: Duration) {
-        self.0
-            .fetch_add(d.as_nanos().min(u128::from(u64::MAX)) as u64, Ordering::Relaxed);
+        self.0.fetch_add(
+            d.as_nanos().min(u128::from(u64::MAX)) as u64,
+            Ordering::Relaxed,
+        );
     }
 
     fn get(&self) -> Duration {

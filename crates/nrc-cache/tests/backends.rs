@@ -434,8 +434,9 @@ fn cpu_and_wgpu_fused_mlp_agree() {
 
             let run = |device: &Device| {
                 let device = device.clone().autodiff();
-                let wt = Tensor::<1>::from_data(TensorData::new(w.clone(), [weight_count]), &device)
-                    .require_grad();
+                let wt =
+                    Tensor::<1>::from_data(TensorData::new(w.clone(), [weight_count]), &device)
+                        .require_grad();
                 let xt = Tensor::<2>::from_data(TensorData::new(x.clone(), [n, inputs]), &device)
                     .require_grad();
                 let ut = Tensor::<2>::from_data(TensorData::new(up.clone(), [n, 3]), &device);

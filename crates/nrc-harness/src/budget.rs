@@ -21,6 +21,8 @@ use nrc_scene::{Camera, Image, Scene};
 
 use nrc_render::pass_seed;
 
+use crate::error::HarnessError;
+
 /// One independent estimate of the frame by a method.
 #[derive(Clone, Debug)]
 pub struct Estimate {
@@ -50,7 +52,7 @@ pub trait Method: Send {
         _camera: &Camera,
         _width: u32,
         _height: u32,
-    ) -> Result<(), String> {
+    ) -> Result<(), HarnessError> {
         Ok(())
     }
 
@@ -73,7 +75,7 @@ pub trait Method: Send {
         _height: u32,
         _run: u32,
         _seed: u64,
-    ) -> Result<(), String> {
+    ) -> Result<(), HarnessError> {
         Ok(())
     }
 
@@ -103,17 +105,19 @@ impl Budget {
     pub fn from_limits(
         equal_time_ms: Option<f64>,
         equal_passes: Option<u32>,
-    ) -> Result<Self, String> {
+    ) -> Result<Self, HarnessError> {
         match (equal_time_ms, equal_passes) {
             (Some(ms), None) if ms.is_finite() && ms > 0.0 && ms <= 3.6e6 => {
                 Ok(Budget::Time(Duration::from_secs_f64(ms * 1e-3)))
             }
-            (Some(ms), None) => Err(format!(
-                "--equal-time must be between 0 and one hour in milliseconds, got {ms}"
+            (Some(ms), None) => Err(HarnessError::bounds(
+                "--equal-time",
+                "be between 0 and one hour in milliseconds",
+                ms,
             )),
-            (None, Some(0)) => Err("--equal-spp must be at least 1".into()),
+            (None, Some(0)) => Err(HarnessError::bounds("--equal-spp", "be at least 1", 0)),
             (None, Some(n)) => Ok(Budget::Passes(n)),
-            _ => Err("give exactly one of --equal-time MS and --equal-spp N".into()),
+            _ => Err(HarnessError::BudgetChoice),
         }
     }
 }

@@ -23,6 +23,7 @@
 pub mod bench;
 pub mod budget;
 pub mod compare;
+pub mod error;
 pub mod methods;
 pub mod options;
 pub mod reference;

@@ -27,6 +27,8 @@ use nrc_train::online::{OnlineSettings, OnlineTrainer};
 use nrc_train::query::QueryMaker;
 
 use crate::budget::{Estimate, Method};
+use crate::error::HarnessError;
+use nrc_render::error::PassError;
 
 /// The producer of the cache that a resampling pass's `-nrc` variant reads when its name
 /// names none.
@@ -120,9 +122,12 @@ impl FromStr for MethodSpec {
         };
         // The general form: <pass>@<N>spp[+<producer>].
         if let Some((pass, rest)) = s.split_once('@') {
-            let pass: PassSpec = pass.parse().map_err(|e: String| err(&e))?;
+            let pass: PassSpec = pass.parse().map_err(|e: PassError| err(&e.to_string()))?;
             let (spp, producer) = match rest.split_once('+') {
-                Some((spp, p)) => (spp, Some(p.parse::<ProducerSpec>().map_err(|e| err(&e))?)),
+                Some((spp, p)) => (
+                    spp,
+                    Some(p.parse::<ProducerSpec>().map_err(|e| err(&e.to_string()))?),
+                ),
                 None => (rest, None),
             };
             let spp: u32 = spp
@@ -149,7 +154,7 @@ impl FromStr for MethodSpec {
         if let Some((kind, pass)) = passes::find(s)
             && kind.method
         {
-            let pass = pass.map_err(|e| err(&e))?;
+            let pass = pass.map_err(|e| err(&e.to_string()))?;
             let producer = pass.uses_source().then(|| {
                 DEFAULT_PASS_PRODUCER
                     .parse::<ProducerSpec>()
@@ -174,7 +179,9 @@ impl FromStr for MethodSpec {
                 }
                 _ => (rest, Termination::default()),
             };
-            let producer = producer.parse::<ProducerSpec>().map_err(|e| err(&e))?;
+            let producer = producer
+                .parse::<ProducerSpec>()
+                .map_err(|e| err(&e.to_string()))?;
             return Ok(Self {
                 pass: CacheTerminatedSettings {
                     termination,
@@ -348,7 +355,7 @@ impl Method for PassMethod {
         height: u32,
         _run: u32,
         seed: u64,
-    ) -> Result<(), String> {
+    ) -> Result<(), HarnessError> {
         self.pass.reset();
         self.warmth.reset();
         for f in 0..self.warm_up {
@@ -408,20 +415,23 @@ pub fn scene_trainer(
     pass: PassSpec,
     settings: &CacheMethodSettings,
     tracer: PathTracer,
-) -> Result<OnlineTrainer, String> {
+) -> Result<OnlineTrainer, HarnessError> {
     let queries = QueryMaker::new(&scene.bounds());
     let ext = queries.scene_box.extent();
     let longest = ext.iter().copied().fold(0.0f32, f32::max);
     if settings.resolution == 0 {
-        return Err("the cache resolution must be at least 1".into());
+        return Err(HarnessError::bounds(
+            "the cache resolution",
+            "be at least 1",
+            0,
+        ));
     }
     let (cache, _) = RadianceCache::for_scene_extent(
         &settings.config,
         queries.scene_box,
         longest / settings.resolution as f32,
         settings.device,
-    )
-    .map_err(|e| e.to_string())?;
+    )?;
     let mut online = OnlineSettings::new(producer, scene, tracer);
     online.records_per_frame = settings.records_per_frame;
     online.producer_options = settings.producer_options;
@@ -429,7 +439,7 @@ pub fn scene_trainer(
     online.pass = pass;
     online.queries = queries;
     online.seed = settings.seed;
-    OnlineTrainer::new(cache, online, scene)
+    Ok(OnlineTrainer::new(cache, online, scene)?)
 }
 
 impl CacheMethod {
@@ -439,7 +449,7 @@ impl CacheMethod {
         camera: &Camera,
         width: u32,
         height: u32,
-    ) -> Result<&mut OnlineTrainer, String> {
+    ) -> Result<&mut OnlineTrainer, HarnessError> {
         if self.trainer.is_none() {
             let mut t = scene_trainer(
                 scene,
@@ -452,8 +462,7 @@ impl CacheMethod {
             // their history is warm too.
             let render = self.spec.pass.is_stateful();
             for _ in 0..self.settings.train_frames {
-                t.frame(scene, camera, width, height, render)
-                    .map_err(|e| e.to_string())?;
+                t.frame(scene, camera, width, height, render)?;
             }
             self.trainer = Some(t);
         }
@@ -476,7 +485,7 @@ impl Method for CacheMethod {
         camera: &Camera,
         width: u32,
         height: u32,
-    ) -> Result<(), String> {
+    ) -> Result<(), HarnessError> {
         self.trainer(scene, camera, width, height).map(|_| ())
     }
 
@@ -493,7 +502,7 @@ impl Method for CacheMethod {
         height: u32,
         run: u32,
         _seed: u64,
-    ) -> Result<(), String> {
+    ) -> Result<(), HarnessError> {
         // Run 0 uses the cache `prepare` trained; each later run trains its own from scratch
         // (its own seed), so that runs are independent.
         if run > 0 {

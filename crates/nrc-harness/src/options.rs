@@ -12,7 +12,9 @@ use nrc_render::{LightStrategy, PathTracer, Termination};
 use nrc_scene::{Camera, Scene};
 use nrc_train::mix::ProducerOptions;
 
+use crate::error::HarnessError;
 use crate::methods::CacheMethodSettings;
+use nrc_render::error::TerminationError;
 
 /// Path depth options: every command that traces paths, so that methods and their reference
 /// estimate the same image.
@@ -77,40 +79,42 @@ impl TracerArgs {
 }
 
 /// Parses `x,y,z` into a vector of three finite numbers.
-pub fn parse_vec3(s: &str) -> Result<Vec3, String> {
+pub fn parse_vec3(s: &str) -> Result<Vec3, HarnessError> {
     let parts: Vec<&str> = s.split(',').map(str::trim).collect();
     if parts.len() != 3 {
-        return Err(format!(
-            "expected three comma-separated numbers x,y,z, got `{s}`"
-        ));
+        return Err(HarnessError::NotThreeNumbers(s.to_string()));
     }
     let mut v = [0.0f32; 3];
     for (slot, p) in v.iter_mut().zip(&parts) {
-        let x: f32 = p
-            .parse()
-            .map_err(|_| format!("`{p}` is not a number (in `{s}`)"))?;
-        if !x.is_finite() {
-            return Err(format!("`{p}` is not a finite number (in `{s}`)"));
-        }
-        *slot = x;
+        *slot = match p.parse::<f32>() {
+            Ok(x) if x.is_finite() => x,
+            _ => {
+                return Err(HarnessError::NotANumber {
+                    text: p.to_string(),
+                    context: format!(" (in `{s}`)"),
+                });
+            }
+        };
     }
     Ok(Vec3::from_array(v))
 }
 
 /// Parses a non-negative RGB radiance `r,g,b` (or a single number for grey).
-pub fn parse_rgb(s: &str) -> Result<Vec3, String> {
+pub fn parse_rgb(s: &str) -> Result<Vec3, HarnessError> {
     let v = if s.contains(',') {
         parse_vec3(s)?
     } else {
-        let x: f32 = s
-            .trim()
-            .parse()
-            .map_err(|_| format!("`{s}` is not a number"))?;
+        let x: f32 = s.trim().parse().map_err(|_| HarnessError::NotANumber {
+            text: s.to_string(),
+            context: String::new(),
+        })?;
         Vec3::splat(x)
     };
     if !v.is_finite() || v.min_element() < 0.0 {
-        return Err(format!(
-            "radiance must be finite and non-negative, got `{s}`"
+        return Err(HarnessError::bounds(
+            "radiance",
+            "be finite and non-negative",
+            format!("`{s}`"),
         ));
     }
     Ok(v)
@@ -367,13 +371,13 @@ impl RadianceCacheArgs {
             sppc_alpha: self.sppc_alpha,
             sppc_normal_reject: !self.sppc_no_normal_reject,
         };
-        s.producer_options.validate().map_err(anyhow::Error::msg)?;
+        s.producer_options.validate()?;
         Ok(s)
     }
 }
 
 /// Parses a termination strategy for clap.
-pub fn parse_termination(s: &str) -> Result<Termination, String> {
+pub fn parse_termination(s: &str) -> Result<Termination, TerminationError> {
     s.parse()
 }
 

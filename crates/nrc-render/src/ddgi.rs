@@ -34,6 +34,7 @@ use glam::{UVec3, Vec2, Vec3};
 use nrc_scene::{Aabb, Ray, Scene, bsdf::Bsdf};
 use rayon::prelude::*;
 
+use crate::error::VolumeError;
 use crate::path_tracer::{PathStats, PathTracer};
 use crate::sampler::PixelSampler;
 use crate::source::{RadianceQuery, RadianceSource};
@@ -327,33 +328,27 @@ fn random_rotation(u: Vec3) -> glam::Quat {
 
 impl ProbeVolume {
     /// An empty volume over `bounds`.
-    pub fn new(bounds: &Aabb, settings: DdgiSettings) -> Result<Self, String> {
+    pub fn new(bounds: &Aabb, settings: DdgiSettings) -> Result<Self, VolumeError> {
         let ext = bounds.max - bounds.min;
         if !(ext.is_finite() && ext.max_element() > 0.0) {
-            return Err("ddgi: the scene box is empty or not finite".into());
+            return Err(VolumeError::EmptyBox);
         }
         if settings.rays_per_probe == 0
             || settings.irradiance_texels == 0
             || settings.moment_texels == 0
         {
-            return Err("ddgi: rays per probe and texels per side must be at least 1".into());
+            return Err(VolumeError::Zero);
         }
         if settings.rays_per_probe > 1 << 14
             || settings.irradiance_texels.max(settings.moment_texels) > 64
         {
-            return Err("ddgi: at most 16384 rays per probe and 64 texels per side".into());
+            return Err(VolumeError::TooLarge);
         }
         if !(0.0..1.0).contains(&settings.hysteresis) {
-            return Err(format!(
-                "ddgi: hysteresis must be in [0, 1), got {}",
-                settings.hysteresis
-            ));
+            return Err(VolumeError::Hysteresis(settings.hysteresis));
         }
         if !(settings.attenuation >= 0.0 && settings.attenuation <= 100.0) {
-            return Err(format!(
-                "ddgi: attenuation must lie in [0, 100], got {}",
-                settings.attenuation
-            ));
+            return Err(VolumeError::Attenuation(settings.attenuation));
         }
         let counts = settings.counts.unwrap_or_else(|| {
             let longest = ext.max_element();
@@ -364,9 +359,7 @@ impl ProbeVolume {
             || counts.x as u64 * counts.y as u64 * counts.z as u64 > 1 << 16
         {
             // 2^16 probes of the default maps hold about 280 MB.
-            return Err(format!(
-                "ddgi: probe counts {counts} must be at least 1 and at most 65536 in all"
-            ));
+            return Err(VolumeError::ProbeCounts(counts));
         }
         let spacing = ext / counts.as_vec3();
         let n = (counts.x * counts.y * counts.z) as usize;

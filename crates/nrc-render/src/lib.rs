@@ -21,6 +21,7 @@
 
 pub mod ddgi;
 pub mod emitters;
+pub mod error;
 pub mod knn;
 pub mod light_path;
 pub mod nee;

@@ -17,6 +17,7 @@
 //! [`nrc_cache::CacheQuery`]. The inference passes, the path-vertex step, light paths and the
 //! area-spread heuristic live in [`nrc_render`].
 
+pub mod error;
 pub mod mix;
 pub mod online;
 pub mod producer;

@@ -8,6 +8,7 @@ use std::str::FromStr;
 use nrc_render::sampler::Stream;
 use nrc_scene::Scene;
 
+use crate::error::TrainError;
 use crate::producer::{Produced, Producer, ProducerContext};
 use crate::producers::{
     bt::BidirectionalProducer, lt::LightProducer, pt::PathProducer, sppc::SppcProducer,
@@ -70,7 +71,7 @@ impl ProducerOptions {
     }
 
     /// Checks every setting, naming the first bad one.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), TrainError> {
         self.light().validate()?;
         self.sppc().validate()
     }
@@ -101,7 +102,7 @@ pub const PRODUCER_NAMES: &str = "pt (path tracing), pt-sl (path tracing with se
      (e.g. mix:pt-sl=0.5,sppc=0.5)";
 
 impl ProducerKind {
-    fn parse(s: &str) -> Result<Self, String> {
+    fn parse(s: &str) -> Result<Self, TrainError> {
         Ok(match s.trim() {
             "pt" => Self::Pt {
                 self_learning: false,
@@ -113,9 +114,10 @@ impl ProducerKind {
             "lt" => Self::Lt,
             "sppc" => Self::Sppc,
             other => {
-                return Err(format!(
-                    "unknown producer `{other}`; known: {PRODUCER_NAMES}"
-                ));
+                return Err(TrainError::UnknownProducer {
+                    name: other.to_string(),
+                    known: PRODUCER_NAMES,
+                });
             }
         })
     }
@@ -148,9 +150,9 @@ impl fmt::Display for ProducerKind {
 }
 
 impl FromStr for ProducerSpec {
-    type Err = String;
+    type Err = TrainError;
 
-    fn from_str(s: &str) -> Result<Self, String> {
+    fn from_str(s: &str) -> Result<Self, TrainError> {
         let Some(list) = s.trim().strip_prefix("mix:") else {
             return Ok(Self {
                 parts: vec![(ProducerKind::parse(s)?, 1.0)],
@@ -158,20 +160,25 @@ impl FromStr for ProducerSpec {
         };
         let mut parts = Vec::new();
         for item in list.split(',') {
-            let (name, share) = item
-                .split_once('=')
-                .ok_or_else(|| format!("mix entry `{item}` needs NAME=SHARE; {PRODUCER_NAMES}"))?;
-            let share: f32 = share
-                .trim()
-                .parse()
-                .map_err(|_| format!("share `{share}` of `{name}` is not a number"))?;
-            if !share.is_finite() || share <= 0.0 {
-                return Err(format!("share of `{name}` must be positive, got {share}"));
-            }
+            let (name, text) = item.split_once('=').ok_or_else(|| TrainError::MixEntry {
+                entry: item.to_string(),
+                known: PRODUCER_NAMES,
+            })?;
+            let share = match text.trim().parse::<f32>() {
+                Ok(v) if v.is_finite() && v > 0.0 => v,
+                _ => {
+                    return Err(TrainError::Share {
+                        name: name.to_string(),
+                        share: text.to_string(),
+                    });
+                }
+            };
             parts.push((ProducerKind::parse(name)?, share));
         }
         if parts.is_empty() {
-            return Err(format!("an empty mix; {PRODUCER_NAMES}"));
+            return Err(TrainError::EmptyMix {
+                known: PRODUCER_NAMES,
+            });
         }
         let total: f32 = parts.iter().map(|p| p.1).sum();
         for p in &mut parts {
@@ -210,7 +217,7 @@ impl ProducerMix {
     }
 
     /// Whether every producer of the mix can serve `scene`; the first error.
-    pub fn check(&self, scene: &Scene) -> Result<(), String> {
+    pub fn check(&self, scene: &Scene) -> Result<(), TrainError> {
         self.parts.iter().try_for_each(|(p, _)| p.check(scene))
     }
 
@@ -323,6 +330,8 @@ mod tests {
         for name in ["bt", "lt", "sppc", "mix:pt-sl=0.5,sppc=0.5"] {
             let mix = ProducerMix::new(&name.parse().unwrap(), &options);
             let e = mix.check(&scene).unwrap_err();
+            assert!(matches!(e, TrainError::Unlit { .. }), "{name}: {e}");
+            let e = e.to_string();
             assert!(
                 e.contains("nothing lights it") && e.contains("pt-sl"),
                 "{name}: {e}"

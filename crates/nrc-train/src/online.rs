@@ -9,6 +9,7 @@ use nrc_render::sampler::Stream;
 use nrc_render::{PathTracer, PixelSampler, pass_seed};
 use nrc_scene::{Camera, Scene};
 
+use crate::error::TrainError;
 use crate::mix::{ProducerMix, ProducerOptions, ProducerSpec};
 use crate::producer::{ProducerContext, ProducerStats};
 use crate::query::QueryMaker;
@@ -64,21 +65,22 @@ impl OnlineSettings {
     }
 
     /// Checks the settings, naming the first bad one.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), TrainError> {
         if self.records_per_frame == 0 {
-            return Err("records per frame must be at least 1".into());
+            return Err(TrainError::bounds("records per frame", "be at least 1", 0));
         }
         if self.batch_size == 0 {
-            return Err("the batch size must be at least 1".into());
+            return Err(TrainError::bounds("the batch size", "be at least 1", 0));
         }
         if !(0.0..=1.0).contains(&self.from_terminations) {
-            return Err(format!(
-                "the fraction of queries from termination points must be in [0, 1], got {}",
-                self.from_terminations
+            return Err(TrainError::bounds(
+                "the fraction of queries from termination points",
+                "be in [0, 1]",
+                self.from_terminations,
             ));
         }
         if self.spp == 0 {
-            return Err("samples per pixel must be at least 1".into());
+            return Err(TrainError::bounds("samples per pixel", "be at least 1", 0));
         }
         self.producer_options.validate()
     }
@@ -133,7 +135,7 @@ impl OnlineTrainer {
         cache: RadianceCache,
         settings: OnlineSettings,
         scene: &Scene,
-    ) -> Result<Self, String> {
+    ) -> Result<Self, TrainError> {
         settings.validate()?;
         let mix = ProducerMix::new(&settings.producer, &settings.producer_options);
         mix.check(scene)?;

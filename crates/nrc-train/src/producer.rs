@@ -7,6 +7,7 @@ use nrc_render::{PathTracer, RadianceSource};
 use nrc_scene::{Camera, Scene};
 use rayon::prelude::*;
 
+use crate::error::TrainError;
 use crate::query::QueryMaker;
 use crate::starts::StartRay;
 
@@ -66,7 +67,7 @@ pub trait Producer: Send {
     fn produce(&mut self, ctx: &ProducerContext, budget: usize, seed: u64) -> Produced;
 
     /// Whether the producer can serve `scene`; an error names why not. Default: any scene.
-    fn check(&self, _scene: &Scene) -> Result<(), String> {
+    fn check(&self, _scene: &Scene) -> Result<(), TrainError> {
         Ok(())
     }
 }
@@ -74,11 +75,11 @@ pub trait Producer: Send {
 /// The check of the producers that start light paths: a scene that nothing lights (no
 /// emissive triangle, punctual light or environment) has no light to start them from, and
 /// they would produce no target at all. Refused rather than trained silently on nothing.
-pub(crate) fn check_light_paths(name: &str, scene: &Scene) -> Result<(), String> {
+pub(crate) fn check_light_paths(name: &str, scene: &Scene) -> Result<(), TrainError> {
     if scene.light_count() == 0 {
-        return Err(format!(
-            "producer {name} cannot serve this scene: nothing lights it (no emissive triangle, punctual light or environment), so its light paths have nowhere to start; use pt or pt-sl instead"
-        ));
+        return Err(TrainError::Unlit {
+            producer: name.to_string(),
+        });
     }
     Ok(())
 }

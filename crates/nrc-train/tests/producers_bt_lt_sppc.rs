@@ -393,7 +393,12 @@ fn sppc_ring_replaces_the_oldest_balls() {
     assert!(bad.validate().is_err());
     bad.alpha = 0.7;
     bad.initial_radius = f32::NAN;
-    assert!(bad.validate().unwrap_err().contains("initial_radius"));
+    assert!(
+        bad.validate()
+            .unwrap_err()
+            .to_string()
+            .contains("initial_radius")
+    );
 }
 
 /// Runs `f` on a pool of `threads` threads.

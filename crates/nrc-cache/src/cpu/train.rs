@@ -280,7 +280,9 @@ pub fn train_step(
                     8 => scatter_binned::<8>(hg, l, xyz, dout, scratch, per_bin),
                     _ => panic!("unsupported features per level {f}"),
                 }
-                clock.grid_scatter.add(t_scatter.elapsed().saturating_sub(adam));
+                clock
+                    .grid_scatter
+                    .add(t_scatter.elapsed().saturating_sub(adam));
                 clock.grid_adam.add(adam);
             });
         };

@@ -142,8 +142,16 @@ fn describe(adapter: &wgpu::Adapter) -> String {
         info.backend,
         info.driver,
         info.driver_info,
-        if has.is_empty() { "none".into() } else { has.join(", ") },
-        if lacks.is_empty() { "nothing".into() } else { lacks.join(", ") },
+        if has.is_empty() {
+            "none".into()
+        } else {
+            has.join(", ")
+        },
+        if lacks.is_empty() {
+            "nothing".into()
+        } else {
+            lacks.join(", ")
+        },
         info.subgroup_min_size,
         info.subgroup_max_size,
         limits.max_compute_workgroup_storage_size,

@@ -20,6 +20,7 @@ use std::str::FromStr;
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
 
+use crate::error::{PassError, TerminationError};
 use super::params::{self, Params};
 use super::spec::{PassConfig, PassKind};
 use super::frame::{FrameInput, PassOutput, PassStats, RenderPass, TerminationPoint};
@@ -63,21 +64,22 @@ impl Default for Termination {
 pub const TERMINATION_NAMES: &str = "first, secondary, diffuse[:ROUGHNESS] (default 0.3), spread[:C] (default 0.01), bth[:K] (default 4)";
 
 impl FromStr for Termination {
-    type Err = String;
+    type Err = TerminationError;
 
-    fn from_str(s: &str) -> Result<Self, String> {
+    fn from_str(s: &str) -> Result<Self, TerminationError> {
         let (name, param) = match s.trim().split_once(':') {
             Some((n, p)) => (n, Some(p)),
             None => (s.trim(), None),
         };
-        let value = |default: f32| -> Result<f32, String> {
+        let value = |default: f32| -> Result<f32, TerminationError> {
             match param {
                 None => Ok(default),
                 Some(p) => match p.parse::<f32>() {
                     Ok(v) if v.is_finite() && v > 0.0 => Ok(v),
-                    _ => Err(format!(
-                        "termination `{s}`: the parameter must be a positive number, got `{p}`"
-                    )),
+                    _ => Err(TerminationError::BadParameter {
+                        name: s.to_string(),
+                        param: p.to_string(),
+                    }),
                 },
             }
         };
@@ -90,9 +92,10 @@ impl FromStr for Termination {
             "spread" => Self::SpreadAngle { c: value(0.01)? },
             "bth" => Self::Balanced { k: value(4.0)? },
             _ => {
-                return Err(format!(
-                    "unknown termination `{s}`; known: {TERMINATION_NAMES}"
-                ));
+                return Err(TerminationError::Unknown {
+                    name: s.to_string(),
+                    known: TERMINATION_NAMES,
+                });
             }
         })
     }
@@ -131,10 +134,9 @@ pub const KIND: PassKind = PassKind {
         let rest = match name.strip_prefix("cache")? {
             "" => "",
             r if r.starts_with(':') || r.contains('=') => {
-                return Some(Err(format!(
-                    "pass `{name}`: takes no KEY=VALUE parameters (a termination takes its own \
-                     after its colon, e.g. cache-bth:8)"
-                )));
+                return Some(Err(PassError::TerminationParameters {
+                    pass: name.to_string(),
+                }));
             }
             r => r.strip_prefix('-').filter(|t| !t.is_empty())?,
         };
@@ -149,7 +151,10 @@ pub const KIND: PassKind = PassKind {
         Some(
             match rest {
                 "" => Ok(Termination::default()),
-                t => t.parse().map_err(|e| format!("pass `{name}`: {e}")),
+                t => t.parse().map_err(|source| PassError::Termination {
+                    pass: name.to_string(),
+                    source,
+                }),
             }
             .map(|termination| CacheTerminatedSettings { termination, nee }.into()),
         )

@@ -55,6 +55,7 @@ use std::time::Instant;
 use glam::Vec3;
 use nrc_scene::{LightSample, Scene, sampling::luminance, spawn_ray};
 
+use crate::error::SettingsError;
 use super::restir_di;
 use super::screen::{GBuffer, Phase, Primary, combine, par_map, stream, visible_between};
 use super::params::{Key, Params, Value};
@@ -164,7 +165,7 @@ impl Default for DdgiRestirSettings {
 
 impl DdgiRestirSettings {
     /// Errors for settings that cannot work.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), SettingsError> {
         super::screen::validate_reuse(
             &[
                 self.light_candidates,
@@ -175,28 +176,34 @@ impl DdgiRestirSettings {
             self.m_cap,
         )?;
         if self.bsdf_candidates == 0 {
-            return Err("at least one BSDF candidate is needed (it covers every surface)".into());
+            return Err(SettingsError::Combination(
+                "at least one BSDF candidate is needed (it covers every surface)",
+            ));
         }
         if !(self.footprint >= 0.0 && self.footprint <= 1e3) {
-            return Err(format!(
-                "footprint must lie in [0, 1000], got {}",
-                self.footprint
+            return Err(SettingsError::bounds(
+                "footprint",
+                "lie in [0, 1000]",
+                self.footprint,
             ));
         }
         if !(0.0..=1.0).contains(&self.smooth) {
-            return Err(format!("smooth must lie in [0, 1], got {}", self.smooth));
+            return Err(SettingsError::bounds("smooth", "lie in [0, 1]", self.smooth));
         }
         if !(self.clamp >= 0.0 && self.clamp <= 10.0) {
-            return Err(format!("clamp must lie in [0, 10], got {}", self.clamp));
+            return Err(SettingsError::bounds("clamp", "lie in [0, 10]", self.clamp));
         }
         if self.requery && self.light == SurfaceLight::Cache {
-            return Err("requery needs probes (the cache is asked once per frame)".into());
+            return Err(SettingsError::Combination(
+                "requery needs probes (the cache is asked once per frame)",
+            ));
         }
         let unit = nrc_scene::Aabb {
             min: Vec3::ZERO,
             max: Vec3::ONE,
         };
-        ProbeVolume::new(&unit, self.ddgi).map(|_| ())
+        ProbeVolume::new(&unit, self.ddgi)?;
+        Ok(())
     }
 
     fn uses_probes(&self) -> bool {

@@ -6,6 +6,7 @@
 
 use glam::Vec3;
 
+use crate::error::{PassError, SettingsError};
 use super::cache_terminated::{CacheTerminatedPass, Termination};
 use super::params::{Key, Params, Value};
 use super::spec::{PassConfig, PassKind};
@@ -42,7 +43,10 @@ pub const KIND: PassKind = PassKind {
         Some(
             super::params::set(name, &mut set, params)
                 .and_then(|()| {
-                    validate_volume(&set.volume).map_err(|e| format!("pass `{name}`: {e}"))
+                    validate_volume(&set.volume).map_err(|source| PassError::Invalid {
+                        pass: name.to_string(),
+                        source,
+                    })
                 })
                 .map(|()| set.into()),
         )
@@ -57,12 +61,13 @@ pub struct DdgiTerminatedSettings {
 }
 
 /// Errors for volume settings that cannot work (checked on a unit box).
-pub(super) fn validate_volume(volume: &DdgiSettings) -> Result<(), String> {
+pub(super) fn validate_volume(volume: &DdgiSettings) -> Result<(), SettingsError> {
     let unit = nrc_scene::Aabb {
         min: Vec3::ZERO,
         max: Vec3::ONE,
     };
-    ProbeVolume::new(&unit, *volume).map(|_| ())
+    ProbeVolume::new(&unit, *volume)?;
+    Ok(())
 }
 
 /// The probe volume's keys, shared by every pass that keeps one.

@@ -36,6 +36,7 @@ use glam::{Vec2, Vec3};
 use nrc_scene::{Scene, SurfaceInteraction};
 use rayon::prelude::*;
 
+use crate::error::SettingsError;
 use super::screen::{GBuffer, Phase, stream, visible_between};
 use super::params::{Key, Params, Value};
 use super::spec::{PassConfig, PassKind, parse_variant};
@@ -103,9 +104,9 @@ impl Default for IrSettings {
 }
 
 impl IrSettings {
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), SettingsError> {
         if self.vpls == 0 {
-            return Err("vpls must be at least 1".into());
+            return Err(SettingsError::bounds("vpls", "be at least 1", self.vpls));
         }
         // Absurd counts would be absurd allocations (`rate · vpls` candidate points) or loops.
         for (name, value, max) in [
@@ -117,20 +118,23 @@ impl IrSettings {
             ("mmax", self.m_max, 1 << 20),
         ] {
             if value > max {
-                return Err(format!("{name} must be at most {max}, got {value}"));
+                return Err(SettingsError::bounds(name, format!("be at most {max}"), value));
             }
         }
         if self.per_pixel > self.vpls {
-            return Err(format!(
-                "per_pixel ({}) must not exceed vpls ({})",
-                self.per_pixel, self.vpls
+            return Err(SettingsError::bounds(
+                "per_pixel",
+                format!("not exceed vpls ({})", self.vpls),
+                self.per_pixel,
             ));
         }
         if !(self.clamp.is_finite() && self.clamp > 0.0) {
-            return Err(format!("clamp must be finite and > 0, got {}", self.clamp));
+            return Err(SettingsError::bounds("clamp", "be finite and > 0", self.clamp));
         }
         if self.rate == 0 || self.radiosity_spp == 0 || self.visible_points == 0 {
-            return Err("rate, radiosity_spp and visible points must be at least 1".into());
+            return Err(SettingsError::Combination(
+                "rate, radiosity_spp and visible points must be at least 1",
+            ));
         }
         Ok(())
     }

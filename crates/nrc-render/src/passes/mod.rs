@@ -60,10 +60,11 @@ pub use restir_di::{RestirDiPass, RestirDiSettings};
 pub use restir_gi::{GiReuse, RestirGiPass, RestirGiSettings};
 pub use spec::{PassConfig, PassKind, PassSpec};
 
+use crate::error::PassError;
 use params::Param;
 
 /// The registered kind that claims `name`, and what it made of it.
-pub fn find(name: &str) -> Option<(&'static PassKind, Result<PassSpec, String>)> {
+pub fn find(name: &str) -> Option<(&'static PassKind, Result<PassSpec, PassError>)> {
     let name = name.trim();
     REGISTRY
         .iter()
@@ -71,12 +72,15 @@ pub fn find(name: &str) -> Option<(&'static PassKind, Result<PassSpec, String>)>
 }
 
 impl FromStr for PassSpec {
-    type Err = String;
+    type Err = PassError;
 
-    fn from_str(s: &str) -> Result<Self, String> {
+    fn from_str(s: &str) -> Result<Self, PassError> {
         match find(s) {
             Some((_, r)) => r,
-            None => Err(format!("unknown pass `{}`; known: {}", s.trim(), names())),
+            None => Err(PassError::UnknownPass {
+                name: s.trim().to_string(),
+                known: names(),
+            }),
         }
     }
 }

@@ -9,6 +9,8 @@ use std::fmt::Write as _;
 
 use glam::UVec3;
 
+use crate::error::PassError;
+
 /// One key of a pass's parameters.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Key {
@@ -183,11 +185,12 @@ pub fn list<S: Params + Clone>(settings: &S) -> Vec<Param> {
 }
 
 /// Sets the comma-separated `KEY=VALUE` parameters `params` of the pass named `pass`.
-pub fn set<S: Params>(pass: &str, settings: &mut S, params: &str) -> Result<(), String> {
+pub fn set<S: Params>(pass: &str, settings: &mut S, params: &str) -> Result<(), PassError> {
     for kv in params.split(',').filter(|p| !p.is_empty()) {
-        let (name, text) = kv
-            .split_once('=')
-            .ok_or_else(|| format!("pass `{pass}`: parameter `{kv}` is not KEY=VALUE"))?;
+        let (name, text) = kv.split_once('=').ok_or_else(|| PassError::NotKeyValue {
+            pass: pass.to_string(),
+            text: kv.to_string(),
+        })?;
         let mut known = Vec::new();
         let mut outcome = None;
         settings.visit(&mut |key, value| {
@@ -198,25 +201,28 @@ pub fn set<S: Params>(pass: &str, settings: &mut S, params: &str) -> Result<(), 
             let in_range = |v: &dyn Value| v.number().is_none_or(|x| key.admits(x));
             outcome = Some(match value.read(text) {
                 Some(()) if in_range(value) => Ok(()),
-                _ => Err(format!(
-                    "pass `{pass}`: bad value `{text}` for `{name}` ({}{})",
-                    value.grammar(),
-                    bounds(key, " in ")
-                )),
+                _ => Err(PassError::BadValue {
+                    pass: pass.to_string(),
+                    key: name.to_string(),
+                    value: text.to_string(),
+                    expected: format!("{}{}", value.grammar(), bounds(key, " in ")),
+                }),
             });
         });
         match outcome {
             Some(r) => r?,
             None if known.is_empty() => {
-                return Err(format!(
-                    "pass `{pass}`: unknown parameter `{name}` (this pass takes no parameters)"
-                ));
+                return Err(PassError::NoParameters {
+                    pass: pass.to_string(),
+                    key: name.to_string(),
+                });
             }
             None => {
-                return Err(format!(
-                    "pass `{pass}`: unknown parameter `{name}` (known: {})",
-                    known.join(", ")
-                ));
+                return Err(PassError::UnknownParameter {
+                    pass: pass.to_string(),
+                    key: name.to_string(),
+                    known: known.join(", "),
+                });
             }
         }
     }
@@ -325,10 +331,14 @@ mod tests {
             "extra=1",
             "count",
         ] {
-            let e = set("demo", &mut Demo::default(), bad).unwrap_err();
+            let e = set("demo", &mut Demo::default(), bad)
+                .unwrap_err()
+                .to_string();
             assert!(e.starts_with("pass `demo`: "), "{bad}: {e}");
         }
-        let e = set("demo", &mut Demo::default(), "extra=1").unwrap_err();
+        let e = set("demo", &mut Demo::default(), "extra=1")
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("known: count, scale, on)"), "{e}");
         let mut wide = Demo {
             wide: true,

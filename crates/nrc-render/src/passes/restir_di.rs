@@ -32,6 +32,7 @@ use std::time::Instant;
 use glam::Vec3;
 use nrc_scene::{LightSample, Scene, light::Incident, sampling::luminance, spawn_ray};
 
+use crate::error::SettingsError;
 use super::screen::{GBuffer, MAX, Phase, Primary, par_map, stream};
 use super::params::{Key, Params, Value};
 use super::spec::{PassConfig, PassKind, parse_variant};
@@ -96,7 +97,7 @@ impl Default for RestirDiSettings {
 
 impl RestirDiSettings {
     /// Errors for settings that cannot work.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), SettingsError> {
         super::screen::validate_reuse(
             &[
                 self.light_candidates,
@@ -105,10 +106,11 @@ impl RestirDiSettings {
             ],
             self.spatial_radius,
             self.m_cap,
-        )
-        .map_err(|e| format!("restir-di: {e}"))?;
+        )?;
         if self.light_candidates + self.bsdf_candidates == 0 {
-            return Err("restir-di: at least one candidate (light or BSDF) is needed".into());
+            return Err(SettingsError::Combination(
+                "at least one candidate (light or BSDF) is needed",
+            ));
         }
         Ok(())
     }

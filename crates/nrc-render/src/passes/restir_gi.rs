@@ -35,6 +35,7 @@ use std::time::Instant;
 use glam::Vec3;
 use nrc_scene::{Scene, sampling::luminance, spawn_ray};
 
+use crate::error::SettingsError;
 use super::hash_grid::{CellRule, HashGrid};
 use super::screen::{GBuffer, MAX, Phase, Primary, par_map, stream, visible_between};
 use super::params::{Key, Params, Value};
@@ -174,7 +175,7 @@ impl Default for RestirGiSettings {
 
 impl RestirGiSettings {
     /// Errors for settings that cannot work.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), SettingsError> {
         match self.reuse {
             GiReuse::Screen { neighbours, radius } => {
                 super::screen::validate_reuse(&[neighbours], radius, self.m_cap)
@@ -186,8 +187,10 @@ impl RestirGiSettings {
             } => {
                 super::screen::validate_reuse(&[samples], 0.0, self.m_cap)?;
                 if !(cell_scale > 0.0 && d_min > 0.0) {
-                    return Err(format!(
-                        "cell scale and d_min must be positive, got {cell_scale} and {d_min}"
+                    return Err(SettingsError::bounds(
+                        "cell scale and d_min",
+                        "be positive",
+                        format!("{cell_scale} and {d_min}"),
                     ));
                 }
                 Ok(())

@@ -13,6 +13,7 @@ use rayon::prelude::*;
 
 use super::frame::{FrameInput, PassOutput, PassStats, PhaseTimes};
 use super::params::{Key, Value};
+use crate::error::SettingsError;
 use crate::path_tracer::PathStats;
 use crate::reservoir::Reservoir;
 use crate::sampler::PixelSampler;
@@ -364,20 +365,24 @@ pub(super) fn visit_reuse(
 
 /// The bounds every resampling pass puts on its reuse settings (`counts`: its candidate and
 /// neighbour counts; absurd values would be loops per pixel).
-pub(super) fn validate_reuse(counts: &[u32], radius: f32, m_cap: f32) -> Result<(), String> {
+pub(super) fn validate_reuse(counts: &[u32], radius: f32, m_cap: f32) -> Result<(), SettingsError> {
     let max = MAX_COUNT;
-    if counts.iter().any(|&c| c > max) {
-        return Err(format!(
-            "candidate and neighbour counts must be at most {max}"
+    if let Some(c) = counts.iter().find(|&&c| c > max) {
+        return Err(SettingsError::bounds(
+            "candidate and neighbour counts",
+            format!("be at most {max}"),
+            c,
         ));
     }
     if !(radius >= 0.0 && radius.is_finite()) {
-        return Err(format!(
-            "spatial radius must be finite and ≥ 0, got {radius}"
+        return Err(SettingsError::bounds(
+            "spatial radius",
+            "be finite and ≥ 0",
+            radius,
         ));
     }
     if !(m_cap > 0.0 && m_cap.is_finite()) {
-        return Err(format!("M-cap must be positive, got {m_cap}"));
+        return Err(SettingsError::bounds("M-cap", "be positive", m_cap));
     }
     Ok(())
 }

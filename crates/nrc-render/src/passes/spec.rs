@@ -9,6 +9,7 @@ use std::sync::Arc;
 
 use super::frame::RenderPass;
 use super::params::{self, Param, Params};
+use crate::error::{PassError, SettingsError};
 use crate::path_tracer::PathTracer;
 
 /// A family of passes: its names, and how a name with its parameters becomes settings.
@@ -23,7 +24,7 @@ pub struct PassKind {
     /// Its variants without parameters (for help and tests).
     pub variants: fn() -> Vec<PassSpec>,
     /// The pass `name` (with its parameters), or `None` when `name` is not of this kind.
-    pub parse: fn(&str) -> Option<Result<PassSpec, String>>,
+    pub parse: fn(&str) -> Option<Result<PassSpec, PassError>>,
 }
 
 /// A pass's settings: everything needed to name it and build its state.
@@ -93,8 +94,8 @@ impl PassSpec {
 pub fn parse_variant<N, S>(
     name: &str,
     variants: &[(N, S)],
-    validate: fn(&S) -> Result<(), String>,
-) -> Option<Result<PassSpec, String>>
+    validate: fn(&S) -> Result<(), SettingsError>,
+) -> Option<Result<PassSpec, PassError>>
 where
     N: AsRef<str>,
     S: PassConfig + Params + Clone,
@@ -104,7 +105,12 @@ where
     let mut settings = defaults.clone();
     Some(
         params::set(name, &mut settings, rest)
-            .and_then(|()| validate(&settings).map_err(|e| format!("pass `{name}`: {e}")))
+            .and_then(|()| {
+                validate(&settings).map_err(|source| PassError::Invalid {
+                    pass: name.to_string(),
+                    source,
+                })
+            })
             .map(|()| settings.into()),
     )
 }

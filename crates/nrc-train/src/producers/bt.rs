@@ -37,6 +37,7 @@ use nrc_scene::{SurfaceInteraction, bsdf::Bsdf, sampling::Frame, spawn_ray_betwe
 
 use nrc_render::light_path::{LightPath, light_vertex_limit, trace_light_path};
 
+use crate::error::TrainError;
 use crate::producer::{
     Produced, Producer, ProducerContext, ProducerStats, fill_rounds, push_records,
 };
@@ -128,7 +129,7 @@ impl Producer for BidirectionalProducer {
         "bt"
     }
 
-    fn check(&self, scene: &nrc_scene::Scene) -> Result<(), String> {
+    fn check(&self, scene: &nrc_scene::Scene) -> Result<(), TrainError> {
         crate::producer::check_light_paths(self.name(), scene)
     }
 

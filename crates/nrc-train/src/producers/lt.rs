@@ -33,6 +33,7 @@ use nrc_scene::{
     sampling::{Frame, sample_cosine_hemisphere, sample_uniform_triangle},
 };
 
+use crate::error::TrainError;
 use crate::producer::{
     Produced, Producer, ProducerContext, ProducerStats, Rounds, fill_rounds, push_records,
 };
@@ -60,21 +61,24 @@ impl Default for LightProducer {
 
 impl LightProducer {
     /// Checks the settings: each balance finite in `[0, 1]`, their sum at most 1.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), TrainError> {
         for (name, v) in [
             ("surface_balance", self.surface_balance),
             ("camera_balance", self.camera_balance),
         ] {
             if !(0.0..=1.0).contains(&v) {
-                return Err(format!(
-                    "light training: {name} must lie in [0, 1], got {v}"
+                return Err(TrainError::bounds(
+                    format!("light training: {name}"),
+                    "lie in [0, 1]",
+                    v,
                 ));
             }
         }
         if self.surface_balance + self.camera_balance > 1.0 {
-            return Err(format!(
-                "light training: surface_balance + camera_balance must be at most 1, got {}",
-                self.surface_balance + self.camera_balance
+            return Err(TrainError::bounds(
+                "light training: surface_balance + camera_balance",
+                "be at most 1",
+                self.surface_balance + self.camera_balance,
             ));
         }
         Ok(())
@@ -101,7 +105,7 @@ impl Producer for LightProducer {
         "lt"
     }
 
-    fn check(&self, scene: &nrc_scene::Scene) -> Result<(), String> {
+    fn check(&self, scene: &nrc_scene::Scene) -> Result<(), TrainError> {
         crate::producer::check_light_paths(self.name(), scene)
     }
 

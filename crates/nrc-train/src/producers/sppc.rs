@@ -46,6 +46,7 @@ use rayon::prelude::*;
 
 use nrc_render::light_path::{LightVertex, light_vertex_limit, trace_light_path};
 
+use crate::error::TrainError;
 use crate::producer::{Produced, Producer, ProducerContext, ProducerStats, push_records};
 
 /// One persistent query of progressive photon collection.
@@ -121,32 +122,36 @@ const NORMAL_COS: f32 = 0.9;
 
 impl SppcProducer {
     /// Checks the settings, naming the first that is out of range.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), TrainError> {
         if self.capacity == 0 {
-            return Err("sppc: capacity must be at least 1".into());
+            return Err(TrainError::bounds("sppc: capacity", "be at least 1", 0));
         }
         if !(0.0..=1.0).contains(&self.replace_fraction) {
-            return Err(format!(
-                "sppc: replace_fraction must lie in [0, 1], got {}",
-                self.replace_fraction
+            return Err(TrainError::bounds(
+                "sppc: replace_fraction",
+                "lie in [0, 1]",
+                self.replace_fraction,
             ));
         }
         if !(self.initial_radius > 0.0 && self.initial_radius.is_finite()) {
-            return Err(format!(
-                "sppc: initial_radius must be positive and finite, got {}",
-                self.initial_radius
+            return Err(TrainError::bounds(
+                "sppc: initial_radius",
+                "be positive and finite",
+                self.initial_radius,
             ));
         }
         if !(self.photons_per_record > 0.0 && self.photons_per_record.is_finite()) {
-            return Err(format!(
-                "sppc: photons_per_record must be positive and finite, got {}",
-                self.photons_per_record
+            return Err(TrainError::bounds(
+                "sppc: photons_per_record",
+                "be positive and finite",
+                self.photons_per_record,
             ));
         }
         if !(self.alpha > 0.0 && self.alpha <= 1.0) {
-            return Err(format!(
-                "sppc: alpha must lie in (0, 1], got {}",
-                self.alpha
+            return Err(TrainError::bounds(
+                "sppc: alpha",
+                "lie in (0, 1]",
+                self.alpha,
             ));
         }
         Ok(())
@@ -247,7 +252,7 @@ impl Producer for SppcProducer {
         "sppc"
     }
 
-    fn check(&self, scene: &nrc_scene::Scene) -> Result<(), String> {
+    fn check(&self, scene: &nrc_scene::Scene) -> Result<(), TrainError> {
         crate::producer::check_light_paths(self.name(), scene)
     }
 
