@@ -468,3 +468,66 @@ fn temporal_reuse_follows_a_moving_camera() {
         assert!(errors[0] < bound * errors[1], "{base_name}: {errors:?}");
     }
 }
+
+/// A source answering the same radiance to every query.
+struct Constant(glam::Vec3);
+
+impl nrc_render::RadianceSource for Constant {
+    fn radiance(&self, queries: &[nrc_render::RadianceQuery]) -> Vec<glam::Vec3> {
+        vec![self.0; queries.len()]
+    }
+}
+
+/// `-nrc` ReSTIR GI asks its source again, every frame, for the radiance of the history's
+/// samples (an online cache trains between frames). Fifteen frames of a source answering 1
+/// everywhere and a sixteenth answering 2 give the same image as sixteen frames answering 2:
+/// a constant source scales every target and every resampling weight alike, so every choice is
+/// the same and only the history's stored radiance could differ. With `refresh=0` (the
+/// history keeps the answers of the frames that found its samples) the sixteenth frame is
+/// darker by the reused samples' share, and the comparison fails. Screen and world space.
+#[test]
+fn restir_gi_nrc_refreshes_its_history_from_the_source() {
+    let scene = cornell();
+    let tracer = PathTracer::default();
+    let last = |pass: &str, first: f32| {
+        let spec: PassSpec = pass.parse().unwrap();
+        let mut p = spec.build(&tracer);
+        let mut out = None;
+        for f in 0..16u64 {
+            let input = FrameInput {
+                scene: &scene,
+                camera: &scene.camera,
+                width: 24,
+                height: 24,
+                spp: 1,
+                seed: 500 + f,
+            };
+            let c = if f < 15 { first } else { 2.0 };
+            out = Some(passes::run(p.as_mut(), &input, &Constant(glam::Vec3::splat(c))).image);
+        }
+        out.unwrap()
+    };
+    // The largest per-pixel difference, relative to the image's mean.
+    let gap = |a: &Image, b: &Image| {
+        let mean = b.data.iter().map(|p| p.x + p.y + p.z).sum::<f32>() / b.data.len() as f32;
+        let worst = a
+            .data
+            .iter()
+            .zip(&b.data)
+            .map(|(p, q)| (*p - *q).abs().max_element())
+            .fold(0.0f32, f32::max);
+        worst / mean
+    };
+    for base in ["restir-gi-nrc", "wsrestir-gi-nrc"] {
+        let steady = last(&format!("{base}:jitter=0"), 2.0);
+        let refreshed = last(&format!("{base}:jitter=0"), 1.0);
+        let stale = last(&format!("{base}:jitter=0,refresh=0"), 1.0);
+        let (g_refreshed, g_stale) = (gap(&refreshed, &steady), gap(&stale, &steady));
+        println!("{base}: refreshed {g_refreshed:.2e}, stale {g_stale:.2e} of the mean");
+        assert!(
+            g_refreshed < 1e-4,
+            "{base}: refreshed history differs by {g_refreshed}"
+        );
+        assert!(g_stale > 1e-2, "{base}: a stale history passes ({g_stale})");
+    }
+}

@@ -34,6 +34,7 @@ use std::time::Instant;
 
 use glam::Vec3;
 use nrc_scene::{Scene, sampling::luminance, spawn_ray};
+use rayon::prelude::*;
 
 use crate::error::SettingsError;
 use super::hash_grid::{CellRule, HashGrid};
@@ -157,6 +158,10 @@ pub struct RestirGiSettings {
     /// Carry `W` across a shift with the reconnection Jacobian (off: the biased shortcut of
     /// reusing `W` unchanged; an ablation and the tests' negative control).
     pub jacobian: bool,
+    /// `-nrc`: ask the source again, each frame, for the radiance of the history's samples
+    /// (the cache trains between frames; off: keep the answers from the frames that found
+    /// them, an ablation and the refresh test's negative control).
+    pub refresh: bool,
 }
 
 impl Default for RestirGiSettings {
@@ -169,6 +174,7 @@ impl Default for RestirGiSettings {
             m_cap: 30.0,
             jitter: true,
             jacobian: true,
+            refresh: true,
         }
     }
 }
@@ -242,6 +248,10 @@ impl Params for RestirGiSettings {
         let jacobian = Key::new("jacobian", "shift W by the reconnection Jacobian (0: biased)");
         f(&jacobian, &mut self.jacobian);
         f(&Key::new("jitter", "jitter camera rays in the pixel"), &mut self.jitter);
+        if self.cache {
+            let refresh = Key::new("refresh", "ask the source again for the history's samples");
+            f(&refresh, &mut self.refresh);
+        }
     }
 }
 
@@ -287,6 +297,8 @@ pub struct GiSample {
     /// Its geometric normal.
     pub n: Vec3,
     pub l: Vec3,
+    /// Its triangle (to find the surface again when the history's radiance is refreshed).
+    pub tri: u32,
 }
 
 pub type GiReservoir = Reservoir<GiSample>;
@@ -378,7 +390,14 @@ pub struct RestirGiPass {
     pub settings: RestirGiSettings,
     tracer: PathTracer,
     history: Option<History>,
-    frame: Option<(GBuffer, Vec<Traced>, f64)>,
+    frame: Option<(GBuffer, Vec<Traced>, Vec<(Refresh, Vertex)>, f64)>,
+}
+
+/// A history sample to ask the source about again: a screen reservoir or a grid entry.
+#[derive(Clone, Copy, Debug)]
+enum Refresh {
+    Reservoir(usize),
+    Entry(usize),
 }
 
 impl RestirGiPass {
@@ -501,6 +520,7 @@ impl RestirGiPass {
                         x: si.p,
                         n: si.ng,
                         l: Vec3::ZERO,
+                        tri: si.tri,
                     };
                     if self.settings.cache {
                         shading.query = Some(y.query());
@@ -562,6 +582,7 @@ impl RestirGiPass {
                         x: h.vertex.si.p,
                         n: h.vertex.si.ng,
                         l: l3,
+                        tri: h.vertex.si.tri,
                     },
                     bs.pdf,
                 ));
@@ -646,7 +667,17 @@ impl RenderPass for RestirGiPass {
                 queries.push(q);
             }
         }
-        self.frame = Some((g, traced, t.elapsed().as_secs_f64() * 1e3));
+        // -nrc: the history's samples carry the cache's answers from the frames that found
+        // them, and the cache has trained since; each is asked again toward its owner, after
+        // this frame's queries (as DDGI resampling refreshes its history, ddgi_restir.rs).
+        let refresh = match self.history.as_ref() {
+            Some(h) if self.settings.cache && self.settings.refresh => {
+                self.refresh_list(scene, h)
+            }
+            _ => Vec::new(),
+        };
+        queries.extend(refresh.iter().map(|(_, v)| v.query()));
+        self.frame = Some((g, traced, refresh, t.elapsed().as_secs_f64() * 1e3));
         queries
     }
 
@@ -658,7 +689,7 @@ impl RenderPass for RestirGiPass {
                 "resolve without trace needs a pass that asks no source"
             );
         }
-        let (g, traced, trace_ms) = self.frame.take().expect("just traced");
+        let (g, traced, refresh, trace_ms) = self.frame.take().expect("just traced");
         let scene = input.scene;
         let seed = input.seed;
         let n = g.len();
@@ -694,9 +725,29 @@ impl RenderPass for RestirGiPass {
             (r, t.stats)
         });
 
-        // Temporal reuse.
+        // Temporal reuse, after the history's samples took the source's new answers.
         let t0 = Instant::now();
-        let history = self.history.take().filter(|h| h.g.same_shape(&g));
+        let mut history = self.history.take();
+        if let Some(h) = &mut history {
+            let fresh = &answers[answers.len() - refresh.len()..];
+            for (&(slot, _), &l) in refresh.iter().zip(fresh) {
+                let sample = match slot {
+                    Refresh::Reservoir(j) => &mut h.res[j].sample,
+                    Refresh::Entry(k) => match h.world.as_mut() {
+                        Some(w) => &mut w.entries[k].res.sample,
+                        None => continue,
+                    },
+                };
+                if let Some(y) = sample {
+                    y.l = if l.is_finite() {
+                        l.max(Vec3::ZERO)
+                    } else {
+                        Vec3::ZERO
+                    };
+                }
+            }
+        }
+        let history = history.filter(|h| h.g.same_shape(&g));
         let temporal: Vec<(GiReservoir, PathStats)> = par_map(n, |i| {
             let (own, mut stats) = initial[i];
             let (Some(sh), Some(h)) = (
@@ -815,6 +866,30 @@ impl RenderPass for RestirGiPass {
 }
 
 impl RestirGiPass {
+    /// The history's samples that reuse can reach, each with the vertex at its sample facing
+    /// its owner: the screen reservoirs (with temporal reuse on) and the grid's entries.
+    fn refresh_list(&self, scene: &Scene, h: &History) -> Vec<(Refresh, Vertex)> {
+        let at = |y: &GiSample, owner: Vec3| {
+            let wo = (owner - y.x).normalize_or_zero();
+            Vertex::new(scene, &scene.interaction_at(y.tri, y.x, wo), wo)
+        };
+        let mut out: Vec<(Refresh, Vertex)> = Vec::new();
+        if self.settings.temporal {
+            out.par_extend(h.res.par_iter().enumerate().filter_map(|(j, r)| {
+                let y = r.sample.as_ref()?;
+                let owner = h.g.primary[j].as_ref()?.v.si.p;
+                Some((Refresh::Reservoir(j), at(y, owner)))
+            }));
+        }
+        if let Some(w) = &h.world {
+            out.par_extend(w.entries.par_iter().enumerate().filter_map(|(k, e)| {
+                let y = e.res.sample.as_ref()?;
+                Some((Refresh::Entry(k), at(y, e.owner.si.p)))
+            }));
+        }
+        out
+    }
+
     /// World space: the grid for the next frame, temporal reservoirs keyed at x₁ and second
     /// samples at x₂. Empty reservoirs go in too: a donor that found nothing still counts in Z
     /// (leaving them out made reuse select only lucky donors and brightened dark regions 2×).
