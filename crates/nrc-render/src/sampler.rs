@@ -93,6 +93,8 @@ pub enum Stream {
     ConvergeRestart,
     /// Frame `k` of a `nrc compare --converge` run.
     ConvergeFrame(u32),
+    /// Instant radiosity's warm-up iteration `k` before its first frame.
+    VplWarmup(u32),
 }
 
 impl Stream {
@@ -108,6 +110,7 @@ impl Stream {
             Self::SweepStep(k) => (7, k),
             Self::ConvergeRestart => (8, 0),
             Self::ConvergeFrame(k) => (9, k),
+            Self::VplWarmup(k) => (10, k),
         };
         mix64(mix64(seed ^ (id as u64).wrapping_mul(0xD1B5_4A32_D192_ED03)) ^ k as u64)
     }
@@ -116,6 +119,41 @@ impl Stream {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Every named stream of a seed is its own: none repeats another, nor the seed itself (the
+    /// first warm-up iteration of instant radiosity once drew the frame's own numbers).
+    #[test]
+    fn named_streams_differ_from_each_other_and_the_seed() {
+        for seed in [0u64, 1, 12345, u64::MAX] {
+            let mut all: Vec<u64> = vec![seed];
+            all.extend(
+                [
+                    Stream::ProbeRays,
+                    Stream::Vpls,
+                    Stream::TerminationRays,
+                    Stream::TrainingRender,
+                    Stream::ConvergeRestart,
+                ]
+                .map(|s| s.seed(seed)),
+            );
+            for k in 0..4 {
+                all.extend(
+                    [
+                        Stream::Producer(k),
+                        Stream::SequenceFrame(k),
+                        Stream::SweepStep(k),
+                        Stream::ConvergeFrame(k),
+                        Stream::VplWarmup(k),
+                    ]
+                    .map(|s| s.seed(seed)),
+                );
+            }
+            let n = all.len();
+            all.sort_unstable();
+            all.dedup();
+            assert_eq!(all.len(), n, "seed {seed}: two streams coincide");
+        }
+    }
 
     #[test]
     fn streams_are_reproducible_and_distinct() {

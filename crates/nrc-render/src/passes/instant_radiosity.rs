@@ -834,8 +834,11 @@ impl RenderPass for InstantRadiosityPass {
             VplMode::Smc | VplMode::SmcSource => {
                 let visible = self.visible_points(input, seed);
                 if self.vpls.is_empty() {
+                    // Each iteration its own stream: the frame's own iteration below uses
+                    // `seed`, which the first warm-up iteration used to repeat.
                     for w in 0..self.settings.warmup.max(1) {
-                        self.iterate_traced(input, &visible, seed.wrapping_add(w as u64 * 7919));
+                        let stream = Stream::VplWarmup(w).seed(input.seed);
+                        self.iterate_traced(input, &visible, stream);
                         self.vpl_densities();
                     }
                 }
