@@ -30,10 +30,11 @@ const MAX_SLICES: usize = 256;
 /// On a GPU the batch is cut into slices of rows and each layer is one batched product over the
 /// slices, with the layer's matrix expanded (a view) over them. The point is the backward pass:
 /// a layer's weight gradient `xᵀ·δ` reduces over the whole batch into a 64 × 64 matrix, which
-/// one plain product computes on a handful of workgroups (on an H200, 93 % of a training step's
-/// GPU time and 0.67 M samples/s at every batch size, BENCHMARKS.md); sliced, autodiff
-/// computes one 64 × 64 product per slice in parallel and sums them (the expand's backward): a
-/// split-K product from generic ops. Flex keeps one product (its matmul already splits).
+/// one plain product computes on a handful of workgroups (on an H200 the matmul held 93.5 % of
+/// the GPU time of 3 s of training and inference at 2^16, and training ran at 0.67 M samples/s
+/// at every batch size, BENCHMARKS.md); sliced, autodiff computes one 64 × 64 product per slice
+/// in parallel and sums them (the expand's backward): a split-K product from generic ops. Flex
+/// keeps one product (the CPU's default is the fused step; slicing was not measured there).
 pub fn mlp_tensor(weights: Tensor<1>, x: Tensor<2>, layers: &[LayerShape]) -> Tensor<2> {
     let [n, _] = x.dims();
     let flex = matches!(
@@ -49,7 +50,7 @@ pub fn mlp_tensor(weights: Tensor<1>, x: Tensor<2>, layers: &[LayerShape]) -> Te
 }
 
 /// [`mlp_tensor`] with the batch cut into `slices` slices (1: one product per layer).
-pub fn mlp_tensor_sliced(
+fn mlp_tensor_sliced(
     weights: Tensor<1>,
     x: Tensor<2>,
     layers: &[LayerShape],

@@ -18,6 +18,17 @@ pub trait RadianceSource: Sync {
     fn radiance(&self, queries: &[RadianceQuery]) -> Vec<Vec3>;
 }
 
+/// A source's answer as a pass may use it: finite and non-negative, else zero (a cache still
+/// learning can answer anything).
+#[inline]
+pub fn usable_answer(l: Vec3) -> Vec3 {
+    if l.is_finite() {
+        l.max(Vec3::ZERO)
+    } else {
+        Vec3::ZERO
+    }
+}
+
 /// A source that knows nothing: zero everywhere (self-learning off, or no source at all).
 #[derive(Clone, Copy, Debug, Default)]
 pub struct ZeroSource;

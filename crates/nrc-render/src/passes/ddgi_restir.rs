@@ -67,7 +67,7 @@ use crate::path_tracer::{PathStats, PathTracer};
 use crate::sampler::Stream;
 use crate::reservoir::Reservoir;
 use crate::sampler::PixelSampler;
-use crate::source::RadianceQuery;
+use crate::source::{RadianceQuery, usable_answer};
 use crate::spread::Spread;
 use crate::transport::Vertex;
 use rayon::prelude::*;
@@ -852,11 +852,7 @@ impl RenderPass for DdgiRestirPass {
                     for c in &mut tr.candidates {
                         if let (DdgiSample::Surface(y), Some(_)) = (&mut c.y, c.at) {
                             let a = answers[k];
-                            y.l = if a.is_finite() {
-                                a.max(Vec3::ZERO)
-                            } else {
-                                Vec3::ZERO
-                            };
+                            y.l = usable_answer(a);
                             k += 1;
                         }
                     }
@@ -1080,11 +1076,7 @@ impl RenderPass for DdgiRestirPass {
 fn refresh_history(h: &mut History, refresh: &[(usize, Vertex)], fresh: &[Vec3]) {
     for (&(j, at), l) in refresh.iter().zip(fresh) {
         if let Some(DdgiSample::Surface(y)) = &mut h.res[j].sample {
-            y.l = if l.is_finite() {
-                l.max(Vec3::ZERO)
-            } else {
-                Vec3::ZERO
-            };
+            y.l = usable_answer(*l);
             y.side = y.ng.dot(at.wo_world).signum();
         }
     }

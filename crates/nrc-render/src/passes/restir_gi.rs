@@ -45,7 +45,7 @@ use super::frame::{FrameInput, PassOutput, PhaseTimes, RenderPass};
 use crate::nee::next_event;
 use crate::path_tracer::{PathStats, PathTracer};
 use crate::reservoir::Reservoir;
-use crate::source::RadianceQuery;
+use crate::source::{RadianceQuery, usable_answer};
 use crate::transport::{Arrival, PathWalk, Vertex};
 
 /// Vertices below this roughness count as specular (§4.1).
@@ -670,7 +670,7 @@ impl RenderPass for RestirGiPass {
         // -nrc: the history's samples carry the cache's answers from the frames that found
         // them, and the cache has trained since; each is asked again toward its owner, after
         // this frame's queries (as DDGI resampling refreshes its history, ddgi_restir.rs).
-        let refresh = match self.history.as_ref() {
+        let refresh = match self.history.as_ref().filter(|h| h.g.same_shape(&g)) {
             Some(h) if self.settings.cache && self.settings.refresh => {
                 self.refresh_list(scene, h)
             }
@@ -708,7 +708,7 @@ impl RenderPass for RestirGiPass {
                 match sh.candidate {
                     Some((mut y, pdf)) => {
                         if let Some(q) = sh.query_index {
-                            y.l = answers[q];
+                            y.l = usable_answer(answers[q]);
                         }
                         let target = target_at(&sh.v, &y);
                         r.update(
@@ -739,11 +739,7 @@ impl RenderPass for RestirGiPass {
                     },
                 };
                 if let Some(y) = sample {
-                    y.l = if l.is_finite() {
-                        l.max(Vec3::ZERO)
-                    } else {
-                        Vec3::ZERO
-                    };
+                    y.l = usable_answer(l);
                 }
             }
         }
