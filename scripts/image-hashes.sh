@@ -8,7 +8,7 @@
 set -euo pipefail
 B=$1
 O=$2
-mkdir -p "$O/train" "$O/cmp" "$O/caustics/train"
+mkdir -p "$O/train" "$O/cmp" "$O/caustics/train" "$O/reuse"
 S=scenes/cornell-box.gltf
 log="$O/log.txt"
 "$B" render --scene $S --spp 8 --width 64 --height 64 --out "$O/render.exr" --seed 5 > "$log" 2>&1
@@ -24,6 +24,10 @@ C=scenes/caustics.gltf
 "$B" train --scene $C --frames 4 --resolution 64 --records 4096 --width 32 --height 32 --frames-out "$O/caustics/train" \
   --every 1 --snapshot "$O/caustics/c.nrc" --seed 3 --producer mix:pt-sl=0.5,bt=0.2,lt=0.1,sppc=0.2 >> "$log" 2>&1
 "$B" render --scene $C --cache "$O/caustics/c.nrc" --spp 4 --width 32 --height 32 --termination bth --out "$O/caustics/cache-bth.exr" >> "$log" 2>&1
-cd "$O" && sha256sum render.exr render-ajar.exr train/*.exr cache-*.exr cmp/*.exr refs/*/mean.exr caustics/*.exr caustics/train/*.exr \
+# The resampling passes: three frames each (history reused), two runs, warm-up included.
+"$B" compare --scene scenes/ajar.gltf --equal-spp 3 --runs 2 --width 32 --height 32 --no-flip \
+  --methods restir-di,restir-di-biased,restir-gi,restir-gi-biased,wsrestir-gi,ddgi-restir,nrc-restir,ddgi-nrc-restir,restir-gi-nrc,wsrestir-gi-nrc \
+  --train-frames 3 --records 4096 --reference-spp 16 --out "$O/reuse" --cache-dir "$O/refs" >> "$log" 2>&1
+cd "$O" && sha256sum render.exr render-ajar.exr train/*.exr cache-*.exr cmp/*.exr refs/*/mean.exr caustics/*.exr caustics/train/*.exr reuse/*.exr \
   | sed 's#  # #' > hashes.txt
 echo "wrote $O/hashes.txt"

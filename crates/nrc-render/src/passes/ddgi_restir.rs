@@ -57,7 +57,8 @@ use nrc_scene::{LightSample, Scene, sampling::luminance, spawn_ray};
 
 use crate::error::SettingsError;
 use super::restir_di;
-use super::screen::{GBuffer, Phase, Primary, combine, par_map, stream, visible_between};
+use super::reuse::{self, History, Resampling, Slot};
+use super::screen::{GBuffer, Phase, Primary, par_map, stream, visible_between};
 use super::params::{Key, Params, Value};
 use super::screen::MAX;
 use super::spec::{PassConfig, PassKind, parse_variant};
@@ -166,7 +167,7 @@ impl Default for DdgiRestirSettings {
 impl DdgiRestirSettings {
     /// Errors for settings that cannot work.
     pub fn validate(&self) -> Result<(), SettingsError> {
-        super::screen::validate_reuse(
+        reuse::validate_reuse(
             &[
                 self.light_candidates,
                 self.bsdf_candidates,
@@ -218,7 +219,7 @@ impl Params for DdgiRestirSettings {
         let bsdf = Key::new("bsdf", "BSDF-sampled candidates (the first also for the residual)");
         f(&bsdf.range(1.0, MAX), &mut self.bsdf_candidates);
         let (k, radius) = (&mut self.spatial_neighbours, &mut self.spatial_radius);
-        super::screen::visit_reuse(f, k, radius, &mut self.m_cap, &mut self.temporal);
+        reuse::visit_reuse(f, k, radius, &mut self.m_cap, &mut self.temporal);
         let clamp = Key::new("clamp", "G_max = 1/(clamp · diagonal)²; 0: no clamp");
         f(&clamp.range(0.0, 10.0), &mut self.clamp);
         let residual = Key::new("residual", "estimate the clamped-away transport (eq. 9)");
@@ -425,11 +426,6 @@ struct Traced {
     stats: PathStats,
 }
 
-struct History {
-    g: GBuffer,
-    res: Vec<DdgiReservoir>,
-}
-
 /// A frame between trace and resolve.
 struct Frame {
     g: GBuffer,
@@ -447,7 +443,7 @@ pub struct DdgiRestirPass {
     pub settings: DdgiRestirSettings,
     tracer: PathTracer,
     volume: Option<ProbeVolume>,
-    history: Option<History>,
+    history: Option<History<DdgiSample>>,
     frame: Option<Frame>,
     /// Milliseconds of the last probe update.
     pub update_ms: f64,
@@ -969,56 +965,24 @@ impl RenderPass for DdgiRestirPass {
         });
 
         // 2. Spatial reuse from the initial buffer.
-        let spatial: Vec<(DdgiReservoir, PathStats)> = par_map(n, |i| {
-            let own = initial[i].0;
-            let mut stats = PathStats::default();
-            let Some(p) = usable(&g.primary[i], set.smooth) else {
-                return (own, stats);
-            };
-            if set.spatial_neighbours == 0 {
-                return (own, stats);
-            }
-            let mut s = stream(seed, i, Phase::Spatial);
-            let mut near = Vec::new();
-            g.neighbours(
-                i,
-                p,
-                set.spatial_neighbours,
-                set.spatial_radius,
-                &mut s,
-                &mut near,
-            );
-            let others = g.with_vertices(&near, |q| initial[q].0);
-            let target =
-                |v: &Vertex, y: &DdgiSample| contribution(&ctx, v, y).map_or(0.0, |c| c.target);
-            let (r, _) = combine(&p.v, &own, &others, false, &mut s, target, |ov, y| {
-                sees(scene, ov, y, &mut stats)
-            });
-            (r, stats)
-        });
+        let frame = DdgiFrame {
+            scene,
+            g: &g,
+            ctx,
+            smooth: set.smooth,
+        };
+        let slots: Vec<Slot<DdgiSample>> = initial
+            .iter()
+            .map(|(r, _, _)| (*r, PathStats::default()))
+            .collect();
+        let (k, radius) = (set.spatial_neighbours, set.spatial_radius);
+        let spatial = reuse::spatial(&frame, &g, seed, k, radius, &slots);
         times.spatial_ms = t.elapsed().as_secs_f64() * 1e3;
 
-        // 3. Temporal reuse.
+        // 3. Temporal reuse (last: the shading's shadow ray tests what it keeps).
         let t = Instant::now();
         let cap = set.m_cap * (ml + mb);
-        let temporal: Vec<(DdgiReservoir, PathStats)> = par_map(n, |i| {
-            let (own, mut stats) = spatial[i];
-            let (Some(p), Some(h)) = (usable(&g.primary[i], set.smooth), history.as_ref()) else {
-                return (own, stats);
-            };
-            let Some((j, pv)) = h.g.temporal_neighbour(&p.v, i) else {
-                return (own, stats);
-            };
-            let mut prev = h.res[j];
-            prev.cap(cap);
-            let mut s = stream(seed, i, Phase::Temporal);
-            let target =
-                |v: &Vertex, y: &DdgiSample| contribution(&ctx, v, y).map_or(0.0, |c| c.target);
-            let (r, _) = combine(&p.v, &own, &[(prev, pv)], false, &mut s, target, |ov, y| {
-                sees(scene, ov, y, &mut stats)
-            });
-            (r, stats)
-        });
+        let temporal = reuse::temporal(&frame, seed, history.as_ref(), cap, false, &spatial);
         times.temporal_ms = t.elapsed().as_secs_f64() * 1e3;
 
         // 4. Shading: one shadow ray.
@@ -1071,9 +1035,43 @@ impl RenderPass for DdgiRestirPass {
     }
 }
 
+/// A frame of DDGI resampling as the reuse driver sees it: light and surface samples at the
+/// usable primary vertices, in the samples' own measures (the same at every vertex); always
+/// unbiased.
+struct DdgiFrame<'a> {
+    scene: &'a Scene,
+    g: &'a GBuffer,
+    ctx: Ctx<'a>,
+    smooth: f32,
+}
+
+impl Resampling for DdgiFrame<'_> {
+    type Sample = DdgiSample;
+
+    fn receiver(&self, i: usize) -> Option<&Vertex> {
+        usable(&self.g.primary[i], self.smooth).map(|p| &p.v)
+    }
+
+    fn donor(&self, q: usize) -> Option<&Vertex> {
+        self.g.primary[q].as_ref().map(|p| &p.v)
+    }
+
+    fn target(&self, v: &Vertex, y: &DdgiSample) -> f32 {
+        contribution(&self.ctx, v, y).map_or(0.0, |c| c.target)
+    }
+
+    fn visible(&self, v: &Vertex, y: &DdgiSample, stats: &mut PathStats) -> bool {
+        sees(self.scene, v, y, stats)
+    }
+
+    fn biased(&self) -> bool {
+        false
+    }
+}
+
 /// Puts the source's current radiance `fresh` into the history's surface samples listed in
 /// `refresh` (reservoir index, vertex at the sample asked toward the reservoir's owner).
-fn refresh_history(h: &mut History, refresh: &[(usize, Vertex)], fresh: &[Vec3]) {
+fn refresh_history(h: &mut History<DdgiSample>, refresh: &[(usize, Vertex)], fresh: &[Vec3]) {
     for (&(j, at), l) in refresh.iter().zip(fresh) {
         if let Some(DdgiSample::Surface(y)) = &mut h.res[j].sample {
             y.l = usable_answer(*l);

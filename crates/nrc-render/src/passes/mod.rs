@@ -41,6 +41,7 @@ passes!(
 pub mod frame;
 pub mod hash_grid;
 pub mod params;
+pub mod reuse;
 pub mod screen;
 pub mod spec;
 

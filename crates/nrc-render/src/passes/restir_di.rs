@@ -33,6 +33,7 @@ use glam::Vec3;
 use nrc_scene::{LightSample, Scene, light::Incident, sampling::luminance, spawn_ray};
 
 use crate::error::SettingsError;
+use super::reuse::{self, History, Resampling, Slot};
 use super::screen::{GBuffer, MAX, Phase, Primary, par_map, stream};
 use super::params::{Key, Params, Value};
 use super::spec::{PassConfig, PassKind, parse_variant};
@@ -98,7 +99,7 @@ impl Default for RestirDiSettings {
 impl RestirDiSettings {
     /// Errors for settings that cannot work.
     pub fn validate(&self) -> Result<(), SettingsError> {
-        super::screen::validate_reuse(
+        reuse::validate_reuse(
             &[
                 self.light_candidates,
                 self.bsdf_candidates,
@@ -123,7 +124,7 @@ impl Params for RestirDiSettings {
         let bsdf = Key::new("bsdf", "BSDF-sampled candidates (a ray each)");
         f(&bsdf.range(0.0, MAX), &mut self.bsdf_candidates);
         let (k, radius) = (&mut self.spatial_neighbours, &mut self.spatial_radius);
-        super::screen::visit_reuse(f, k, radius, &mut self.m_cap, &mut self.temporal);
+        reuse::visit_reuse(f, k, radius, &mut self.m_cap, &mut self.temporal);
         f(&Key::new("jitter", "jitter camera rays in the pixel"), &mut self.jitter);
     }
 }
@@ -154,17 +155,11 @@ impl PassConfig for RestirDiSettings {
 /// A direct-light reservoir.
 pub type DiReservoir = Reservoir<LightSample>;
 
-/// The previous frame: its camera rays and final reservoirs.
-struct History {
-    g: GBuffer,
-    res: Vec<DiReservoir>,
-}
-
 /// The ReSTIR DI pass and its history.
 pub struct RestirDiPass {
     pub settings: RestirDiSettings,
     tracer: PathTracer,
-    history: Option<History>,
+    history: Option<History<LightSample>>,
     frame: Option<PassOutput>,
 }
 
@@ -304,29 +299,48 @@ impl RestirDiPass {
         }
         r
     }
+}
 
-    /// Steps 2–3: merges `others` (reservoirs with their owners' vertices) into `own` (the
-    /// reservoir of `v`), finishing with the unbiased or the biased `Z`
-    /// ([`super::screen::combine`]). Returns the merged reservoir and whether its sample is
-    /// `own`'s.
-    fn combine(
-        &self,
-        scene: &Scene,
-        v: &Vertex,
-        own: &DiReservoir,
-        others: &[(DiReservoir, &Vertex)],
-        s: &mut PixelSampler,
-        stats: &mut PathStats,
-    ) -> (DiReservoir, bool) {
-        super::screen::combine(
-            v,
-            own,
-            others,
-            self.settings.biased,
-            s,
-            target_at,
-            |ov, y| contribution(ov, y).is_some_and(|c| sees(scene, ov, y, &c.inc, stats)),
-        )
+/// A frame of ReSTIR DI as the reuse driver sees it: light samples at the usable primary
+/// vertices, in area (or the light's own) measure, which is the same at every vertex.
+struct DiFrame<'a> {
+    scene: &'a Scene,
+    g: &'a GBuffer,
+    direct: bool,
+    biased: bool,
+}
+
+impl DiFrame<'_> {
+    /// The primary vertex of pixel sample `i` where resampling applies: non-delta, with direct
+    /// light to resample.
+    fn usable(&self, i: usize) -> Option<&Primary> {
+        self.g.primary[i]
+            .as_ref()
+            .filter(|p| self.direct && !p.v.bsdf.is_delta())
+    }
+}
+
+impl Resampling for DiFrame<'_> {
+    type Sample = LightSample;
+
+    fn receiver(&self, i: usize) -> Option<&Vertex> {
+        self.usable(i).map(|p| &p.v)
+    }
+
+    fn donor(&self, q: usize) -> Option<&Vertex> {
+        self.g.primary[q].as_ref().map(|p| &p.v)
+    }
+
+    fn target(&self, v: &Vertex, y: &LightSample) -> f32 {
+        target_at(v, y)
+    }
+
+    fn visible(&self, v: &Vertex, y: &LightSample, stats: &mut PathStats) -> bool {
+        contribution(v, y).is_some_and(|c| sees(self.scene, v, y, &c.inc, stats))
+    }
+
+    fn biased(&self) -> bool {
+        self.biased
     }
 }
 
@@ -354,15 +368,17 @@ impl RenderPass for RestirDiPass {
             self.settings.jitter,
         );
         let n = g.len();
-        let direct = self.tracer.segment_limit() >= 2 && scene.light_count() > 0;
-        fn usable(p: &Option<Primary>, direct: bool) -> Option<&Primary> {
-            p.as_ref().filter(|p| direct && !p.v.bsdf.is_delta())
-        }
+        let frame = DiFrame {
+            scene,
+            g: &g,
+            direct: self.tracer.segment_limit() >= 2 && scene.light_count() > 0,
+            biased: self.settings.biased,
+        };
 
         // 1. Candidates.
-        let initial: Vec<(DiReservoir, PathStats)> = par_map(n, |i| {
+        let initial: Vec<Slot<LightSample>> = par_map(n, |i| {
             let mut stats = PathStats::default();
-            let r = match usable(&g.primary[i], direct) {
+            let r = match frame.usable(i) {
                 Some(p) => self.candidates(
                     scene,
                     &p.v,
@@ -375,7 +391,7 @@ impl RenderPass for RestirDiPass {
         });
         times.candidates_ms = t.elapsed().as_secs_f64() * 1e3;
 
-        // 2. Temporal reuse.
+        // 2. Temporal reuse (history samples shadow-tested, as they feed spatial reuse).
         let t = Instant::now();
         let cap = self.settings.m_cap
             * (self.settings.light_candidates + self.settings.bsdf_candidates) as f32;
@@ -383,57 +399,13 @@ impl RenderPass for RestirDiPass {
             .history
             .take()
             .filter(|h| self.settings.temporal && h.g.same_shape(&g));
-        let temporal: Vec<(DiReservoir, PathStats)> = par_map(n, |i| {
-            let (own, mut stats) = initial[i];
-            let (Some(p), Some(h)) = (usable(&g.primary[i], direct), history.as_ref()) else {
-                return (own, stats);
-            };
-            let Some((j, pv)) = h.g.temporal_neighbour(&p.v, i) else {
-                return (own, stats);
-            };
-            let mut prev = h.res[j];
-            prev.cap(cap);
-            let mut s = stream(seed, i, Phase::Temporal);
-            let (mut r, is_own) =
-                self.combine(scene, &p.v, &own, &[(prev, pv)], &mut s, &mut stats);
-            // A sample taken from the history is tested here too, so that every reservoir
-            // handed to the spatial step holds only samples its owner sees.
-            if !is_own && let Some(y) = r.sample {
-                let inc = y
-                    .incident(p.v.si.p)
-                    .expect("a selected sample lights its owner");
-                if !sees(scene, &p.v, &y, &inc, &mut stats) {
-                    r.clear_sample();
-                }
-            }
-            (r, stats)
-        });
+        let temporal = reuse::temporal(&frame, seed, history.as_ref(), cap, true, &initial);
         times.temporal_ms = t.elapsed().as_secs_f64() * 1e3;
 
         // 3. Spatial reuse, reading only the temporal buffer.
         let t = Instant::now();
-        let spatial: Vec<(DiReservoir, PathStats)> = par_map(n, |i| {
-            let (own, mut stats) = temporal[i];
-            let Some(p) = usable(&g.primary[i], direct) else {
-                return (own, stats);
-            };
-            if self.settings.spatial_neighbours == 0 {
-                return (own, stats);
-            }
-            let mut s = stream(seed, i, Phase::Spatial);
-            let mut near = Vec::new();
-            g.neighbours(
-                i,
-                p,
-                self.settings.spatial_neighbours,
-                self.settings.spatial_radius,
-                &mut s,
-                &mut near,
-            );
-            let others = g.with_vertices(&near, |q| temporal[q].0);
-            let (r, _) = self.combine(scene, &p.v, &own, &others, &mut s, &mut stats);
-            (r, stats)
-        });
+        let (k, radius) = (self.settings.spatial_neighbours, self.settings.spatial_radius);
+        let spatial = reuse::spatial(&frame, &g, seed, k, radius, &temporal);
         times.spatial_ms = t.elapsed().as_secs_f64() * 1e3;
 
         // 4. Shading, and the rest of the path.
@@ -443,7 +415,7 @@ impl RenderPass for RestirDiPass {
             let mut l = g.emitted[i];
             if let Some(p) = &g.primary[i] {
                 let mut s = stream(seed, i, Phase::Path);
-                if usable(&g.primary[i], direct).is_some() {
+                if frame.usable(i).is_some() {
                     if let Some(y) = r.sample {
                         let c = contribution(&p.v, &y).expect("a selected sample lights its owner");
                         if sees(scene, &p.v, &y, &c.inc, &mut stats) {

@@ -37,7 +37,7 @@ use nrc_scene::{Scene, sampling::luminance, spawn_ray};
 use rayon::prelude::*;
 
 use crate::error::SettingsError;
-use super::hash_grid::{CellRule, HashGrid};
+use super::reuse::{self, Entry, Resampling, Slot, WorldHistory};
 use super::screen::{GBuffer, MAX, Phase, Primary, par_map, stream, visible_between};
 use super::params::{Key, Params, Value};
 use super::spec::{PassConfig, PassKind, parse_variant};
@@ -67,9 +67,6 @@ fn bounded_jacobian(receiver: Vec3, donor: Vec3, y: &GiSample) -> f32 {
         0.0
     }
 }
-
-/// Cosine of the largest normal difference between a grid entry's owner and the receiver.
-const GRID_NORMAL_COS: f32 = 0.966; // 15°
 
 pub const KIND: PassKind = PassKind {
     grammar: "restir-gi[-biased][-nrc], wsrestir-gi[-biased][-nrc]",
@@ -184,14 +181,14 @@ impl RestirGiSettings {
     pub fn validate(&self) -> Result<(), SettingsError> {
         match self.reuse {
             GiReuse::Screen { neighbours, radius } => {
-                super::screen::validate_reuse(&[neighbours], radius, self.m_cap)
+                reuse::validate_reuse(&[neighbours], radius, self.m_cap)
             }
             GiReuse::World {
                 samples,
                 cell_scale,
                 d_min,
             } => {
-                super::screen::validate_reuse(&[samples], 0.0, self.m_cap)?;
+                reuse::validate_reuse(&[samples], 0.0, self.m_cap)?;
                 if !(cell_scale > 0.0 && d_min > 0.0) {
                     return Err(SettingsError::bounds(
                         "cell scale and d_min",
@@ -362,27 +359,10 @@ struct Traced {
     stats: PathStats,
 }
 
-/// A grid entry: a reservoir and its owner vertex, and whether the owner's path reached it
-/// from the camera directly (receivers with a depth limit reuse only such entries when they
-/// are primary too: the radiance a sample carries depends on the segments left).
-#[derive(Clone, Copy, Debug)]
-struct Entry {
-    owner: Vertex,
-    res: GiReservoir,
-    primary: bool,
-}
-
 struct History {
-    g: GBuffer,
-    res: Vec<GiReservoir>,
+    screen: reuse::History<GiSample>,
     /// World space: the frame's hash grid of reservoirs.
-    world: Option<WorldHistory>,
-}
-
-struct WorldHistory {
-    grid: HashGrid,
-    entries: Vec<Entry>,
-    rule: CellRule,
+    world: Option<WorldHistory<GiSample>>,
 }
 
 /// The ReSTIR GI pass (screen or world space) and its history.
@@ -590,47 +570,46 @@ impl RestirGiPass {
             }
         }
     }
+}
 
-    /// Merges `others` into `own` at `v`, shifting each by the reconnection Jacobian; the
-    /// unbiased `Z` tests each input's owner (target and visibility). Returns the reservoir
-    /// and whether its sample is `own`'s.
-    fn combine(
-        &self,
-        scene: &Scene,
-        v: &Vertex,
-        own: &GiReservoir,
-        others: &[(GiReservoir, &Vertex)],
-        s: &mut crate::sampler::PixelSampler,
-        stats: &mut PathStats,
-    ) -> (GiReservoir, bool) {
-        let mut out = GiReservoir::new();
-        let mut is_own = out.merge(own, own.target, s.next_1d());
-        for (o, ov) in others {
-            let (t, j) = match o.sample {
-                Some(y) => (target_at(v, &y), self.shift_jacobian(v.si.p, ov.si.p, &y)),
-                None => (0.0, 0.0),
-            };
-            if out.merge_shifted(o, t, j, s.next_1d()) {
-                is_own = false;
-            }
-        }
-        let z = match out.sample {
-            Some(y) if !self.settings.biased => {
-                let mut z = own.m;
-                for (o, ov) in others {
-                    if self.shift_jacobian(v.si.p, ov.si.p, &y) > 0.0
-                        && target_at(ov, &y) > 0.0
-                        && visible_between(scene, ov.si.p, ov.si.ng, y.x, y.n, stats)
-                    {
-                        z += o.m;
-                    }
-                }
-                z
-            }
-            _ => out.m,
-        };
-        out.finish(z);
-        (out, is_own)
+/// A frame of ReSTIR GI as the reuse driver sees it: reconnection vertices at the shading
+/// vertices `x₁` (temporal and screen reuse only where `x₁` is the primary vertex), shifted by
+/// the bounded reconnection Jacobian.
+struct GiFrame<'a> {
+    pass: &'a RestirGiPass,
+    scene: &'a Scene,
+    traced: &'a [Traced],
+}
+
+impl Resampling for GiFrame<'_> {
+    type Sample = GiSample;
+
+    fn receiver(&self, i: usize) -> Option<&Vertex> {
+        self.traced[i]
+            .shading
+            .as_ref()
+            .filter(|sh| sh.primary)
+            .map(|sh| &sh.v)
+    }
+
+    fn donor(&self, q: usize) -> Option<&Vertex> {
+        self.receiver(q)
+    }
+
+    fn target(&self, v: &Vertex, y: &GiSample) -> f32 {
+        target_at(v, y)
+    }
+
+    fn jacobian(&self, receiver: &Vertex, donor: &Vertex, y: &GiSample) -> f32 {
+        self.pass.shift_jacobian(receiver.si.p, donor.si.p, y)
+    }
+
+    fn visible(&self, v: &Vertex, y: &GiSample, stats: &mut PathStats) -> bool {
+        visible_between(self.scene, v.si.p, v.si.ng, y.x, y.n, stats)
+    }
+
+    fn biased(&self) -> bool {
+        self.pass.settings.biased
     }
 }
 
@@ -670,7 +649,7 @@ impl RenderPass for RestirGiPass {
         // -nrc: the history's samples carry the cache's answers from the frames that found
         // them, and the cache has trained since; each is asked again toward its owner, after
         // this frame's queries (as DDGI resampling refreshes its history, ddgi_restir.rs).
-        let refresh = match self.history.as_ref().filter(|h| h.g.same_shape(&g)) {
+        let refresh = match self.history.as_ref().filter(|h| h.screen.g.same_shape(&g)) {
             Some(h) if self.settings.cache && self.settings.refresh => {
                 self.refresh_list(scene, h)
             }
@@ -732,9 +711,9 @@ impl RenderPass for RestirGiPass {
             let fresh = &answers[answers.len() - refresh.len()..];
             for (&(slot, _), &l) in refresh.iter().zip(fresh) {
                 let sample = match slot {
-                    Refresh::Reservoir(j) => &mut h.res[j].sample,
+                    Refresh::Reservoir(j) => &mut h.screen.res[j].sample,
                     Refresh::Entry(k) => match h.world.as_mut() {
-                        Some(w) => &mut w.entries[k].res.sample,
+                        Some(w) => &mut w.entries_mut()[k].res.sample,
                         None => continue,
                     },
                 };
@@ -743,84 +722,34 @@ impl RenderPass for RestirGiPass {
                 }
             }
         }
-        let history = history.filter(|h| h.g.same_shape(&g));
-        let temporal: Vec<(GiReservoir, PathStats)> = par_map(n, |i| {
-            let (own, mut stats) = initial[i];
-            let (Some(sh), Some(h)) = (
-                traced[i].shading.as_ref(),
-                history.as_ref().filter(|_| set.temporal),
-            ) else {
-                return (own, stats);
-            };
-            if !sh.primary {
-                return (own, stats);
-            }
-            let Some((j, pv)) = h.g.temporal_neighbour(&sh.v, i) else {
-                return (own, stats);
-            };
-            let mut prev = h.res[j];
-            prev.cap(set.m_cap);
-            let mut s = stream(seed, i, Phase::Temporal);
-            let (mut r, is_own) =
-                self.combine(scene, &sh.v, &own, &[(prev, pv)], &mut s, &mut stats);
-            if !is_own
-                && let Some(y) = r.sample
-                && !visible_between(scene, sh.v.si.p, sh.v.si.ng, y.x, y.n, &mut stats)
-            {
-                r.clear_sample();
-            }
-            (r, stats)
-        });
+        let history = history.filter(|h| h.screen.g.same_shape(&g));
+        let frame = GiFrame {
+            pass: self,
+            scene,
+            traced: &traced,
+        };
+        let screen = history
+            .as_ref()
+            .filter(|_| set.temporal)
+            .map(|h| &h.screen);
+        let temporal = reuse::temporal(&frame, seed, screen, set.m_cap, true, &initial);
         times.temporal_ms = t0.elapsed().as_secs_f64() * 1e3;
 
         // Spatial reuse: screen neighbours from the temporal buffer, or the previous grid.
         let t0 = Instant::now();
-        let unlimited = self.tracer.segment_limit() == u32::MAX;
-        let spatial: Vec<(GiReservoir, PathStats)> = par_map(n, |i| {
-            let (own, mut stats) = temporal[i];
-            let Some(sh) = traced[i].shading.as_ref() else {
-                return (own, stats);
-            };
-            let mut s = stream(seed, i, Phase::Spatial);
-            let mut others: Vec<(GiReservoir, &Vertex)> = Vec::new();
-            if let GiReuse::World { samples, .. } = set.reuse {
-                if let Some(h) = history.as_ref().and_then(|h| h.world.as_ref()) {
-                    let jitter =
-                        Vec3::new(s.next_1d(), s.next_1d(), s.next_1d()) - Vec3::splat(0.5);
-                    let cell = h.grid.find(h.rule.key(sh.v.si.p, sh.v.si.ns, jitter));
-                    let count = cell.len();
-                    if count > 0 && samples > 0 {
-                        let step = count.div_ceil(samples as usize).max(1);
-                        let off = ((s.next_1d() * step as f32) as usize).min(step - 1);
-                        for k in (0..count).step_by(step) {
-                            let e = &h.entries[cell[(k + off) % count] as usize];
-                            let same_budget = unlimited || e.primary == sh.primary;
-                            if same_budget && e.owner.si.ns.dot(sh.v.si.ns) >= GRID_NORMAL_COS {
-                                let mut res = e.res;
-                                res.cap(set.m_cap);
-                                others.push((res, &e.owner));
-                            }
-                        }
-                    }
-                }
-            } else if let GiReuse::Screen { neighbours, radius } = set.reuse
-                && neighbours > 0
-                && let Some(p) = g.primary[i].as_ref().filter(|_| sh.primary)
-            {
-                let mut near = Vec::new();
-                g.neighbours(i, p, neighbours, radius, &mut s, &mut near);
-                for q in near {
-                    if let Some(qs) = traced[q].shading.as_ref().filter(|qs| qs.primary) {
-                        others.push((temporal[q].0, &qs.v));
-                    }
-                }
+        let spatial = match set.reuse {
+            GiReuse::World { samples, .. } => {
+                let unlimited = self.tracer.segment_limit() == u32::MAX;
+                let at = |i: usize| traced[i].shading.as_ref().map(|sh| (&sh.v, sh.primary));
+                let grid = history.as_ref().and_then(|h| h.world.as_ref());
+                reuse::world_spatial(
+                    &frame, at, seed, grid, samples, set.m_cap, unlimited, &temporal,
+                )
             }
-            if others.is_empty() {
-                return (own, stats);
+            GiReuse::Screen { neighbours, radius } => {
+                reuse::spatial(&frame, &g, seed, neighbours, radius, &temporal)
             }
-            let (r, _) = self.combine(scene, &sh.v, &own, &others, &mut s, &mut stats);
-            (r, stats)
-        });
+        };
         times.spatial_ms = t0.elapsed().as_secs_f64() * 1e3;
 
         // Shading: one shadow ray for the chosen sample.
@@ -856,7 +785,10 @@ impl RenderPass for RestirGiPass {
         times.spatial_ms += t0.elapsed().as_secs_f64() * 1e3;
 
         let (out, res) = super::screen::assemble(&g, input, shaded, times);
-        self.history = Some(History { g, res, world });
+        self.history = Some(History {
+            screen: reuse::History { g, res },
+            world,
+        });
         out
     }
 }
@@ -871,6 +803,7 @@ impl RestirGiPass {
         };
         let mut out: Vec<(Refresh, Vertex)> = Vec::new();
         if self.settings.temporal {
+            let h = &h.screen;
             out.par_extend(h.res.par_iter().enumerate().filter_map(|(j, r)| {
                 let y = r.sample.as_ref()?;
                 let owner = h.g.primary[j].as_ref()?.v.si.p;
@@ -878,7 +811,7 @@ impl RestirGiPass {
             }));
         }
         if let Some(w) = &h.world {
-            out.par_extend(w.entries.par_iter().enumerate().filter_map(|(k, e)| {
+            out.par_extend(w.entries().par_iter().enumerate().filter_map(|(k, e)| {
                 let y = e.res.sample.as_ref()?;
                 Some((Refresh::Entry(k), at(y, e.owner.si.p)))
             }));
@@ -892,18 +825,10 @@ impl RestirGiPass {
     fn world_history(
         input: &FrameInput,
         traced: &[Traced],
-        temporal: &[(GiReservoir, PathStats)],
+        temporal: &[Slot<GiSample>],
         cell_scale: f32,
         d_min: f32,
-    ) -> WorldHistory {
-        let rule = CellRule::new(
-            input.camera,
-            input.width,
-            input.height,
-            &input.scene.bounds(),
-            cell_scale,
-            d_min,
-        );
+    ) -> WorldHistory<GiSample> {
         let mut entries = Vec::new();
         for (i, t) in traced.iter().enumerate() {
             if let Some(sh) = &t.shading {
@@ -930,15 +855,6 @@ impl RestirGiPass {
                 });
             }
         }
-        let keys: Vec<u64> = entries
-            .iter()
-            .map(|e| rule.key(e.owner.si.p, e.owner.si.ns, Vec3::ZERO))
-            .collect();
-        let grid = HashGrid::build(&keys);
-        WorldHistory {
-            grid,
-            entries,
-            rule,
-        }
+        WorldHistory::build(input, entries, cell_scale, d_min)
     }
 }

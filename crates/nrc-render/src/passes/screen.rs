@@ -12,10 +12,7 @@ use nrc_scene::{Camera, Ray, Scene};
 use rayon::prelude::*;
 
 use super::frame::{FrameInput, PassOutput, PassStats, PhaseTimes};
-use super::params::{Key, Value};
-use crate::error::SettingsError;
 use crate::path_tracer::PathStats;
-use crate::reservoir::Reservoir;
 use crate::sampler::PixelSampler;
 use crate::transport::Vertex;
 
@@ -159,19 +156,6 @@ impl GBuffer {
         Some((j, &self.primary[j].as_ref()?.v))
     }
 
-    /// The neighbours `near` as `(res(q), vertex)` pairs, for [`combine`].
-    pub fn with_vertices<R>(&self, near: &[usize], res: impl Fn(usize) -> R) -> Vec<(R, &Vertex)> {
-        near.iter()
-            .map(|&q| {
-                let v = &self.primary[q]
-                    .as_ref()
-                    .expect("neighbours have vertices")
-                    .v;
-                (res(q), v)
-            })
-            .collect()
-    }
-
     /// Up to `k` spatial neighbours of pixel sample `i` (chain `s`): pixels uniform in a disc
     /// of `radius` pixels, kept where their vertex is similar to `me` (Bitterli et al. 2020:
     /// rejected candidates are not replaced).
@@ -256,45 +240,6 @@ pub fn visible_between(
     !scene.occluded(&nrc_scene::spawn_ray_between(a, ng_a, b, ng_b))
 }
 
-/// Merges `others` (finished reservoirs with their owners' vertices) into `own` (the reservoir
-/// of `v`) for a sample type whose target at a vertex is `target` (the same measure at every
-/// vertex: no shift Jacobian), finishing with the unbiased `Z` (Bitterli et al. 2020, Alg. 6:
-/// the `M` of the inputs whose owner has `p̂ > 0` for the chosen `y` and, by `sees`, sees it)
-/// or, `biased`, `Z = Σ M`. Returns the merged reservoir and whether its sample is `own`'s.
-pub fn combine<T: Copy>(
-    v: &Vertex,
-    own: &Reservoir<T>,
-    others: &[(Reservoir<T>, &Vertex)],
-    biased: bool,
-    u: &mut PixelSampler,
-    target: impl Fn(&Vertex, &T) -> f32,
-    mut sees: impl FnMut(&Vertex, &T) -> bool,
-) -> (Reservoir<T>, bool) {
-    let mut out = Reservoir::new();
-    let mut is_own = out.merge(own, own.target, u.next_1d());
-    for (o, _) in others {
-        let t = o.sample.map_or(0.0, |y| target(v, &y));
-        if out.merge(o, t, u.next_1d()) {
-            is_own = false;
-        }
-    }
-    let z = match out.sample {
-        None => out.m,
-        Some(_) if biased => out.m,
-        Some(y) => {
-            let mut z = own.m;
-            for (o, ov) in others {
-                if target(ov, &y) > 0.0 && sees(ov, &y) {
-                    z += o.m;
-                }
-            }
-            z
-        }
-    };
-    out.finish(z);
-    (out, is_own)
-}
-
 /// `f` over the pixel samples `0..n`, in parallel, results in order.
 pub fn par_map<T: Send>(n: usize, f: impl Fn(usize) -> T + Sync + Send) -> Vec<T> {
     (0..n).into_par_iter().map(f).collect()
@@ -337,52 +282,4 @@ pub fn assemble<R>(
         stats,
     };
     (out, states)
-}
-
-/// The keys of the screen-space reuse every resampling pass of the primary vertex shares:
-/// `k` neighbours in a disc of `radius` pixels, the history's `mcap`, and `temporal`.
-pub(super) fn visit_reuse(
-    f: &mut dyn FnMut(&Key, &mut dyn Value),
-    neighbours: &mut u32,
-    radius: &mut f32,
-    m_cap: &mut f32,
-    temporal: &mut bool,
-) {
-    let k = Key::new("k", "spatial neighbours (0: no spatial reuse)");
-    f(&k.range(0.0, MAX), neighbours);
-    let r = Key::new("radius", "radius of the spatial neighbourhood, pixels");
-    f(&r.range(0.0, f64::INFINITY), radius);
-    let mcap = Key::new(
-        "mcap",
-        "the history's M capped at this multiple of the candidates",
-    );
-    f(&mcap.positive(f64::INFINITY), m_cap);
-    f(
-        &Key::new("temporal", "reuse the previous frame's reservoirs"),
-        temporal,
-    );
-}
-
-/// The bounds every resampling pass puts on its reuse settings (`counts`: its candidate and
-/// neighbour counts; absurd values would be loops per pixel).
-pub(super) fn validate_reuse(counts: &[u32], radius: f32, m_cap: f32) -> Result<(), SettingsError> {
-    let max = MAX_COUNT;
-    if let Some(c) = counts.iter().find(|&&c| c > max) {
-        return Err(SettingsError::bounds(
-            "candidate and neighbour counts",
-            format!("be at most {max}"),
-            c,
-        ));
-    }
-    if !(radius >= 0.0 && radius.is_finite()) {
-        return Err(SettingsError::bounds(
-            "spatial radius",
-            "be finite and ≥ 0",
-            radius,
-        ));
-    }
-    if !(m_cap > 0.0 && m_cap.is_finite()) {
-        return Err(SettingsError::bounds("M-cap", "be positive", m_cap));
-    }
-    Ok(())
 }
