@@ -5,9 +5,9 @@
 use std::path::PathBuf;
 
 use anyhow::{Context, Result, ensure};
-use indicatif::{ProgressBar, ProgressStyle};
 use nrc_harness::budget::Budget;
-use nrc_harness::compare::{Comparison, Progress, compare, total_frames};
+use nrc_harness::compare::{Comparison, Progress as Step, compare, total_frames};
+use nrc_harness::progress::{Progress, Unit};
 use nrc_harness::reference::{self, ReferenceRequest};
 use nrc_harness::{MethodList, MethodSpec};
 use nrc_scene::Scene;
@@ -260,7 +260,7 @@ fn run_comparison(args: &CompareArgs, budget: Budget, scene: &Scene) -> Result<(
             reference::check_given(&r, &req)?;
             r
         }
-        None => crate::reference::obtain_with_bar(&req, &args.cache.dir(), false)?,
+        None => reference::obtain_showing_progress(&req, &args.cache.dir(), false)?,
     };
     eprintln!(
         "reference: {} {}",
@@ -271,16 +271,12 @@ fn run_comparison(args: &CompareArgs, budget: Budget, scene: &Scene) -> Result<(
         },
         reference.location.display()
     );
-    let bar = ProgressBar::new(total_frames(&c)).with_style(
-        ProgressStyle::with_template("{elapsed_precise} [{bar:30}] {pos}/{len} frames {msg}")
-            .expect("valid progress template")
-            .progress_chars("=> "),
-    );
+    let progress = Progress::new(total_frames(&c), Unit::Frames, "compare");
     let (report, markdown) = compare(&c, scene, &reference, &|p| match p {
-        Progress::Method(name) => bar.set_message(name.to_string()),
-        Progress::Frame => bar.inc(1),
+        Step::Method(name) => progress.set_message(name),
+        Step::Frame => progress.inc(1),
     })?;
-    bar.finish_and_clear();
+    progress.finish();
     for note in &report.notes {
         if note.contains("NaN or infinite") {
             eprintln!("warning: {note}");

@@ -10,10 +10,9 @@ mod compare;
 mod info;
 mod reference;
 mod render;
-mod run_file;
 mod train;
 
-use clap::{Parser, Subcommand};
+use clap::{CommandFactory, Parser, Subcommand};
 
 /// Neural radiance cache trainer and reference renderer.
 #[derive(Parser, Debug)]
@@ -43,7 +42,7 @@ enum Command {
 }
 
 fn main() -> std::process::ExitCode {
-    let args = match run_file::expand(std::env::args_os().collect()) {
+    let args = match nrc_harness::run_file::expand(std::env::args_os().collect(), &Cli::command()) {
         Ok(a) => a,
         Err(e) => {
             eprintln!("error: {}", one_line(&e));

@@ -3,16 +3,11 @@
 //! checks), and the depth and cache-folder options `nrc compare` shares.
 
 use std::path::PathBuf;
-use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Instant;
 
 use anyhow::Result;
-use indicatif::{ProgressBar, ProgressStyle};
-use nrc_harness::reference::{ReferenceRequest, obtain};
-
-use nrc_harness::options::SceneArgs;
-
-use nrc_harness::options::{CacheArgs, DepthArgs};
+use nrc_harness::options::{CacheArgs, DepthArgs, SceneArgs};
+use nrc_harness::reference::{ReferenceRequest, obtain_showing_progress};
 
 /// Arguments of `nrc reference`.
 #[derive(clap::Args, Debug)]
@@ -55,32 +50,6 @@ pub struct ReferenceArgs {
     pub threads: Option<usize>,
 }
 
-/// A progress bar over `total` pixels (drawn only when stderr is a terminal).
-pub fn pixel_bar(total: u64, what: &str) -> ProgressBar {
-    ProgressBar::new(total).with_style(
-        ProgressStyle::with_template(&format!(
-            "{what} {{elapsed_precise}} [{{bar:40}}] {{percent:>3}}% ETA {{eta}}"
-        ))
-        .expect("valid progress template")
-        .progress_chars("=> "),
-    )
-}
-
-/// [`obtain`] with a progress bar over the pixels of a new render.
-pub fn obtain_with_bar(
-    req: &ReferenceRequest<'_>,
-    cache_dir: &std::path::Path,
-    force: bool,
-) -> Result<nrc_harness::reference::Reference> {
-    let bar = pixel_bar(req.width as u64 * req.height as u64, "reference");
-    let done = AtomicU64::new(0);
-    let r = obtain(req, cache_dir, force, &|n| {
-        bar.set_position(done.fetch_add(n, Ordering::Relaxed) + n);
-    });
-    bar.finish_and_clear();
-    r
-}
-
 /// Runs `nrc reference`.
 pub fn run(args: &ReferenceArgs) -> Result<()> {
     let scene = args.scene.load()?;
@@ -99,7 +68,7 @@ pub fn run(args: &ReferenceArgs) -> Result<()> {
     };
     let cache = args.cache.dir();
     let start = Instant::now();
-    let r = pool.install(|| obtain_with_bar(&req, &cache, args.force))?;
+    let r = pool.install(|| obtain_showing_progress(&req, &cache, args.force))?;
     if let Some(png) = &args.png {
         r.mean.write_png_preview(png, 0.0)?;
     }

@@ -1,16 +1,13 @@
 //! `nrc render`: the reference path tracer on a scene, written as EXR (and PNG preview).
 
 use std::path::PathBuf;
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::Arc;
 
 use anyhow::{Result, bail};
-use indicatif::{ProgressBar, ProgressStyle};
-use nrc_render::LightStrategy;
-use nrc_render::passes::{CacheTerminatedSettings, PassSpec, PathTracedSettings};
-
-use nrc_harness::options::TracerArgs;
-
-use nrc_harness::options::SceneArgs;
+use nrc_harness::options::{SceneArgs, TracerArgs};
+use nrc_harness::progress::{Progress, Unit};
+use nrc_harness::run::RenderChoice;
+use nrc_render::passes::PassSpec;
 
 #[derive(clap::Args, Debug)]
 pub struct RenderArgs {
@@ -96,115 +93,59 @@ pub struct RenderArgs {
     pub allow_other_scene: bool,
 }
 
-/// Renders and writes the image(s), with a progress bar and a closing line.
+/// Renders and writes the image(s), with progress and a closing line.
 pub fn run(args: &RenderArgs) -> Result<()> {
     if args.width == 0 || args.height == 0 {
         bail!("image size {}x{} is empty", args.width, args.height);
     }
-    if args.spp == 0 {
-        bail!("--spp must be at least 1");
-    }
-    if args.frames == 0 {
-        bail!("--frames must be at least 1");
+    if args.spp == 0 || args.frames == 0 {
+        bail!("--spp and --frames must be at least 1");
     }
     if !args.exposure.is_finite() {
         bail!("--exposure must be a finite number");
     }
     // Fail before a long render, not after it, when an output cannot be written.
-    for path in std::iter::once(&args.out)
+    let outputs = std::iter::once(&args.out)
         .chain(&args.png)
-        .chain(&args.variance)
-    {
-        let parent = path
-            .parent()
-            .filter(|p| !p.as_os_str().is_empty())
-            .unwrap_or(std::path::Path::new("."));
-        if !parent.is_dir() {
-            bail!(
-                "{}: the folder {} does not exist",
-                path.display(),
-                parent.display()
-            );
-        }
-    }
+        .chain(&args.variance);
+    nrc_harness::options::check_output_folders(outputs)?;
     let scene = args.scene.load()?;
-    for w in scene.warnings() {
+    let tracer = args.tracer.tracer();
+    let choice = RenderChoice {
+        pass: args.pass.clone(),
+        snapshot: args.cache.as_deref(),
+        termination: args.termination,
+        device: args.device,
+        scene_path: &args.scene.scene,
+        allow_other_scene: args.allow_other_scene,
+    };
+    let (spec, cache, warnings) = nrc_harness::run::choose_pass(choice, &scene, &tracer)?;
+    for w in scene.warnings().iter().chain(&warnings) {
         eprintln!("warning: {w}");
     }
-    let tracer = args.tracer.tracer();
-    let spec: PassSpec = args.pass.clone().unwrap_or_else(|| {
-        if args.cache.is_some() {
-            let nee = tracer.strategy != LightStrategy::BsdfOnly;
-            CacheTerminatedSettings {
-                termination: args.termination,
-                nee,
-            }
-            .into()
-        } else {
-            PathTracedSettings {
-                strategy: tracer.strategy,
-            }
-            .into()
-        }
-    });
-    // The radiance source: the --cache snapshot, checked against the scene, for the passes
-    // that read one.
-    let cache = match (spec.uses_source(), &args.cache) {
-        (false, Some(snapshot)) => {
-            eprintln!(
-                "warning: the pass {spec} reads no cache; {} is not used",
-                snapshot.display()
-            );
-            None
-        }
-        (false, None) => None,
-        (true, None) => {
-            bail!("the pass {spec} ends paths in a cache: give it one with --cache snapshot.nrc")
-        }
-        (true, Some(snapshot)) => {
-            let device = args.device.resolve_and_print();
-            let (cache, warning) = nrc_harness::run::load_snapshot(
-                snapshot,
-                device,
-                &scene,
-                &args.scene.scene,
-                args.allow_other_scene,
-            )?;
-            if let Some(w) = warning {
-                eprintln!("warning: {w}");
-            }
-            Some((cache, snapshot))
-        }
-    };
-    let bar = ProgressBar::new(args.width as u64 * args.height as u64).with_style(
-        ProgressStyle::with_template("{elapsed_precise} [{bar:40}] {percent:>3}% ETA {eta}")
-            .expect("valid progress template")
-            .progress_chars("=> "),
-    );
-    let (progress_bar, done) = (bar.clone(), AtomicU64::new(0));
+    let pixels = args.width as u64 * args.height as u64;
+    let progress = Arc::new(Progress::new(pixels, Unit::Pixels, "render"));
     let cameras =
         nrc_harness::run::camera_path(args.camera_path.as_deref(), &scene.camera, args.frames)?;
     let pool = nrc_harness::options::thread_pool(args.threads)?;
+    let counter = progress.clone();
     let rendered = pool.install(|| {
         nrc_harness::run::render(nrc_harness::run::RenderJob {
             scene: &scene,
             pass: &spec,
             tracer,
-            cache: cache.as_ref().map(|(c, _)| c),
+            cache: cache.as_ref(),
             cameras: &cameras,
             width: args.width,
             height: args.height,
             spp: args.spp,
             seed: args.seed,
             variance: args.variance.is_some(),
-            // Batched counts: updating the bar from every tile would contend on its lock.
-            progress: Some(Box::new(move |n| {
-                progress_bar.set_position(done.fetch_add(n, Ordering::Relaxed) + n);
-            })),
+            progress: Some(Box::new(move |n| counter.inc(n))),
         })
     })?;
     let (out, seconds) = (rendered.output, rendered.seconds_per_frame);
-    bar.finish_and_clear();
+    progress.finish();
 
     out.image.write_exr(&args.out)?;
     if let Some(png) = &args.png {
@@ -223,42 +164,31 @@ pub fn run(args: &RenderArgs) -> Result<()> {
             s.invalid_samples
         );
     }
-    let from = cache
-        .as_ref()
-        .map(|(_, p)| {
-            format!(
-                " from the cache {} ({} cache queries, {:.1} ms in the cache)",
-                p.display(),
-                s.queries,
-                s.cache_ms
-            )
-        })
-        .unwrap_or_default();
+    let from = match (&args.cache, &cache) {
+        (Some(p), Some(_)) => format!(
+            " from the cache {} ({} cache queries, {:.1} ms in the cache)",
+            p.display(),
+            s.queries,
+            s.cache_ms
+        ),
+        _ => String::new(),
+    };
     let frames = if args.frames > 1 {
         format!(" (last of {} frames, each)", args.frames)
     } else {
         String::new()
     };
-    let ph = &s.phases;
-    let phases = if ph.probes_ms + ph.candidates_ms + ph.temporal_ms + ph.spatial_ms + ph.shading_ms
-        > 0.0
-    {
-        format!(
-            "; phases: probes {:.1} ms, candidates {:.1} ms, temporal {:.1} ms, spatial {:.1} ms, shading {:.1} ms",
-            ph.probes_ms, ph.candidates_ms, ph.temporal_ms, ph.spatial_ms, ph.shading_ms
-        )
-    } else {
-        String::new()
-    };
+    let phases = s.phases.describe().map(|p| format!("; phases: {p}"));
     println!(
-        "rendered {}x{} at {} spp with {}{from} in {seconds:.3} s{frames} on {} threads: {:.3} M samples/s, {:.2} M rays/s{phases}",
+        "rendered {}x{} at {} spp with {}{from} in {seconds:.3} s{frames} on {} threads: {:.3} M samples/s, {:.2} M rays/s{}",
         args.width,
         args.height,
         args.spp,
         rendered.pass,
         pool.current_num_threads(),
         s.paths as f64 / seconds * 1e-6,
-        s.rays as f64 / seconds * 1e-6
+        s.rays as f64 / seconds * 1e-6,
+        phases.unwrap_or_default()
     );
     Ok(())
 }

@@ -5,16 +5,14 @@
 use std::path::PathBuf;
 
 use anyhow::{Context, Result, bail, ensure};
-use indicatif::{ProgressBar, ProgressStyle};
 use nrc_render::PassSpec;
 use nrc_render::Termination;
 use nrc_render::passes::CacheTerminatedSettings;
 use nrc_scene::Scene;
-use nrc_train::{FrameStats, ProducerSpec};
+use nrc_train::ProducerSpec;
 
-use nrc_harness::options::SceneArgs;
-use nrc_harness::options::TracerArgs;
-use nrc_harness::options::{RadianceCacheArgs, parse_termination};
+use nrc_harness::options::{RadianceCacheArgs, SceneArgs, TracerArgs, parse_termination};
+use nrc_harness::progress::{Progress, Unit};
 
 /// Arguments of `nrc train`.
 #[derive(clap::Args, Debug)]
@@ -161,11 +159,7 @@ pub fn run(args: &TrainArgs) -> Result<()> {
     trainer.settings.from_terminations = args.from_terminations;
     eprintln!("{}", trainer.cache.describe());
     let pool = nrc_harness::options::thread_pool(args.threads)?;
-    let bar = ProgressBar::new(args.frames as u64).with_style(
-        ProgressStyle::with_template("{elapsed_precise} [{bar:30}] {pos}/{len} frames {msg}")
-            .expect("valid progress template")
-            .progress_chars("=> "),
-    );
+    let progress = Progress::new(args.frames as u64, Unit::Frames, "train");
     let frames = args
         .frames_out
         .clone()
@@ -201,16 +195,16 @@ pub fn run(args: &TrainArgs) -> Result<()> {
             (args.width, args.height),
             frames.as_ref(),
             &|stats| {
-                bar.set_message(format!(
+                progress.set_message(format!(
                     "loss {:.4}, {:.0} ms/frame",
                     stats.loss,
                     stats.produce_ms + stats.train_ms + stats.infer_ms
                 ));
-                bar.inc(1);
+                progress.inc(1);
             },
         )
     })?;
-    bar.finish_and_clear();
+    progress.finish();
     if let Some(path) = &args.stats {
         nrc_harness::run::write_stats(path, &all)?;
     }
@@ -223,24 +217,18 @@ pub fn run(args: &TrainArgs) -> Result<()> {
             )?));
         trainer.cache.save(path)?;
     }
-    let n = all.len() as f64;
-    let mean = |f: fn(&FrameStats) -> f64| all.iter().map(f).sum::<f64>() / n;
-    let dropped: u64 = all
-        .iter()
-        .map(|s| (s.dropped_nonfinite + s.dropped_absurd) as u64 + s.producer.dropped)
-        .sum();
-    let skipped: u64 = all.iter().map(|s| s.producer.skipped).sum();
+    let sum = nrc_harness::run::TrainSummary::of(&all);
     println!(
         "trained {} frames of {} ({} records/frame): produce {:.1} ms, train {:.1} ms, infer {:.1} ms per frame; final loss {:.5}; {} records dropped, {} non-finite light-path contributions skipped",
         all.len(),
         args.producer,
         args.cache.records,
-        mean(|s| s.produce_ms),
-        mean(|s| s.train_ms),
-        mean(|s| s.infer_ms),
-        all.last().map_or(0.0, |s| s.loss),
-        dropped,
-        skipped
+        sum.produce_ms,
+        sum.train_ms,
+        sum.infer_ms,
+        sum.loss,
+        sum.dropped,
+        sum.skipped
     );
     Ok(())
 }

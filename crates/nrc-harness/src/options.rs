@@ -1,9 +1,9 @@
 //! Options shared by the commands that load a scene, trace paths or train a cache: the scene
 //! and its camera, path depth and light strategy, the cache model and its training, their value
 //! parsers. They derive clap's `Args`, so their doc comments are the command line's help (as
-//! brush's config structs do), and a run file's fields are their flags (`src/run_file.rs`).
+//! brush's config structs do), and a run file's fields are their flags (`run_file.rs`).
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
 use glam::Vec3;
@@ -424,4 +424,22 @@ mod tests {
         assert_eq!(parse_rgb("0.5").unwrap(), Vec3::splat(0.5));
         assert!(parse_rgb("1,-1,0").is_err());
     }
+}
+
+/// Refuses outputs whose folder does not exist (before a long run, not after it).
+pub fn check_output_folders<'a>(paths: impl IntoIterator<Item = &'a PathBuf>) -> Result<()> {
+    for path in paths {
+        let parent = path
+            .parent()
+            .filter(|p| !p.as_os_str().is_empty())
+            .unwrap_or(Path::new("."));
+        if !parent.is_dir() {
+            bail!(
+                "{}: the folder {} does not exist",
+                path.display(),
+                parent.display()
+            );
+        }
+    }
+    Ok(())
 }

@@ -30,6 +30,8 @@ use nrc_scene::{Camera, Image, Scene};
 use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
 
+use crate::progress::{Progress, Unit};
+
 /// Format tag of reference entries and of the key; bump when the path tracer's expected
 /// value changes (a fix to an estimator), so that stale references are not reused.
 pub const FORMAT: &str = "nrc-reference/2";
@@ -224,6 +226,19 @@ fn request_key(req: &ReferenceRequest<'_>, scene_content: &str) -> String {
         req.scene.environment().content_key(),
     );
     hex(&Sha256::digest(text.as_bytes()))
+}
+
+/// [`obtain`] with the progress of a new render shown ([`crate::progress`]).
+pub fn obtain_showing_progress(
+    req: &ReferenceRequest<'_>,
+    cache_dir: &Path,
+    force: bool,
+) -> Result<Reference> {
+    let pixels = req.width as u64 * req.height as u64;
+    let progress = Progress::new(pixels, Unit::Pixels, "reference");
+    let r = obtain(req, cache_dir, force, &|n| progress.inc(n));
+    progress.finish();
+    r
 }
 
 /// Finds the reference of `req` in `cache_dir` or renders and stores it (`force`: always render).

@@ -9,10 +9,10 @@ use anyhow::{Context, Result, bail};
 use glam::Vec3;
 use nrc_cache::RadianceCache;
 use nrc_render::passes::{
-    self, FrameInput, PassOutput, PassSpec, PathTracedPass, PathTracedSettings, RenderPass,
-    path_traced::Progress,
+    self, CacheTerminatedSettings, FrameInput, PassOutput, PassSpec, PathTracedPass,
+    PathTracedSettings, RenderPass, path_traced::Progress,
 };
-use nrc_render::{PathTracer, ZeroSource};
+use nrc_render::{LightStrategy, PathTracer, Termination, ZeroSource};
 use nrc_scene::{Camera, Scene};
 use nrc_train::{FrameStats, OnlineTrainer, QueryMaker};
 
@@ -266,5 +266,92 @@ pub fn load_snapshot(
             )),
         )),
         Err(e) => bail!("{}: {e}", snapshot.display()),
+    }
+}
+
+/// What `nrc render` was asked to render with, before the pass and its source are chosen.
+pub struct RenderChoice<'a> {
+    /// `--pass`, if given.
+    pub pass: Option<PassSpec>,
+    /// `--cache`: a snapshot.
+    pub snapshot: Option<&'a Path>,
+    /// Where paths end in the snapshot when no pass is named.
+    pub termination: Termination,
+    pub device: crate::options::DeviceArg,
+    /// The scene's file (its content names the snapshot's scene).
+    pub scene_path: &'a Path,
+    pub allow_other_scene: bool,
+}
+
+/// The pass of a render and its source: the pass asked for, else the cache-terminated pass
+/// (`termination`, NEE as the tracer's strategy allows) when a snapshot is given, else the
+/// path tracer; the snapshot loaded and checked against the scene where the pass reads a
+/// source (refused where the pass needs one and none is given). Returns the warnings to print.
+pub fn choose_pass(
+    c: RenderChoice,
+    scene: &Scene,
+    tracer: &PathTracer,
+) -> Result<(PassSpec, Option<RadianceCache>, Vec<String>)> {
+    let spec: PassSpec = c.pass.unwrap_or_else(|| match c.snapshot {
+        Some(_) => CacheTerminatedSettings {
+            termination: c.termination,
+            nee: tracer.strategy != LightStrategy::BsdfOnly,
+        }
+        .into(),
+        None => PathTracedSettings {
+            strategy: tracer.strategy,
+        }
+        .into(),
+    });
+    match (spec.uses_source(), c.snapshot) {
+        (false, Some(snapshot)) => {
+            let w = format!(
+                "the pass {spec} reads no cache; {} is not used",
+                snapshot.display()
+            );
+            Ok((spec, None, vec![w]))
+        }
+        (false, None) => Ok((spec, None, Vec::new())),
+        (true, None) => {
+            bail!("the pass {spec} ends paths in a cache: give it one with --cache snapshot.nrc")
+        }
+        (true, Some(snapshot)) => {
+            let device = c.device.resolve_and_print();
+            let (cache, warning) =
+                load_snapshot(snapshot, device, scene, c.scene_path, c.allow_other_scene)?;
+            Ok((spec, Some(cache), warning.into_iter().collect()))
+        }
+    }
+}
+
+/// Means and totals of a run's frame statistics, for the closing line of `nrc train`.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct TrainSummary {
+    pub produce_ms: f64,
+    pub train_ms: f64,
+    pub infer_ms: f64,
+    /// The last frame's loss.
+    pub loss: f32,
+    /// Records dropped: non-finite or absurd targets at the cache's filter and the producers'.
+    pub dropped: u64,
+    /// Light-path contributions the producers skipped as non-finite.
+    pub skipped: u64,
+}
+
+impl TrainSummary {
+    pub fn of(all: &[FrameStats]) -> Self {
+        let n = all.len().max(1) as f64;
+        let mean = |f: fn(&FrameStats) -> f64| all.iter().map(f).sum::<f64>() / n;
+        Self {
+            produce_ms: mean(|s| s.produce_ms),
+            train_ms: mean(|s| s.train_ms),
+            infer_ms: mean(|s| s.infer_ms),
+            loss: all.last().map_or(0.0, |s| s.loss),
+            dropped: all
+                .iter()
+                .map(|s| (s.dropped_nonfinite + s.dropped_absurd) as u64 + s.producer.dropped)
+                .sum(),
+            skipped: all.iter().map(|s| s.producer.skipped).sum(),
+        }
     }
 }

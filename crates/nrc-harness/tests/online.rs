@@ -434,3 +434,98 @@ fn online_training_on_the_environment_lit_kajiya_scene_brings_the_error_down() {
         "a frozen cache passed: {frozen:?}"
     );
 }
+
+/// `var` from the environment, else `default`.
+fn env_or(var: &str, default: &str) -> String {
+    std::env::var(var).unwrap_or_else(|_| default.to_string())
+}
+
+/// The hash-grid preset with `edits` applied: `path.to.field=value` pairs, `,`-separated, on
+/// its JSON form (`optimizer.nested.learning_rate=2e-3`, `optimizer.decay=0.999`,
+/// `encoding.nested.0.log2_hashmap_size=21`); `base` is the preset itself.
+fn edited_preset(edits: &str) -> CacheConfig {
+    let mut json = serde_json::to_value(CacheConfig::hash_grid_preset()).unwrap();
+    for edit in edits.split(',').filter(|e| *e != "base") {
+        let (path, value) = edit.split_once('=').expect("an edit is path=value");
+        let mut at = &mut json;
+        for key in path.split('.') {
+            at = match key.parse::<usize>() {
+                Ok(i) => &mut at[i],
+                Err(_) => &mut at[key],
+            };
+        }
+        assert!(!at.is_null(), "{path} is not a field of the preset");
+        *at = serde_json::from_str(value).expect("a JSON value");
+    }
+    serde_json::from_value(json).expect("a valid configuration")
+}
+
+/// Issue 31's drift study, on demand (`scripts/drift-study.sh`): long online runs with one
+/// training setting changed at a time, and the cache's error along the run for paths ending at
+/// the first vertex (where the camera's records land) and by the spread heuristic (where later
+/// vertices query it). Settings from the environment: `NRC_DRIFT_SCENE` (a shipped scene's file
+/// or `photon-nrc-ajar-caustic`), `NRC_DRIFT_PRODUCERS` (`,`-separated), `NRC_DRIFT_VARIANTS`
+/// (`;`-separated, each an [`edited_preset`] list), `NRC_DRIFT_FRAMES`, `NRC_DRIFT_RECORDS`.
+/// Prints one row per run: relMSE at every tenth of the run (first-vertex / spread).
+#[test]
+#[ignore]
+fn drift_study() {
+    let name = env_or("NRC_DRIFT_SCENE", "photon-nrc-ajar-caustic");
+    let Some((_, scene)) = hard_scenes()
+        .into_iter()
+        .find(|(n, _)| *n == name)
+        .or_else(|| Some((name.clone(), scene(&name))))
+    else {
+        return;
+    };
+    let frames: u32 = env_or("NRC_DRIFT_FRAMES", "2000").parse().unwrap();
+    let records: usize = env_or("NRC_DRIFT_RECORDS", "4096").parse().unwrap();
+    let (reference, mask) = reference_of(&scene, (32, 32), 4096);
+    let input = FrameInput {
+        scene: &scene,
+        camera: &scene.camera,
+        width: 32,
+        height: 32,
+        spp: 4,
+        seed: 17,
+    };
+    let first = PassSpec::from(nrc_render::passes::CacheTerminatedSettings {
+        termination: nrc_render::Termination::FirstVertex,
+        nee: true,
+    });
+    println!(
+        "| scene | producer | variant | relMSE first-vertex / spread at every tenth of the run | spread: end / min from the tenth on |\n|---|---|---|---|---|"
+    );
+    for producer in env_or("NRC_DRIFT_PRODUCERS", "pt").split(',') {
+        for variant in env_or("NRC_DRIFT_VARIANTS", "base").split(';') {
+            let mut s = CacheMethodSettings::new(edited_preset(variant), CacheDevice::Cpu);
+            s.records_per_frame = records;
+            s.batch_size = records / 2;
+            s.resolution = 128;
+            s.seed = 11;
+            let spec = producer.parse::<ProducerSpec>().unwrap();
+            let mut t = scene_trainer(&scene, spec, PassSpec::default(), &s, PathTracer::default())
+                .unwrap();
+            let mut row = Vec::new();
+            let mut spread = Vec::new();
+            for f in 1..=frames {
+                t.frame(&scene, &scene.camera, 32, 32, false).unwrap();
+                if f % (frames / 10).max(1) == 0 {
+                    let e_spread = rel_mse_excluding(&t.render(&input).image, &reference, &mask);
+                    let mut pass = first.build(&PathTracer::default());
+                    let out =
+                        nrc_render::passes::run(pass.as_mut(), &input, &CacheSource::new(&t.cache));
+                    let e_first = rel_mse_excluding(&out.image, &reference, &mask);
+                    row.push(format!("{e_first:.3}/{e_spread:.3}"));
+                    spread.push(e_spread);
+                }
+            }
+            let min = spread.iter().cloned().fold(f64::INFINITY, f64::min);
+            println!(
+                "| {name} | {producer} | {variant} | {} | {:.2} |",
+                row.join(" "),
+                spread.last().unwrap() / min
+            );
+        }
+    }
+}

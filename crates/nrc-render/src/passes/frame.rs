@@ -62,6 +62,23 @@ pub struct PhaseTimes {
     pub shading_ms: f64,
 }
 
+impl PhaseTimes {
+    /// `probes 1.0 ms, candidates 2.0 ms, ...`, or `None` for a pass that times no phases.
+    pub fn describe(&self) -> Option<String> {
+        let total = self.probes_ms
+            + self.candidates_ms
+            + self.temporal_ms
+            + self.spatial_ms
+            + self.shading_ms;
+        (total > 0.0).then(|| {
+            format!(
+                "probes {:.1} ms, candidates {:.1} ms, temporal {:.1} ms, spatial {:.1} ms, shading {:.1} ms",
+                self.probes_ms, self.candidates_ms, self.temporal_ms, self.spatial_ms, self.shading_ms
+            )
+        })
+    }
+}
+
 /// A rendered frame.
 #[derive(Clone, Debug)]
 pub struct PassOutput {

@@ -18,13 +18,13 @@ use std::ffi::OsString;
 use std::path::Path;
 
 use anyhow::{Context, Result, bail};
-use clap::CommandFactory;
 
 /// The command line with the run file named by `--run FILE` or `--run=FILE` (after the
 /// subcommand) expanded into flags, placed before the command line's own. A field whose flag
 /// the command line also gives is left out, so the command line overrides it (list flags such
-/// as `--methods` included, which would otherwise add up).
-pub fn expand(args: Vec<OsString>) -> Result<Vec<OsString>> {
+/// as `--methods` included, which would otherwise add up). `command` is the program's command
+/// line (its subcommands' flags are the fields a run file may hold).
+pub fn expand(args: Vec<OsString>, command: &clap::Command) -> Result<Vec<OsString>> {
     let file = args.iter().enumerate().find_map(|(i, a)| {
         let a = a.to_str()?;
         if a == "--run" {
@@ -48,7 +48,7 @@ pub fn expand(args: Vec<OsString>) -> Result<Vec<OsString>> {
         .filter_map(|a| a.to_str()?.strip_prefix("--"))
         .map(|a| a.split_once('=').map_or(a, |(flag, _)| flag))
         .collect();
-    let flags = flags_of(Path::new(&file), sub, &given)?;
+    let flags = flags_of(Path::new(&file), command, sub, &given)?;
     let mut out = args[..2].to_vec();
     out.extend(flags);
     out.extend(args[2..].iter().cloned());
@@ -56,7 +56,12 @@ pub fn expand(args: Vec<OsString>) -> Result<Vec<OsString>> {
 }
 
 /// The run file's fields as flags of subcommand `sub`, but for the flags in `given`.
-fn flags_of(path: &Path, sub: &str, given: &[&str]) -> Result<Vec<OsString>> {
+fn flags_of(
+    path: &Path,
+    command: &clap::Command,
+    sub: &str,
+    given: &[&str],
+) -> Result<Vec<OsString>> {
     let what = || format!("run file {}", path.display());
     let text = std::fs::read_to_string(path).with_context(|| format!("cannot read {}", what()))?;
     let value: serde_json::Value =
@@ -64,7 +69,6 @@ fn flags_of(path: &Path, sub: &str, given: &[&str]) -> Result<Vec<OsString>> {
     let Some(fields) = value.as_object() else {
         bail!("{}: expected an object of flags", what());
     };
-    let command = crate::Cli::command();
     let Some(sub_cmd) = command.find_subcommand(sub) else {
         bail!("{}: unknown subcommand `{sub}`", what());
     };
@@ -116,10 +120,52 @@ fn flags_of(path: &Path, sub: &str, given: &[&str]) -> Result<Vec<OsString>> {
 
 #[cfg(test)]
 mod tests {
-    use clap::Parser;
+    use clap::{CommandFactory, Parser};
     use rand::SeedableRng;
 
-    /// A run file of `nrc train` with every kind of value: strings, numbers, a switch, null, an
+    use crate::options::{RadianceCacheArgs, SceneArgs};
+
+    /// A command line with a `train` subcommand holding the shared option groups and flags of
+    /// every kind (the program's own is in the binary crate, above this one).
+    #[derive(Parser, Debug)]
+    struct Cli {
+        #[command(subcommand)]
+        command: Command,
+    }
+
+    #[derive(clap::Subcommand, Debug)]
+    enum Command {
+        Train(Box<Train>),
+        Info,
+    }
+
+    #[derive(clap::Args, Debug)]
+    struct Train {
+        #[arg(long)]
+        run: Option<std::path::PathBuf>,
+        #[command(flatten)]
+        scene: SceneArgs,
+        #[arg(long, default_value = "pt-sl")]
+        producer: nrc_train::ProducerSpec,
+        #[arg(long, default_value_t = 64)]
+        frames: u32,
+        #[arg(long, default_value_t = 256)]
+        width: u32,
+        #[arg(long, default_value_t = 256)]
+        height: u32,
+        #[arg(long)]
+        no_nee: bool,
+        #[arg(long)]
+        pass: Option<nrc_render::PassSpec>,
+        #[arg(long, default_value_t = 0.0)]
+        from_terminations: f32,
+        #[arg(long)]
+        camera_path: Option<std::path::PathBuf>,
+        #[command(flatten)]
+        cache: RadianceCacheArgs,
+    }
+
+    /// A run file of `train` with every kind of value: strings, numbers, a switch, null, an
     /// inline cache configuration (the shipped hash-grid preset).
     fn run_file() -> String {
         format!(
@@ -129,7 +175,7 @@ mod tests {
   "pass": null, "from_terminations": 0.25, "camera_path": "orbit.json",
   "config": {}
 }}"#,
-            include_str!("../models/nrc-hashgrid.json")
+            include_str!("../../../models/nrc-hashgrid.json")
         )
     }
 
@@ -146,10 +192,10 @@ mod tests {
         let parse = |path: std::path::PathBuf| {
             move || {
                 let args = vec!["nrc".into(), "train".into(), "--run".into(), path.into()];
-                let cli = crate::Cli::try_parse_from(super::expand(args).ok()?).ok()?;
-                match cli.command {
-                    crate::Command::Train(t) => Some(t.cache.config().is_ok()),
-                    _ => Some(false),
+                let args = super::expand(args, &Cli::command()).ok()?;
+                match Cli::try_parse_from(args).ok()?.command {
+                    Command::Train(t) => Some(t.cache.config().is_ok()),
+                    Command::Info => Some(false),
                 }
             }
         };
