@@ -7,18 +7,24 @@
 # Usage: scripts/drift-study.sh [VARIANT...]    (from the repository root; a variant is a
 # comma-separated list of path=value edits of the preset's JSON, or `base`)
 # Environment: SCENE (photon-nrc-ajar-caustic, ajar or caustics), PRODUCERS (pt), FRAMES (2000),
-# RECORDS (4096).
+# RECORDS (4096), RESOLUTION (128: the finest grid resolution along the scene's longest axis).
 set -euo pipefail
 if [ $# -eq 0 ]; then
   set -- base \
     optimizer.nested.learning_rate=2e-3 \
     optimizer.nested.epsilon=1e-8 \
-    optimizer.decay=0.999 \
+    optimizer.nested.beta2=0.999 \
     optimizer.nested.l2_reg=1e-6 \
-    encoding.nested.0.log2_hashmap_size=15
+    optimizer.decay=0.999 \
+    optimizer.decay=0.9995 \
+    encoding.nested.0.log2_hashmap_size=15 \
+    encoding.nested.0.n_levels=8 \
+    loss.epsilon=1.0 \
+    loss.max_relative_error=4
 fi
 variants=$(IFS=';'; echo "$*")
 NRC_DRIFT_SCENE=${SCENE:-photon-nrc-ajar-caustic} NRC_DRIFT_PRODUCERS=${PRODUCERS:-pt} \
-  NRC_DRIFT_FRAMES=${FRAMES:-2000} NRC_DRIFT_RECORDS=${RECORDS:-4096} NRC_DRIFT_VARIANTS="$variants" \
+  NRC_DRIFT_FRAMES=${FRAMES:-2000} NRC_DRIFT_RECORDS=${RECORDS:-4096} \
+  NRC_DRIFT_RESOLUTION=${RESOLUTION:-128} NRC_DRIFT_VARIANTS="$variants" \
   cargo test --release --locked --workspace --test online drift_study -- --ignored --nocapture \
-  | grep '^|'
+  | grep -E '^(\||  )'

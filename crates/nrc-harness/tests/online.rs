@@ -461,25 +461,30 @@ fn edited_preset(edits: &str) -> CacheConfig {
 }
 
 /// Issue 31's drift study, on demand (`scripts/drift-study.sh`): long online runs with one
-/// training setting changed at a time, and the cache's error along the run for paths ending at
-/// the first vertex (where the camera's records land) and by the spread heuristic (where later
-/// vertices query it). Settings from the environment: `NRC_DRIFT_SCENE` (a shipped scene's file
-/// or `photon-nrc-ajar-caustic`), `NRC_DRIFT_PRODUCERS` (`,`-separated), `NRC_DRIFT_VARIANTS`
-/// (`;`-separated, each an [`edited_preset`] list), `NRC_DRIFT_FRAMES`, `NRC_DRIFT_RECORDS`.
-/// Prints one row per run: relMSE at every tenth of the run (first-vertex / spread).
+/// training setting changed at a time. Settings from the environment: `NRC_DRIFT_SCENE` (a
+/// shipped scene's file or `photon-nrc-ajar-caustic`), `NRC_DRIFT_PRODUCERS` (`,`-separated),
+/// `NRC_DRIFT_VARIANTS` (`;`-separated, each an [`edited_preset`] list), `NRC_DRIFT_FRAMES`,
+/// `NRC_DRIFT_RECORDS`, `NRC_DRIFT_RESOLUTION`. At every tenth of a run it measures (32 × 32,
+/// emitter pixels excluded, one fixed seed):
+/// - the relMSE of the render with paths ending at the first vertex (where the camera's
+///   records land) and with the spread heuristic (where later vertices query the cache), and
+///   the spread render's MSE (luminance);
+/// - the cache's own answers at every query of the spread render against 1,024-spp
+///   path-traced answers at the same points: relMSE, mean ratio, MSE, and the part of the
+///   MSE from the 1 % of queries whose path-traced answer is brightest.
+///
+/// Prints a Markdown row per run and indented lines with the rest.
 #[test]
 #[ignore]
 fn drift_study() {
     let name = env_or("NRC_DRIFT_SCENE", "photon-nrc-ajar-caustic");
-    let Some((_, scene)) = hard_scenes()
-        .into_iter()
-        .find(|(n, _)| *n == name)
-        .or_else(|| Some((name.clone(), scene(&name))))
-    else {
-        return;
+    let scene = match hard_scenes().into_iter().find(|(n, _)| *n == name) {
+        Some((_, s)) => s,
+        None => scene(&name),
     };
     let frames: u32 = env_or("NRC_DRIFT_FRAMES", "2000").parse().unwrap();
     let records: usize = env_or("NRC_DRIFT_RECORDS", "4096").parse().unwrap();
+    let resolution: u32 = env_or("NRC_DRIFT_RESOLUTION", "128").parse().unwrap();
     let (reference, mask) = reference_of(&scene, (32, 32), 4096);
     let input = FrameInput {
         scene: &scene,
@@ -489,10 +494,46 @@ fn drift_study() {
         spp: 4,
         seed: 17,
     };
+    let lum = |p: &glam::Vec3| nrc_scene::sampling::luminance(*p) as f64;
     let first = PassSpec::from(nrc_render::passes::CacheTerminatedSettings {
         termination: nrc_render::Termination::FirstVertex,
         nee: true,
     });
+    let spread = PassSpec::default();
+    // The spread render's queries (they depend on the geometry alone) and their answers.
+    let rec = Recording {
+        inner: &nrc_render::ZeroSource,
+        log: Default::default(),
+    };
+    nrc_render::passes::run(spread.build(&PathTracer::default()).as_mut(), &input, &rec);
+    let queries: Vec<_> = rec
+        .log
+        .into_inner()
+        .unwrap()
+        .into_iter()
+        .map(|(q, _)| q)
+        .collect();
+    let exact = nrc_render::source::PathTracedSource {
+        scene: &scene,
+        tracer: PathTracer::default(),
+        samples: 1024,
+        seed: 5,
+    };
+    let truth = nrc_render::RadianceSource::radiance(&exact, &queries);
+    let mut brightest: Vec<usize> = (0..queries.len()).collect();
+    brightest.sort_by(|&i, &j| lum(&truth[j]).total_cmp(&lum(&truth[i])));
+    brightest.truncate(queries.len().div_ceil(100));
+    let n = queries.len() as f64;
+    let masked = |image: &nrc_scene::Image| {
+        image
+            .data
+            .iter()
+            .zip(&reference.data)
+            .zip(&mask)
+            .filter(|(_, m)| !**m)
+            .map(|((a, b), _)| (lum(a), lum(b)))
+            .collect::<Vec<_>>()
+    };
     println!(
         "| scene | producer | variant | relMSE first-vertex / spread at every tenth of the run | spread: end / min from the tenth on |\n|---|---|---|---|---|"
     );
@@ -501,31 +542,87 @@ fn drift_study() {
             let mut s = CacheMethodSettings::new(edited_preset(variant), CacheDevice::Cpu);
             s.records_per_frame = records;
             s.batch_size = records / 2;
-            s.resolution = 128;
+            s.resolution = resolution;
             s.seed = 11;
             let spec = producer.parse::<ProducerSpec>().unwrap();
-            let mut t = scene_trainer(&scene, spec, PassSpec::default(), &s, PathTracer::default())
-                .unwrap();
-            let mut row = Vec::new();
-            let mut spread = Vec::new();
+            let mut t =
+                scene_trainer(&scene, spec, spread.clone(), &s, PathTracer::default()).unwrap();
+            let (mut row, mut spread_rel, mut mse, mut answers) = (vec![], vec![], vec![], vec![]);
+            let mut last = Vec::new();
             for f in 1..=frames {
                 t.frame(&scene, &scene.camera, 32, 32, false).unwrap();
-                if f % (frames / 10).max(1) == 0 {
-                    let e_spread = rel_mse_excluding(&t.render(&input).image, &reference, &mask);
-                    let mut pass = first.build(&PathTracer::default());
-                    let out =
-                        nrc_render::passes::run(pass.as_mut(), &input, &CacheSource::new(&t.cache));
-                    let e_first = rel_mse_excluding(&out.image, &reference, &mask);
-                    row.push(format!("{e_first:.3}/{e_spread:.3}"));
-                    spread.push(e_spread);
+                if f % (frames / 10).max(1) != 0 {
+                    continue;
                 }
+                let image = nrc_render::passes::run(
+                    first.build(&PathTracer::default()).as_mut(),
+                    &input,
+                    &CacheSource::new(&t.cache),
+                )
+                .image;
+                let e_first = rel_mse_excluding(&image, &reference, &mask);
+                let image = t.render(&input).image;
+                let e_spread = rel_mse_excluding(&image, &reference, &mask);
+                last = masked(&image);
+                let m = last.iter().map(|(a, b)| (a - b).powi(2)).sum::<f64>() / 1024.0;
+                row.push(format!("{e_first:.3}/{e_spread:.3}"));
+                spread_rel.push(e_spread);
+                mse.push(format!("{m:.3}"));
+                let a = nrc_render::RadianceSource::radiance(&CacheSource::new(&t.cache), &queries);
+                let sq = |i: usize| (lum(&a[i]) - lum(&truth[i])).powi(2);
+                let rel = (0..a.len())
+                    .map(|i| sq(i) / (lum(&truth[i]).powi(2) + 0.01))
+                    .sum::<f64>()
+                    / n;
+                let ratio = a.iter().map(lum).sum::<f64>() / truth.iter().map(lum).sum::<f64>();
+                let all = (0..a.len()).map(sq).sum::<f64>() / n;
+                let top = brightest.iter().map(|&i| sq(i)).sum::<f64>() / n;
+                answers.push(format!("{rel:.2}/{ratio:.2}/{all:.2}/{top:.2}"));
             }
-            let min = spread.iter().cloned().fold(f64::INFINITY, f64::min);
+            let min = spread_rel.iter().cloned().fold(f64::INFINITY, f64::min);
             println!(
                 "| {name} | {producer} | {variant} | {} | {:.2} |",
                 row.join(" "),
-                spread.last().unwrap() / min
+                spread_rel.last().unwrap() / min
+            );
+            println!("  spread render MSE: {}", mse.join(" "));
+            println!(
+                "  the cache at the spread render's {} queries (relMSE/mean ratio/MSE/MSE of the brightest 1 %): {}",
+                queries.len(),
+                answers.join(" ")
+            );
+            // Where the last spread render's error is: its mean against the reference's, and
+            // the share of its squared relative error in the worst 1 % of pixels.
+            let mut rel: Vec<f64> = last
+                .iter()
+                .map(|(a, b)| (a - b).powi(2) / (b * b + 0.01))
+                .collect();
+            rel.sort_by(|a, b| b.total_cmp(a));
+            let worst =
+                rel[..rel.len().div_ceil(100)].iter().sum::<f64>() / rel.iter().sum::<f64>();
+            let mean =
+                last.iter().map(|p| p.0).sum::<f64>() / last.iter().map(|p| p.1).sum::<f64>();
+            println!(
+                "  at the end: spread render mean {mean:.3} x the reference's; the worst 1 % of pixels hold {:.0} % of its squared relative error",
+                100.0 * worst
             );
         }
+    }
+}
+
+/// A source that remembers every query and its answer.
+struct Recording<'a> {
+    inner: &'a dyn nrc_render::RadianceSource,
+    log: std::sync::Mutex<Vec<(nrc_render::RadianceQuery, glam::Vec3)>>,
+}
+
+impl nrc_render::RadianceSource for Recording<'_> {
+    fn radiance(&self, queries: &[nrc_render::RadianceQuery]) -> Vec<glam::Vec3> {
+        let a = self.inner.radiance(queries);
+        self.log
+            .lock()
+            .unwrap()
+            .extend(queries.iter().copied().zip(a.iter().copied()));
+        a
     }
 }
