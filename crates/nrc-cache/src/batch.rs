@@ -35,6 +35,26 @@ pub struct PackedBatch {
     pub dropped_absurd: usize,
 }
 
+/// Why a training record is dropped.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Dropped {
+    /// A query field, target or weight is NaN or infinite.
+    NonFinite,
+    /// A target channel is negative or above `max_target`, or the weight negative.
+    Absurd,
+}
+
+/// The checks every cache puts on a training record (query `q`, target `t`, weight `w`).
+pub fn check_record(q: &CacheQuery, t: &[f32; 3], w: f32, max_target: f32) -> Result<(), Dropped> {
+    if !query_is_finite(q) || !t.iter().all(|v| v.is_finite()) || !w.is_finite() {
+        return Err(Dropped::NonFinite);
+    }
+    if t.iter().any(|v| *v < 0.0 || *v > max_target) || w < 0.0 {
+        return Err(Dropped::Absurd);
+    }
+    Ok(())
+}
+
 /// Packs a training batch, dropping and counting bad samples.
 pub fn pack_training(
     batch: &TrainingBatch,
@@ -63,13 +83,16 @@ pub fn pack_training(
         let q = &batch.queries[i];
         let t = batch.targets[i];
         let w = batch.weights.as_ref().map_or(1.0, |w| w[i]);
-        if !query_is_finite(q) || !t.iter().all(|v| v.is_finite()) || !w.is_finite() {
-            out.dropped_nonfinite += 1;
-            continue;
-        }
-        if t.iter().any(|v| *v < 0.0 || *v > max_target) || w < 0.0 {
-            out.dropped_absurd += 1;
-            continue;
+        match check_record(q, &t, w, max_target) {
+            Err(Dropped::NonFinite) => {
+                out.dropped_nonfinite += 1;
+                continue;
+            }
+            Err(Dropped::Absurd) => {
+                out.dropped_absurd += 1;
+                continue;
+            }
+            Ok(()) => {}
         }
         out.rows.extend_from_slice(&raw_inputs(q));
         out.rows.extend_from_slice(&reflectance_factor(q));

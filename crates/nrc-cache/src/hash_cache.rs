@@ -1,0 +1,605 @@
+//! The non-neural baseline: a spatially hashed radiance cache, the way NVIDIA's SHaRC and
+//! bevy_solari's world cache build one (and the kind of cache the NRC thesis compares against,
+//! §7.3). It learns from the same training records as the neural cache and answers the same
+//! queries, so that "what does the network buy" is one switch.
+//!
+//! - **Cells**: a record's position quantised to a grid whose cell is `cell` times the scene
+//!   box's largest extent, doubled per level of detail: a point at distance `d` from the camera
+//!   uses level `⌊log2(max(d / (lod_cells · cell), 1))⌋` (clamped to `levels − 1`), so that a
+//!   cell covers about the same number of pixels near and far (SHaRC's distance-based
+//!   levels). The key also holds the normal's dominant axis and sign (6 bins: the two sides of
+//!   a wall never share a cell) and, with `direction_bins`, the outgoing direction's (6 more).
+//! - **Table**: open addressing over a fixed number of slots (`2^log2_capacity`, a fixed memory
+//!   budget), linear probing of at most [`MAX_PROBES`] slots, the full 64-bit key stored as the
+//!   checksum; a record or lookup that finds neither its key nor a free slot is counted as a
+//!   collision (and dropped, or answered by a coarser level).
+//! - **Averaging**: a frame's records are summed per cell, then blended into the cell's value
+//!   as a count-limited running mean: `v ← (v·n + Σ) / (n + k)`, `n ← min(n + k, max_samples)`
+//!   (an exponential average of time constant `max_samples` samples once the count saturates,
+//!   so the cache follows a changing scene). Each record also accumulates into the coarser
+//!   levels of its point, so that a lookup whose own cell is empty falls back to a coarser
+//!   one.
+//! - **Eviction**: a cell not updated for `stale_frames` frames is removed (and the table
+//!   rebuilt without it), as SHaRC evicts stale entries.
+//! - **Lookups**: the cell of the query's level, or the first non-empty coarser one; with
+//!   `jitter`, the position is offset by up to half a cell per axis first (a hash of the query,
+//!   so answers are deterministic), which hides cell borders at the cost of noise.
+
+use rayon::prelude::*;
+
+use crate::batch::check_record;
+use crate::{CacheQuery, SceneBox, TrainingBatch};
+
+/// Slots probed before a key counts as a collision.
+pub const MAX_PROBES: usize = 16;
+
+/// The hash cache's settings.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct HashCacheConfig {
+    /// Cell edge at the finest level, as a fraction of the scene box's largest extent.
+    pub cell: f32,
+    /// Levels of detail (1: one cell size everywhere).
+    pub levels: u32,
+    /// A point within this many finest cells of the camera uses the finest level.
+    pub lod_cells: f32,
+    /// Also key cells by the outgoing direction's dominant axis (for glossy surfaces).
+    pub direction_bins: bool,
+    /// The table holds `2^log2_capacity` cells.
+    pub log2_capacity: u32,
+    /// The running mean's sample count saturates here (its time constant, in samples).
+    pub max_samples: f32,
+    /// Cells not updated for this many frames are evicted.
+    pub stale_frames: u32,
+    /// Jitter lookups by up to half a cell.
+    pub jitter: bool,
+}
+
+impl Default for HashCacheConfig {
+    fn default() -> Self {
+        Self {
+            cell: 1.0 / 128.0,
+            levels: 6,
+            lod_cells: 64.0,
+            direction_bins: false,
+            log2_capacity: 20,
+            max_samples: 256.0,
+            stale_frames: 64,
+            jitter: false,
+        }
+    }
+}
+
+impl HashCacheConfig {
+    /// Refuses settings that cannot work, naming the field.
+    pub fn validate(&self) -> Result<(), String> {
+        if !(self.cell > 0.0 && self.cell <= 1.0) {
+            return Err(format!(
+                "hash cache: cell must be in (0, 1], got {}",
+                self.cell
+            ));
+        }
+        if !(1..=16).contains(&self.levels) {
+            return Err(format!(
+                "hash cache: levels must be in 1..=16, got {}",
+                self.levels
+            ));
+        }
+        if !(self.lod_cells > 0.0 && self.lod_cells.is_finite()) {
+            return Err(format!(
+                "hash cache: lod_cells must be positive, got {}",
+                self.lod_cells
+            ));
+        }
+        if !(8..=28).contains(&self.log2_capacity) {
+            return Err(format!(
+                "hash cache: log2_capacity must be in 8..=28, got {}",
+                self.log2_capacity
+            ));
+        }
+        if !(self.max_samples >= 1.0 && self.max_samples.is_finite()) {
+            return Err(format!(
+                "hash cache: max_samples must be ≥ 1, got {}",
+                self.max_samples
+            ));
+        }
+        if self.stale_frames == 0 {
+            return Err("hash cache: stale_frames must be at least 1".into());
+        }
+        Ok(())
+    }
+}
+
+/// One cell of the table. `key == 0` is a free slot.
+#[derive(Clone, Copy, Debug, Default)]
+struct Slot {
+    key: u64,
+    /// The running mean and its sample count.
+    value: [f32; 3],
+    count: f32,
+    /// This frame's sum and weight, not yet blended.
+    sum: [f32; 3],
+    weight: f32,
+    /// The last frame that updated the cell.
+    frame: u32,
+}
+
+/// What a training call did.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct HashTrainStats {
+    pub used: usize,
+    pub dropped_nonfinite: usize,
+    pub dropped_absurd: usize,
+    /// Records (one per level) that found neither their cell nor a free slot.
+    pub collisions: usize,
+    /// Cells evicted as stale after this call.
+    pub evicted: usize,
+    /// Relative L2 error of the cells' values before the update against the records.
+    pub loss: f32,
+}
+
+/// The spatially hashed radiance cache.
+#[derive(Debug)]
+pub struct HashCache {
+    config: HashCacheConfig,
+    scene_box: SceneBox,
+    /// Finest cell edge in world units.
+    cell: f32,
+    /// The camera position (world) the levels of detail are measured from.
+    camera: [f32; 3],
+    slots: Vec<Slot>,
+    frame: u32,
+    /// Lookups (since creation) that found no cell at any level.
+    misses: std::sync::atomic::AtomicU64,
+}
+
+impl HashCache {
+    /// An empty cache over `scene_box`.
+    pub fn new(config: HashCacheConfig, scene_box: SceneBox) -> Result<Self, String> {
+        config.validate()?;
+        let extent = (0..3)
+            .map(|k| scene_box.max[k] - scene_box.min[k])
+            .fold(0.0f32, f32::max);
+        if !(extent > 0.0 && extent.is_finite()) {
+            return Err(format!(
+                "hash cache: the scene box {scene_box:?} is degenerate"
+            ));
+        }
+        let center = std::array::from_fn(|k| 0.5 * (scene_box.min[k] + scene_box.max[k]));
+        Ok(Self {
+            config,
+            scene_box,
+            cell: config.cell * extent,
+            camera: center,
+            slots: vec![Slot::default(); 1 << config.log2_capacity],
+            frame: 0,
+            misses: Default::default(),
+        })
+    }
+
+    pub fn config(&self) -> &HashCacheConfig {
+        &self.config
+    }
+
+    pub fn scene_box(&self) -> SceneBox {
+        self.scene_box
+    }
+
+    /// The camera the levels of detail are measured from (world units).
+    pub fn set_camera(&mut self, position: [f32; 3]) {
+        self.camera = position;
+    }
+
+    /// Cells in use.
+    pub fn cells(&self) -> usize {
+        self.slots.iter().filter(|s| s.key != 0).count()
+    }
+
+    /// Bytes of the table.
+    pub fn memory_bytes(&self) -> usize {
+        self.slots.len() * std::mem::size_of::<Slot>()
+    }
+
+    /// Lookups that found nothing at any level, since creation.
+    pub fn misses(&self) -> u64 {
+        self.misses.load(std::sync::atomic::Ordering::Relaxed)
+    }
+
+    /// One line on what the cache is.
+    pub fn describe(&self) -> String {
+        let c = &self.config;
+        format!(
+            "hash cache: {} slots ({:.1} MB), finest cell {:.4} ({} of the box), {} levels, normal{} bins, running mean of up to {} samples, stale after {} frames{}",
+            self.slots.len(),
+            self.memory_bytes() as f64 / 1e6,
+            self.cell,
+            c.cell,
+            c.levels,
+            if c.direction_bins {
+                " and direction"
+            } else {
+                ""
+            },
+            c.max_samples,
+            c.stale_frames,
+            if c.jitter { ", jittered lookups" } else { "" }
+        )
+    }
+
+    fn world(&self, p: [f32; 3]) -> [f32; 3] {
+        std::array::from_fn(|k| {
+            self.scene_box.min[k] + p[k] * (self.scene_box.max[k] - self.scene_box.min[k])
+        })
+    }
+
+    /// The level of detail of a world point.
+    fn level(&self, p: [f32; 3]) -> u32 {
+        let d = (0..3)
+            .map(|k| (p[k] - self.camera[k]).powi(2))
+            .sum::<f32>()
+            .sqrt();
+        let r = d / (self.config.lod_cells * self.cell);
+        if r > 1.0 {
+            (r.log2().floor() as u32).min(self.config.levels - 1)
+        } else {
+            0
+        }
+    }
+
+    /// The key of world point `p` at `level` (never 0).
+    fn key(&self, p: [f32; 3], q: &CacheQuery, level: u32) -> u64 {
+        let size = self.cell * (1u32 << level) as f32;
+        let mut h = 0xcbf2_9ce4_8422_2325u64 ^ u64::from(level);
+        for &x in &p {
+            h = mix(h ^ ((x / size).floor() as i64 as u64));
+        }
+        h = mix(h ^ axis_bin(q.normal));
+        if self.config.direction_bins {
+            h = mix(h ^ (axis_bin(q.direction) << 8));
+        }
+        h.max(1)
+    }
+
+    /// The slot holding `key`, or a free one to put it in (`None`: a collision).
+    fn find(&self, key: u64) -> Option<usize> {
+        let mask = self.slots.len() - 1;
+        let start = (key as usize) & mask;
+        (0..MAX_PROBES)
+            .map(|k| (start + k) & mask)
+            .find(|&i| self.slots[i].key == key || self.slots[i].key == 0)
+    }
+
+    /// The world point of a lookup: the query's, jittered by a hash of it when asked.
+    fn lookup_point(&self, q: &CacheQuery, level: u32) -> [f32; 3] {
+        let mut p = self.world(q.position);
+        if self.config.jitter {
+            let size = self.cell * (1u32 << level) as f32;
+            let mut h = q.position.iter().fold(0x9e37_79b9_7f4a_7c15u64, |h, x| {
+                mix(h ^ u64::from(x.to_bits()))
+            });
+            for x in &mut p {
+                h = mix(h);
+                *x += ((h >> 40) as f32 / (1u64 << 24) as f32 - 0.5) * size;
+            }
+        }
+        p
+    }
+
+    /// The radiance of a query's cell, or of the first non-empty coarser one.
+    fn answer(&self, q: &CacheQuery) -> Option<[f32; 3]> {
+        let start = self.level(self.world(q.position));
+        (start..self.config.levels).find_map(|level| {
+            let key = self.key(self.lookup_point(q, level), q, level);
+            let i = self.find(key)?;
+            let s = &self.slots[i];
+            (s.key == key && s.count > 0.0).then_some(s.value)
+        })
+    }
+
+    /// Radiance for each query: its cell's mean, or the first non-empty coarser cell's; 0
+    /// (a counted miss) where none holds data.
+    pub fn infer(&self, queries: &[CacheQuery]) -> Vec<[f32; 3]> {
+        queries
+            .par_iter()
+            .map(|q| {
+                self.answer(q).unwrap_or_else(|| {
+                    self.misses.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                    [0.0; 3]
+                })
+            })
+            .collect()
+    }
+
+    /// Learns one frame's records: each (checked as the neural cache checks them) adds to its
+    /// cell at its level and every coarser one; then the frame's sums are blended into the
+    /// cells' running means and stale cells evicted.
+    pub fn train(&mut self, batch: &TrainingBatch) -> Result<HashTrainStats, String> {
+        let n = batch.queries.len();
+        if batch.targets.len() != n || batch.weights.as_ref().is_some_and(|w| w.len() != n) {
+            return Err(format!(
+                "training batch has {n} queries but {} targets",
+                batch.targets.len()
+            ));
+        }
+        let mut stats = HashTrainStats::default();
+        let (mut loss, mut loss_n) = (0.0f64, 0usize);
+        let before: Vec<[f32; 3]> = batch
+            .queries
+            .par_iter()
+            .map(|q| self.answer(q).unwrap_or([0.0; 3]))
+            .collect();
+        for i in 0..n {
+            let (q, t) = (&batch.queries[i], batch.targets[i]);
+            let w = batch.weights.as_ref().map_or(1.0, |w| w[i]);
+            match check_record(q, &t, w, f32::MAX) {
+                Err(crate::batch::Dropped::NonFinite) => {
+                    stats.dropped_nonfinite += 1;
+                    continue;
+                }
+                Err(crate::batch::Dropped::Absurd) => {
+                    stats.dropped_absurd += 1;
+                    continue;
+                }
+                Ok(()) => {}
+            }
+            stats.used += 1;
+            let lum = |c: [f32; 3]| 0.2126 * c[0] + 0.7152 * c[1] + 0.0722 * c[2];
+            let (b, tl) = (lum(before[i]), lum(t));
+            loss += f64::from((b - tl).powi(2) / (b * b + 0.01));
+            loss_n += 1;
+            let p = self.world(q.position);
+            for level in self.level(p)..self.config.levels {
+                let key = self.key(p, q, level);
+                let Some(s) = self.find(key) else {
+                    stats.collisions += 1;
+                    continue;
+                };
+                let slot = &mut self.slots[s];
+                slot.key = key;
+                for k in 0..3 {
+                    slot.sum[k] += w * t[k];
+                }
+                slot.weight += w;
+            }
+        }
+        self.frame += 1;
+        let (frame, max) = (self.frame, self.config.max_samples);
+        for s in self
+            .slots
+            .iter_mut()
+            .filter(|s| s.key != 0 && s.weight > 0.0)
+        {
+            let total = s.count + s.weight;
+            for k in 0..3 {
+                s.value[k] = (s.value[k] * s.count + s.sum[k]) / total;
+            }
+            s.count = total.min(max);
+            s.sum = [0.0; 3];
+            s.weight = 0.0;
+            s.frame = frame;
+        }
+        stats.evicted = self.evict();
+        stats.loss = (loss / loss_n.max(1) as f64) as f32;
+        Ok(stats)
+    }
+
+    /// Removes the cells not updated for `stale_frames` frames; returns how many.
+    fn evict(&mut self) -> usize {
+        let cutoff = self.frame.saturating_sub(self.config.stale_frames);
+        let stale = |s: &Slot| s.key != 0 && s.frame < cutoff;
+        let evicted = self.slots.iter().filter(|s| stale(s)).count();
+        if evicted > 0 {
+            // Rebuild: linear probing cannot leave holes in a chain.
+            let live: Vec<Slot> = self
+                .slots
+                .iter()
+                .filter(|s| s.key != 0 && !stale(s))
+                .copied()
+                .collect();
+            self.slots.iter_mut().for_each(|s| *s = Slot::default());
+            for s in live {
+                if let Some(i) = self.find(s.key) {
+                    self.slots[i] = s;
+                }
+            }
+        }
+        evicted
+    }
+}
+
+/// The dominant axis of `v` and its sign, 0..6 (a zero or non-finite vector: +z).
+fn axis_bin(v: [f32; 3]) -> u64 {
+    let a = v.map(|x| if x.is_finite() { x } else { 0.0 });
+    let k = (0..3)
+        .max_by(|&i, &j| a[i].abs().total_cmp(&a[j].abs()))
+        .unwrap_or(2);
+    if a == [0.0; 3] {
+        return 4;
+    }
+    2 * k as u64 + u64::from(a[k] < 0.0)
+}
+
+/// A 64-bit finaliser (splitmix64's).
+#[inline]
+fn mix(mut z: u64) -> u64 {
+    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+    z ^ (z >> 31)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn query(p: [f32; 3], n: [f32; 3]) -> CacheQuery {
+        CacheQuery {
+            position: p,
+            direction: n,
+            normal: n,
+            roughness: 1.0,
+            diffuse: [0.5; 3],
+            specular: [0.0; 3],
+        }
+    }
+
+    fn cache(config: HashCacheConfig) -> HashCache {
+        HashCache::new(config, SceneBox::default()).unwrap()
+    }
+
+    fn batch(records: Vec<(CacheQuery, [f32; 3])>) -> TrainingBatch {
+        let (queries, targets) = records.into_iter().unzip();
+        TrainingBatch {
+            queries,
+            targets,
+            weights: None,
+        }
+    }
+
+    /// A cell's answer is the mean of its records (within the running mean's exactness), the
+    /// two sides of a wall do not mix, and a point never trained falls back to a coarser level.
+    #[test]
+    fn a_cell_answers_the_mean_of_its_records_and_sides_do_not_mix() {
+        let mut c = cache(HashCacheConfig::default());
+        let up = [0.0, 0.0, 1.0];
+        let down = [0.0, 0.0, -1.0];
+        let p = [0.501, 0.502, 0.5];
+        let targets = [1.0f32, 3.0, 2.0, 6.0];
+        let recs: Vec<_> = targets
+            .iter()
+            .map(|&t| (query(p, up), [t; 3]))
+            .chain([(query(p, down), [100.0; 3])])
+            .collect();
+        c.train(&batch(recs)).unwrap();
+        let a = c.infer(&[query(p, up), query(p, down)]);
+        assert!((a[0][0] - 3.0).abs() < 1e-5, "{:?}", a[0]);
+        assert!((a[1][0] - 100.0).abs() < 1e-3, "{:?}", a[1]);
+        // A nearby point in an untrained finest cell answers from a coarser cell.
+        let near = [0.505 + c.config.cell, 0.502, 0.5];
+        assert!(c.infer(&[query(near, up)])[0][0] > 0.0);
+        // Far away, nothing: a counted miss.
+        assert_eq!(c.infer(&[query([0.05, 0.9, 0.1], up)])[0], [0.0; 3]);
+        assert_eq!(c.misses(), 1);
+    }
+
+    /// Statistical check of the running mean over 32 cells: noisy records of a constant
+    /// converge to it, and once the count saturates a cell follows a change within a few time
+    /// constants. Negative control: a cell that keeps only its last frame (`max_samples` 1)
+    /// fails the same bound.
+    #[test]
+    fn the_running_mean_converges_and_follows_a_change() {
+        let run = |max_samples: f32| {
+            let config = HashCacheConfig {
+                max_samples,
+                ..Default::default()
+            };
+            let mut c = cache(config);
+            let qs: Vec<_> = (0..32)
+                .map(|i| query([0.1 + 0.025 * i as f32, 0.3, 0.3], [1.0, 0.0, 0.0]))
+                .collect();
+            let mut rng = 0x1234_5678u64;
+            let mut uniform = || {
+                rng = mix(rng);
+                (rng >> 40) as f32 / (1u64 << 24) as f32
+            };
+            let mut frame = |c: &mut HashCache, scale: f32| {
+                let recs = qs
+                    .iter()
+                    .flat_map(|q| {
+                        (0..16)
+                            .map(|_| (*q, [scale * uniform(); 3]))
+                            .collect::<Vec<_>>()
+                    })
+                    .collect();
+                c.train(&batch(recs)).unwrap();
+            };
+            let rms = |c: &HashCache, mean: f32| {
+                let a = c.infer(&qs);
+                (a.iter().map(|v| (v[0] - mean).powi(2)).sum::<f32>() / a.len() as f32).sqrt()
+            };
+            // Targets uniform in [0, 2): mean 1, standard deviation 0.577.
+            for _ in 0..64 {
+                frame(&mut c, 2.0);
+            }
+            let settled = rms(&c, 1.0);
+            // The light doubles: targets uniform in [0, 4).
+            for _ in 0..96 {
+                frame(&mut c, 4.0);
+            }
+            (settled, rms(&c, 2.0))
+        };
+        // 256 samples of σ 0.577: the mean's σ is 0.036. After the change (96 frames of 16
+        // samples at a time constant of 272 samples: e^-5.6 of the gap left) the EMA's σ is
+        // about 1.155 / √544 = 0.05.
+        let (settled, changed) = run(256.0);
+        assert!(settled < 0.07, "settled RMS error {settled}");
+        assert!(changed < 0.1, "RMS error after the change {changed}");
+        // Without averaging, the last frame's 16 samples: σ 0.144.
+        let (control, _) = run(1.0);
+        assert!(
+            control > 0.07,
+            "a cell without averaging passes: the test cannot tell ({control})"
+        );
+    }
+
+    /// A full table counts collisions instead of losing the cells it holds, and stale cells
+    /// are evicted, freeing their slots.
+    #[test]
+    fn collisions_are_counted_and_stale_cells_evicted() {
+        let config = HashCacheConfig {
+            log2_capacity: 8,
+            levels: 1,
+            stale_frames: 2,
+            cell: 1.0 / 1024.0,
+            ..Default::default()
+        };
+        let mut c = cache(config);
+        let up = [0.0, 0.0, 1.0];
+        let recs: Vec<_> = (0..400)
+            .map(|i| (query([i as f32 / 400.0, 0.5, 0.5], up), [1.0; 3]))
+            .collect();
+        let s = c.train(&batch(recs)).unwrap();
+        assert_eq!(c.cells(), 256, "the table fills");
+        assert_eq!(
+            s.collisions,
+            400 - 256,
+            "every record that found no slot is counted"
+        );
+        let empty = batch(Vec::new());
+        for _ in 0..3 {
+            c.train(&empty).unwrap();
+        }
+        assert_eq!(c.cells(), 0, "stale cells are evicted");
+    }
+
+    #[test]
+    fn bad_settings_and_records_are_refused_or_counted() {
+        let bad = HashCacheConfig {
+            log2_capacity: 40,
+            ..Default::default()
+        };
+        assert!(
+            HashCache::new(bad, SceneBox::default())
+                .unwrap_err()
+                .contains("log2_capacity")
+        );
+        let flat = SceneBox {
+            min: [0.0; 3],
+            max: [0.0; 3],
+        };
+        assert!(
+            HashCache::new(HashCacheConfig::default(), flat)
+                .unwrap_err()
+                .contains("degenerate")
+        );
+        let mut c = cache(HashCacheConfig::default());
+        let q = query([0.5; 3], [0.0, 1.0, 0.0]);
+        let s = c
+            .train(&batch(vec![
+                (q, [f32::NAN; 3]),
+                (q, [-1.0; 3]),
+                (q, [1.0; 3]),
+            ]))
+            .unwrap();
+        assert_eq!((s.dropped_nonfinite, s.dropped_absurd, s.used), (1, 1, 1));
+    }
+}
