@@ -92,6 +92,11 @@ pub struct TrainArgs {
     #[arg(long, default_value_t = 0.0)]
     pub from_terminations: f32,
 
+    /// The cache trained: `neural` (the network) or `hash` (the spatial-hash baseline, no
+    /// network; no snapshots yet).
+    #[arg(long, default_value = "neural")]
+    pub cache_kind: nrc_cache::CacheKind,
+
     #[command(flatten)]
     pub cache: RadianceCacheArgs,
 
@@ -143,7 +148,13 @@ pub fn run(args: &TrainArgs) -> Result<()> {
                 .with_context(|| format!("cannot create {}", parent.display()))?;
         }
     }
-    let settings = args.cache.method_settings(0, args.seed, true)?;
+    if args.cache_kind == nrc_cache::CacheKind::Hash && args.snapshot.is_some() {
+        bail!(
+            "--snapshot: the hash cache has no snapshot format yet; train --cache-kind neural to save one"
+        );
+    }
+    let mut settings = args.cache.method_settings(0, args.seed, true)?;
+    settings.kind = args.cache_kind;
     let tracer = args.tracer.tracer();
     let pass = args.pass.clone().unwrap_or_else(|| {
         CacheTerminatedSettings {

@@ -303,7 +303,8 @@ impl HashCache {
             .par_iter()
             .map(|q| {
                 self.answer(q).unwrap_or_else(|| {
-                    self.misses.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                    self.misses
+                        .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
                     [0.0; 3]
                 })
             })
@@ -323,6 +324,7 @@ impl HashCache {
         }
         let mut stats = HashTrainStats::default();
         let (mut loss, mut loss_n) = (0.0f64, 0usize);
+        let mut touched = Vec::new();
         let before: Vec<[f32; 3]> = batch
             .queries
             .par_iter()
@@ -355,6 +357,9 @@ impl HashCache {
                     continue;
                 };
                 let slot = &mut self.slots[s];
+                if slot.weight == 0.0 {
+                    touched.push(s);
+                }
                 slot.key = key;
                 for k in 0..3 {
                     slot.sum[k] += w * t[k];
@@ -378,7 +383,10 @@ impl HashCache {
             s.weight = 0.0;
             s.frame = frame;
         }
-        stats.evicted = self.evict();
+        // The sweep for stale cells reads the whole table: every eighth of the stale age.
+        if self.frame % (self.config.stale_frames / 8).max(1) == 0 {
+            stats.evicted = self.evict();
+        }
         stats.loss = (loss / loss_n.max(1) as f64) as f32;
         Ok(stats)
     }

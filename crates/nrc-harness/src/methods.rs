@@ -15,7 +15,7 @@
 use std::fmt;
 use std::str::FromStr;
 
-use nrc_cache::{CacheConfig, CacheDevice, RadianceCache};
+use nrc_cache::{Cache, CacheConfig, CacheDevice, CacheKind, HashCacheConfig, RadianceCache};
 use nrc_render::passes::{
     self, CacheTerminatedSettings, FrameInput, PathTracedSettings, RenderPass, TERMINATION_NAMES,
     Termination, Warmth,
@@ -40,9 +40,10 @@ pub fn method_names() -> String {
         "pt-<N>spp (reference path tracer, N samples per pixel per estimate, NEE and BSDF sampling combined by MIS), \
          pt-<N>spp-nonee (the same with next-event estimation off: BSDF sampling only), \
          nrc-<producer>[-<termination>] (a cache trained online, 1 spp; producers: {PRODUCER_NAMES}; terminations: {TERMINATION_NAMES}), \
+         hash-<producer>[-<termination>] (the same with the spatial-hash radiance cache instead of the network), \
          {} \
          (the resampling, probe and instant-radiosity passes by their names at 1 spp, see `--pass`; those reading a cache read one trained online by {DEFAULT_PASS_PRODUCER}), \
-         or in general <pass>@<N>spp[+<producer>] (any pass of `--pass`, e.g. pt-light@4spp, cache-first-nonee@2spp+pt-sl)",
+         or in general <pass>@<N>spp[+[hash:]<producer>] (any pass of `--pass`, e.g. pt-light@4spp, cache-first-nonee@2spp+pt-sl, restir-gi-nrc@1spp+hash:pt-sl)",
         passes::REGISTRY
             .iter()
             .filter(|k| k.method)
@@ -59,6 +60,8 @@ pub struct MethodSpec {
     pub pass: PassSpec,
     pub spp: u32,
     pub producer: Option<ProducerSpec>,
+    /// The kind of cache the producers train (`nrc-…`: neural, `hash-…`: the spatial hash).
+    pub cache: CacheKind,
 }
 
 /// A name that is not a method.
@@ -123,12 +126,16 @@ impl FromStr for MethodSpec {
         // The general form: <pass>@<N>spp[+<producer>].
         if let Some((pass, rest)) = s.split_once('@') {
             let pass: PassSpec = pass.parse().map_err(|e: PassError| err(&e.to_string()))?;
-            let (spp, producer) = match rest.split_once('+') {
-                Some((spp, p)) => (
-                    spp,
-                    Some(p.parse::<ProducerSpec>().map_err(|e| err(&e.to_string()))?),
-                ),
-                None => (rest, None),
+            let (spp, producer, cache) = match rest.split_once('+') {
+                Some((spp, p)) => {
+                    let (p, cache) = match p.strip_prefix("hash:") {
+                        Some(p) => (p, CacheKind::Hash),
+                        None => (p, CacheKind::Neural),
+                    };
+                    let p = p.parse::<ProducerSpec>().map_err(|e| err(&e.to_string()))?;
+                    (spp, Some(p), cache)
+                }
+                None => (rest, None, CacheKind::Neural),
             };
             let spp: u32 = spp
                 .strip_suffix("spp")
@@ -146,6 +153,7 @@ impl FromStr for MethodSpec {
                 pass,
                 spp,
                 producer,
+                cache,
             });
         }
         // The resampling and instant-radiosity passes by their pass names, at 1 sample per pixel.
@@ -164,9 +172,14 @@ impl FromStr for MethodSpec {
                 pass,
                 spp: 1,
                 producer,
+                cache: CacheKind::Neural,
             });
         }
-        if let Some(rest) = s.strip_prefix("nrc-") {
+        let cache_name = s
+            .strip_prefix("nrc-")
+            .map(|r| (r, CacheKind::Neural))
+            .or_else(|| s.strip_prefix("hash-").map(|r| (r, CacheKind::Hash)));
+        if let Some((rest, cache)) = cache_name {
             if rest.starts_with("mix:") {
                 return Err(err(
                     "mixes are not method names; train a mix with `nrc train --producer mix:...`",
@@ -190,6 +203,7 @@ impl FromStr for MethodSpec {
                 .into(),
                 spp: 1,
                 producer: Some(producer),
+                cache,
             });
         }
         let mut parts = s.split('-');
@@ -226,6 +240,7 @@ impl FromStr for MethodSpec {
             pass: PathTracedSettings { strategy }.into(),
             spp,
             producer: None,
+            cache: CacheKind::Neural,
         })
     }
 }
@@ -236,10 +251,14 @@ impl fmt::Display for MethodSpec {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         let cache = self.pass.get::<CacheTerminatedSettings>();
         let traced = self.pass.get::<PathTracedSettings>().map(|p| p.strategy);
+        let (family, hash) = match self.cache {
+            CacheKind::Neural => ("nrc", ""),
+            CacheKind::Hash => ("hash", "hash:"),
+        };
         match (&self.producer, self.spp) {
             (Some(p), 1) if cache.is_some_and(|c| c.nee) => match cache.map(|c| c.termination) {
-                Some(t) if t != Termination::default() => write!(f, "nrc-{p}-{t}"),
-                _ => write!(f, "nrc-{p}"),
+                Some(t) if t != Termination::default() => write!(f, "{family}-{p}-{t}"),
+                _ => write!(f, "{family}-{p}"),
             },
             (None, spp) if traced == Some(LightStrategy::Mis) => write!(f, "pt-{spp}spp"),
             (None, spp) if traced == Some(LightStrategy::BsdfOnly) => {
@@ -247,11 +266,15 @@ impl fmt::Display for MethodSpec {
             }
             // The passes `from_str` takes by their own names.
             (None, 1) if self.pass.kind().method => write!(f, "{}", self.pass),
-            (Some(p), 1) if self.pass.kind().method && p.to_string() == DEFAULT_PASS_PRODUCER => {
+            (Some(p), 1)
+                if self.pass.kind().method
+                    && self.cache == CacheKind::Neural
+                    && p.to_string() == DEFAULT_PASS_PRODUCER =>
+            {
                 write!(f, "{}", self.pass)
             }
             (None, spp) => write!(f, "{}@{spp}spp", self.pass),
-            (Some(p), spp) => write!(f, "{}@{spp}spp+{p}", self.pass),
+            (Some(p), spp) => write!(f, "{}@{spp}spp+{hash}{p}", self.pass),
         }
     }
 }
@@ -273,6 +296,9 @@ pub struct CacheMethodSettings {
     /// The producers' own settings.
     pub producer_options: ProducerOptions,
     pub seed: u64,
+    /// The kind of cache trained, and the hash cache's settings.
+    pub kind: CacheKind,
+    pub hash: HashCacheConfig,
 }
 
 impl CacheMethodSettings {
@@ -287,6 +313,8 @@ impl CacheMethodSettings {
             online: true,
             producer_options: ProducerOptions::default(),
             seed: 0,
+            kind: CacheKind::Neural,
+            hash: HashCacheConfig::default(),
         }
     }
 }
@@ -317,7 +345,10 @@ impl MethodSpec {
                 name: self.to_string(),
                 spec: self.clone(),
                 producer: producer.clone(),
-                settings: cache.clone(),
+                settings: CacheMethodSettings {
+                    kind: self.cache,
+                    ..cache.clone()
+                },
                 base_seed: cache.seed,
                 tracer: *tracer,
                 trainer: None,
@@ -426,12 +457,17 @@ pub fn scene_trainer(
             0,
         ));
     }
-    let (cache, _) = RadianceCache::for_scene_extent(
-        &settings.config,
-        queries.scene_box,
-        longest / settings.resolution as f32,
-        settings.device,
-    )?;
+    let cache: Cache = match settings.kind {
+        CacheKind::Neural => RadianceCache::for_scene_extent(
+            &settings.config,
+            queries.scene_box,
+            longest / settings.resolution as f32,
+            settings.device,
+        )?
+        .0
+        .into(),
+        CacheKind::Hash => Cache::hash(settings.hash, queries.scene_box)?,
+    };
     let mut online = OnlineSettings::new(producer, scene, tracer);
     online.records_per_frame = settings.records_per_frame;
     online.producer_options = settings.producer_options;
@@ -601,6 +637,10 @@ mod tests {
             "ir:vpls=512",
             "smc-ir",
             "smc-ir-nrc:mmax=8",
+            "hash-pt-sl",
+            "hash-bt-first",
+            "restir-gi-nrc@1spp+hash:pt-sl",
+            "cache-first@2spp+hash:sppc",
         ] {
             let spec: MethodSpec = name.parse().unwrap();
             assert_eq!(spec.to_string(), name);
@@ -613,6 +653,7 @@ mod tests {
             ("cache-first@1spp+bt", "nrc-bt-first"),
             ("wsrestir-gi-nrc@1spp+pt-sl", "wsrestir-gi-nrc"),
             ("restir-di@1spp", "restir-di"),
+            ("cache@1spp+hash:pt-sl", "hash-pt-sl"),
         ] {
             assert_eq!(general.parse::<MethodSpec>().unwrap().to_string(), short);
         }
@@ -624,7 +665,8 @@ mod tests {
                 }
                 .into(),
                 spp: 4,
-                producer: None
+                producer: None,
+                cache: CacheKind::Neural,
             }
         );
         for (alias, canonical) in [("nrc-pt-spread", "nrc-pt"), ("pt-8spp-nee", "pt-8spp")] {
@@ -650,6 +692,10 @@ mod tests {
             "pt@4spp+pt-sl",
             "cache@1spp",
             "cache-nope@1spp+pt",
+            "hash-",
+            "hash-foo",
+            "cache@1spp+hash:",
+            "cache@1spp+hash:mix",
         ] {
             let e = bad.parse::<MethodSpec>().unwrap_err().to_string();
             assert!(

@@ -178,7 +178,7 @@ pub struct RenderJob<'a> {
     pub pass: &'a PassSpec,
     /// Depth limit and Russian roulette (the light strategy is the pass's own).
     pub tracer: PathTracer,
-    pub cache: Option<&'a RadianceCache>,
+    pub cache: Option<&'a nrc_cache::Cache>,
     /// The camera of each frame; the last frame is the one returned.
     pub cameras: &'a [Camera],
     pub width: u32,
@@ -291,7 +291,7 @@ pub fn choose_pass(
     c: RenderChoice,
     scene: &Scene,
     tracer: &PathTracer,
-) -> Result<(PassSpec, Option<RadianceCache>, Vec<String>)> {
+) -> Result<(PassSpec, Option<nrc_cache::Cache>, Vec<String>)> {
     let spec: PassSpec = c.pass.unwrap_or_else(|| match c.snapshot {
         Some(_) => CacheTerminatedSettings {
             termination: c.termination,
@@ -319,7 +319,7 @@ pub fn choose_pass(
             let device = c.device.resolve_and_print();
             let (cache, warning) =
                 load_snapshot(snapshot, device, scene, c.scene_path, c.allow_other_scene)?;
-            Ok((spec, Some(cache), warning.into_iter().collect()))
+            Ok((spec, Some(cache.into()), warning.into_iter().collect()))
         }
     }
 }

@@ -3,7 +3,7 @@
 
 use std::time::Instant;
 
-use nrc_cache::{CacheError, RadianceCache};
+use nrc_cache::{Cache, CacheError};
 use nrc_render::passes::{self, FrameInput, PassOutput, PassSpec, PassStats, RenderPass, Warmth};
 use nrc_render::sampler::Stream;
 use nrc_render::{PathTracer, PixelSampler, pass_seed};
@@ -116,7 +116,7 @@ pub struct FrameStats {
 
 /// A cache trained online on one scene.
 pub struct OnlineTrainer {
-    pub cache: RadianceCache,
+    pub cache: Cache,
     pub settings: OnlineSettings,
     mix: ProducerMix,
     pass: Box<dyn RenderPass>,
@@ -132,7 +132,7 @@ impl OnlineTrainer {
     /// A trainer of `cache` (whose scene box should be `settings.queries.scene_box`) on
     /// `scene`; an error names a bad setting or a producer that cannot serve the scene.
     pub fn new(
-        cache: RadianceCache,
+        cache: impl Into<Cache>,
         settings: OnlineSettings,
         scene: &Scene,
     ) -> Result<Self, TrainError> {
@@ -140,7 +140,7 @@ impl OnlineTrainer {
         let mix = ProducerMix::new(&settings.producer, &settings.producer_options);
         mix.check(scene)?;
         Ok(Self {
-            cache,
+            cache: cache.into(),
             mix,
             pass: settings.pass.build(&settings.tracer),
             warmth: Warmth::default(),
@@ -189,6 +189,7 @@ impl OnlineTrainer {
             ..Default::default()
         };
 
+        self.cache.set_camera(camera.position.to_array());
         let t = Instant::now();
         let starts = starts::predict(
             camera,

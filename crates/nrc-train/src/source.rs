@@ -1,8 +1,8 @@
-//! The neural cache as a [`RadianceSource`]: the adapter between the passes' world-space
+//! A trained cache (neural or hash, [`nrc_cache::Cache`]) as a [`RadianceSource`]: the adapter between the passes' world-space
 //! queries and the cache's box-normalised [`nrc_cache::CacheQuery`] records.
 
 use glam::Vec3;
-use nrc_cache::{CacheQuery, RadianceCache};
+use nrc_cache::{Cache, CacheQuery};
 use nrc_render::{RadianceQuery, RadianceSource};
 
 use crate::query::QueryMaker;
@@ -10,14 +10,14 @@ use crate::query::QueryMaker;
 /// A trained cache answering radiance queries (its EMA weights, one inference call per batch).
 #[derive(Clone, Copy)]
 pub struct CacheSource<'a> {
-    pub cache: &'a RadianceCache,
+    pub cache: &'a Cache,
     /// The scene box the cache's positions are normalised to.
     pub queries: QueryMaker,
 }
 
 impl<'a> CacheSource<'a> {
     /// The cache with its own scene box.
-    pub fn new(cache: &'a RadianceCache) -> Self {
+    pub fn new(cache: &'a Cache) -> Self {
         Self {
             cache,
             queries: QueryMaker {

@@ -1,0 +1,168 @@
+//! Which cache a run trains: the neural cache or the spatial-hash baseline
+//! ([`crate::hash_cache`]), behind one type so that the online loop, the comparison and the
+//! renders take either ("which cache" is one switch, `--cache-kind`).
+
+use std::path::Path;
+
+use crate::hash_cache::{HashCache, HashCacheConfig};
+use crate::{CacheError, CacheQuery, RadianceCache, SceneBox, TrainStats, TrainingBatch};
+
+/// The kinds of cache, as `--cache-kind` names them.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum CacheKind {
+    /// The MLP behind the hash-grid encoding.
+    #[default]
+    Neural,
+    /// The spatially hashed radiance cache (no network).
+    Hash,
+}
+
+impl std::str::FromStr for CacheKind {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "neural" => Ok(Self::Neural),
+            "hash" => Ok(Self::Hash),
+            _ => Err(format!("unknown cache kind `{s}` (neural or hash)")),
+        }
+    }
+}
+
+impl std::fmt::Display for CacheKind {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Self::Neural => "neural",
+            Self::Hash => "hash",
+        })
+    }
+}
+
+/// A cache of either kind.
+#[derive(Debug)]
+pub enum Cache {
+    Neural(Box<RadianceCache>),
+    Hash(Box<HashCache>),
+}
+
+impl From<RadianceCache> for Cache {
+    fn from(c: RadianceCache) -> Self {
+        Self::Neural(Box::new(c))
+    }
+}
+
+impl From<HashCache> for Cache {
+    fn from(c: HashCache) -> Self {
+        Self::Hash(Box::new(c))
+    }
+}
+
+impl Cache {
+    /// An empty hash cache over `scene_box`.
+    pub fn hash(config: HashCacheConfig, scene_box: SceneBox) -> Result<Self, CacheError> {
+        HashCache::new(config, scene_box)
+            .map(Self::from)
+            .map_err(|message| CacheError::Config {
+                field: "hash cache".into(),
+                message,
+            })
+    }
+
+    pub fn kind(&self) -> CacheKind {
+        match self {
+            Self::Neural(_) => CacheKind::Neural,
+            Self::Hash(_) => CacheKind::Hash,
+        }
+    }
+
+    /// The neural cache, if this is one.
+    pub fn neural(&self) -> Option<&RadianceCache> {
+        match self {
+            Self::Neural(c) => Some(c),
+            Self::Hash(_) => None,
+        }
+    }
+
+    pub fn neural_mut(&mut self) -> Option<&mut RadianceCache> {
+        match self {
+            Self::Neural(c) => Some(c),
+            Self::Hash(_) => None,
+        }
+    }
+
+    /// Learns from `batch`: `steps` optimiser steps for the neural cache, one frame's update
+    /// for the hash cache (its statistics in the neural cache's form: one step, the relative
+    /// L2 error of the cells before the update as the loss).
+    pub fn train(&mut self, batch: &TrainingBatch, steps: u32) -> Result<TrainStats, CacheError> {
+        match self {
+            Self::Neural(c) => c.train(batch, steps),
+            Self::Hash(c) => {
+                let s = c.train(batch).map_err(CacheError::Input)?;
+                Ok(TrainStats {
+                    loss: s.loss,
+                    first_loss: s.loss,
+                    steps: u32::from(s.used > 0),
+                    total_steps: 0,
+                    used: s.used,
+                    dropped_nonfinite: s.dropped_nonfinite,
+                    dropped_absurd: s.dropped_absurd,
+                    ..Default::default()
+                })
+            }
+        }
+    }
+
+    pub fn infer(&self, queries: &[CacheQuery]) -> Vec<[f32; 3]> {
+        match self {
+            Self::Neural(c) => c.infer(queries),
+            Self::Hash(c) => c.infer(queries),
+        }
+    }
+
+    /// The camera of the frame being produced and rendered (the hash cache's levels of detail
+    /// follow it; the neural cache has none).
+    pub fn set_camera(&mut self, position: [f32; 3]) {
+        if let Self::Hash(c) = self {
+            c.set_camera(position);
+        }
+    }
+
+    pub fn scene_box(&self) -> SceneBox {
+        match self {
+            Self::Neural(c) => c.scene_box(),
+            Self::Hash(c) => c.scene_box(),
+        }
+    }
+
+    pub fn describe(&self) -> String {
+        match self {
+            Self::Neural(c) => c.describe(),
+            Self::Hash(c) => c.describe(),
+        }
+    }
+
+    pub fn memory_bytes(&self) -> usize {
+        match self {
+            Self::Neural(c) => c.memory_bytes(),
+            Self::Hash(c) => c.memory_bytes(),
+        }
+    }
+
+    /// Names the scene the cache was trained on (written into snapshots).
+    pub fn set_scene_content(&mut self, content: Option<String>) {
+        if let Self::Neural(c) = self {
+            c.set_scene_content(content);
+        }
+    }
+
+    /// Writes a snapshot (the neural cache's format; the hash cache has none yet and says so).
+    pub fn save(&mut self, path: &Path) -> Result<(), CacheError> {
+        match self {
+            Self::Neural(c) => c.save(path),
+            Self::Hash(_) => Err(CacheError::Input(format!(
+                "{}: snapshots of the hash cache are not written yet (issue 34); train it with --cache-kind neural to save one",
+                path.display()
+            ))),
+        }
+    }
+}
