@@ -93,7 +93,7 @@ pub struct TrainArgs {
     pub from_terminations: f32,
 
     /// The cache trained: `neural` (the network) or `hash` (the spatial-hash baseline, no
-    /// network; no snapshots yet).
+    /// network); `nrc render --cache` reads either kind's snapshot.
     #[arg(long, default_value = "neural")]
     pub cache_kind: nrc_cache::CacheKind,
 
@@ -147,11 +147,6 @@ pub fn run(args: &TrainArgs) -> Result<()> {
             std::fs::create_dir_all(parent)
                 .with_context(|| format!("cannot create {}", parent.display()))?;
         }
-    }
-    if args.cache_kind == nrc_cache::CacheKind::Hash && args.snapshot.is_some() {
-        bail!(
-            "--snapshot: the hash cache has no snapshot format yet; train --cache-kind neural to save one"
-        );
     }
     let mut settings = args.cache.method_settings(0, args.seed, true)?;
     settings.kind = args.cache_kind;

@@ -158,6 +158,98 @@ fn train_then_render_from_the_snapshot() {
     assert!(text(&o.stderr).contains("warning:"), "{}", text(&o.stderr));
 }
 
+/// The spatial-hash cache end to end: `nrc train --cache-kind hash` writes its snapshot, `nrc
+/// render --cache` reads it (the kind told by the file) with the same render twice, and refuses
+/// it on another scene; a bad kind is a clear error.
+#[test]
+fn the_hash_cache_trains_saves_and_renders() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = |n: &str| dir.path().join(n).to_str().unwrap().to_string();
+    let scene = cornell();
+    let scene = scene.to_str().unwrap();
+    let out = nrc(&[
+        "train",
+        "--scene",
+        scene,
+        "--cache-kind",
+        "hash",
+        "--frames",
+        "8",
+        "--width",
+        "32",
+        "--height",
+        "32",
+        "--records",
+        "2048",
+        "--snapshot",
+        &p("h.nrc"),
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    assert!(
+        text(&out.stderr).contains("hash cache:"),
+        "{}",
+        text(&out.stderr)
+    );
+    let render = |name: &str| {
+        nrc(&[
+            "render",
+            "--scene",
+            scene,
+            "--cache",
+            &p("h.nrc"),
+            "--termination",
+            "first",
+            "--spp",
+            "2",
+            "--width",
+            "24",
+            "--height",
+            "16",
+            "--out",
+            &p(name),
+        ])
+    };
+    let (a, b) = (render("a.exr"), render("b.exr"));
+    assert!(
+        a.status.success() && b.status.success(),
+        "{}",
+        text(&a.stderr)
+    );
+    let image = std::fs::read(p("a.exr")).unwrap();
+    assert_eq!(
+        image,
+        std::fs::read(p("b.exr")).unwrap(),
+        "the same render twice"
+    );
+    let ajar = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/ajar.gltf");
+    let other = nrc(&[
+        "render",
+        "--scene",
+        ajar.to_str().unwrap(),
+        "--cache",
+        &p("h.nrc"),
+        "--spp",
+        "1",
+        "--width",
+        "8",
+        "--height",
+        "8",
+        "--out",
+        &p("c.exr"),
+    ]);
+    assert_error(&other, "another scene");
+    let bad = nrc(&[
+        "train",
+        "--scene",
+        scene,
+        "--cache-kind",
+        "tree",
+        "--frames",
+        "1",
+    ]);
+    assert!(!bad.status.success() && text(&bad.stderr).contains("unknown cache kind"));
+}
+
 #[test]
 fn bad_training_options_are_clear_errors() {
     let scene = cornell();

@@ -151,6 +151,8 @@ pub struct HashCache {
     frame: u32,
     /// Lookups (since creation) that found no cell at any level.
     misses: std::sync::atomic::AtomicU64,
+    /// The content hash of the scene it was trained on (written into snapshots).
+    scene_content: Option<String>,
 }
 
 impl HashCache {
@@ -174,6 +176,7 @@ impl HashCache {
             slots: vec![Slot::default(); 1 << config.log2_capacity],
             frame: 0,
             misses: Default::default(),
+            scene_content: None,
         })
     }
 
@@ -188,6 +191,14 @@ impl HashCache {
     /// The camera the levels of detail are measured from (world units).
     pub fn set_camera(&mut self, position: [f32; 3]) {
         self.camera = position;
+    }
+
+    pub fn scene_content(&self) -> Option<&str> {
+        self.scene_content.as_deref()
+    }
+
+    pub fn set_scene_content(&mut self, content: Option<String>) {
+        self.scene_content = content;
     }
 
     /// Cells in use.
@@ -415,6 +426,193 @@ impl HashCache {
     }
 }
 
+/// The `i`-th `w`-byte word of `b`.
+fn word(b: &[u8], i: usize, w: usize) -> &[u8] {
+    &b[i * w..(i + 1) * w]
+}
+
+/// Value of a hash-cache snapshot's `magic` field.
+pub const SNAPSHOT_MAGIC: &str = "nrc-hash-cache-snapshot";
+/// The hash-cache snapshot format's version.
+pub const SNAPSHOT_VERSION: u32 = 1;
+
+/// A hash-cache snapshot's metadata (the `nrc_cache` entry of the safetensors header; the
+/// envelope is the neural cache's, [`crate::snapshot`]). Tensors: `keys` (U64), `values`
+/// (F32, three per cell), `counts` (F32), `frames` (U32), one entry per cell in use, in table
+/// order; `checksum` is FNV-1a over the settings' JSON and the four tensors' bytes in that
+/// order (the settings size the table, so a corrupted one is refused before it is allocated).
+#[derive(serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+struct SnapshotMeta {
+    magic: String,
+    version: u32,
+    config: HashCacheConfig,
+    scene_box: SceneBox,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    scene_content: Option<String>,
+    camera: [f32; 3],
+    frame: u32,
+    cells: usize,
+    checksum: String,
+}
+
+impl HashCache {
+    /// Writes the cells in use, the settings and the scene's identity, atomically.
+    pub fn save(&self, path: &std::path::Path) -> Result<(), crate::CacheError> {
+        let live: Vec<&Slot> = self.slots.iter().filter(|s| s.key != 0).collect();
+        let keys: Vec<u64> = live.iter().map(|s| s.key).collect();
+        let values: Vec<f32> = live.iter().flat_map(|s| s.value).collect();
+        let counts: Vec<f32> = live.iter().map(|s| s.count).collect();
+        let frames: Vec<u32> = live.iter().map(|s| s.frame).collect();
+        let bytes: [&[u8]; 4] = [
+            bytemuck::cast_slice(&keys),
+            bytemuck::cast_slice(&values),
+            bytemuck::cast_slice(&counts),
+            bytemuck::cast_slice(&frames),
+        ];
+        let settings = serde_json::to_string(&self.config).expect("settings serialise");
+        let summed: [&[u8]; 5] = [settings.as_bytes(), bytes[0], bytes[1], bytes[2], bytes[3]];
+        let meta = SnapshotMeta {
+            magic: SNAPSHOT_MAGIC.into(),
+            version: SNAPSHOT_VERSION,
+            config: self.config,
+            scene_box: self.scene_box,
+            scene_content: self.scene_content.clone(),
+            camera: self.camera,
+            frame: self.frame,
+            cells: live.len(),
+            checksum: crate::snapshot::checksum(&summed),
+        };
+        use safetensors::tensor::Dtype;
+        let n = live.len();
+        let tensors = [
+            ("keys", Dtype::U64, vec![n], bytes[0]),
+            ("values", Dtype::F32, vec![n * 3], bytes[1]),
+            ("counts", Dtype::F32, vec![n], bytes[2]),
+            ("frames", Dtype::U32, vec![n], bytes[3]),
+        ];
+        let json = serde_json::to_string(&meta).expect("metadata serialises");
+        crate::snapshot::write_envelope(path, &tensors, json)
+    }
+
+    /// Reads a snapshot [`HashCache::save`] wrote; a truncated, corrupted or foreign file is an
+    /// error that says what is wrong.
+    pub fn load(path: &std::path::Path) -> Result<Self, crate::CacheError> {
+        use crate::snapshot::bad;
+        use safetensors::tensor::{Dtype, SafeTensors};
+        let (data, json, magic) = crate::snapshot::read_envelope(path)?;
+        if magic != SNAPSHOT_MAGIC {
+            return Err(bad(
+                path,
+                format!("not a hash-cache snapshot (magic {magic:?})"),
+            ));
+        }
+        let meta: SnapshotMeta = serde_json::from_str(&json)
+            .map_err(|e| bad(path, format!("malformed metadata: {e}")))?;
+        if meta.version != SNAPSHOT_VERSION {
+            return Err(bad(
+                path,
+                format!(
+                    "format version {} is not supported (this build reads version {SNAPSHOT_VERSION})",
+                    meta.version
+                ),
+            ));
+        }
+        let n = meta.cells;
+        let tensors = SafeTensors::deserialize(&data)
+            .map_err(|e| bad(path, format!("truncated or corrupted tensor data ({e})")))?;
+        let mut raw: Vec<&[u8]> = Vec::with_capacity(4);
+        for (name, dtype, len) in [
+            ("keys", Dtype::U64, n),
+            ("values", Dtype::F32, n.saturating_mul(3)),
+            ("counts", Dtype::F32, n),
+            ("frames", Dtype::U32, n),
+        ] {
+            let t = tensors
+                .tensor(name)
+                .map_err(|_| bad(path, format!("tensor {name:?} is missing")))?;
+            if t.dtype() != dtype || t.shape() != [len] {
+                return Err(bad(
+                    path,
+                    format!(
+                        "tensor {name:?} is {:?} of shape {:?}, expected {dtype:?} of [{len}]",
+                        t.dtype(),
+                        t.shape()
+                    ),
+                ));
+            }
+            raw.push(t.data());
+        }
+        let settings = serde_json::to_string(&meta.config).expect("settings serialise");
+        let mut summed = vec![settings.as_bytes()];
+        summed.extend(&raw);
+        let sum = crate::snapshot::checksum(&summed);
+        if sum != meta.checksum {
+            return Err(bad(
+                path,
+                format!(
+                    "checksum mismatch (stored {}, computed {sum}): the data is corrupted",
+                    meta.checksum
+                ),
+            ));
+        }
+        let mut cache = Self::new(meta.config, meta.scene_box)
+            .map_err(|e| bad(path, format!("stored settings: {e}")))?;
+        if n > cache.slots.len() {
+            return Err(bad(
+                path,
+                format!(
+                    "{n} cells, more than the table's {} slots",
+                    cache.slots.len()
+                ),
+            ));
+        }
+        for i in 0..n {
+            let key = u64::from_le_bytes(word(raw[0], i, 8).try_into().expect("8 bytes"));
+            let f32_at =
+                |b: &[u8], k: usize| f32::from_le_bytes(word(b, k, 4).try_into().expect("4 bytes"));
+            let slot = Slot {
+                key,
+                value: [
+                    f32_at(raw[1], 3 * i),
+                    f32_at(raw[1], 3 * i + 1),
+                    f32_at(raw[1], 3 * i + 2),
+                ],
+                count: f32_at(raw[2], i),
+                sum: [0.0; 3],
+                weight: 0.0,
+                frame: u32::from_le_bytes(word(raw[3], i, 4).try_into().expect("4 bytes")),
+            };
+            let sane = slot.value.iter().all(|v| v.is_finite() && *v >= 0.0)
+                && slot.count.is_finite()
+                && slot.count >= 0.0;
+            if key == 0 || !sane {
+                return Err(bad(
+                    path,
+                    format!(
+                        "cell {i} is malformed (key {key}, value {:?}, count {})",
+                        slot.value, slot.count
+                    ),
+                ));
+            }
+            match cache.find(key) {
+                Some(at) if cache.slots[at].key == 0 => cache.slots[at] = slot,
+                Some(_) => return Err(bad(path, format!("cell {i}: key {key} appears twice"))),
+                None => {
+                    return Err(bad(
+                        path,
+                        format!("cell {i} finds no slot: the table is corrupted"),
+                    ));
+                }
+            }
+        }
+        cache.camera = meta.camera;
+        cache.frame = meta.frame;
+        cache.scene_content = meta.scene_content;
+        Ok(cache)
+    }
+}
+
 /// The dominant axis of `v` and its sign, 0..6 (a zero or non-finite vector: +z).
 fn axis_bin(v: [f32; 3]) -> u64 {
     let a = v.map(|x| if x.is_finite() { x } else { 0.0 });
@@ -577,6 +775,36 @@ mod tests {
             c.train(&empty).unwrap();
         }
         assert_eq!(c.cells(), 0, "stale cells are evicted");
+    }
+
+    /// A saved cache loads back answering identically; a flipped byte of its data, a
+    /// truncated file and a neural snapshot's magic are refused with a message.
+    #[test]
+    fn snapshots_round_trip_and_corruption_is_refused() {
+        let mut c = cache(HashCacheConfig::default());
+        c.set_scene_content(Some("abc123".into()));
+        let qs: Vec<_> = (0..50)
+            .map(|i| query([0.02 * i as f32, 0.4, 0.6], [0.0, 1.0, 0.0]))
+            .collect();
+        let recs = qs.iter().map(|q| (*q, [q.position[0], 1.0, 2.0])).collect();
+        c.train(&batch(recs)).unwrap();
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("h.nrc");
+        c.save(&path).unwrap();
+        let back = HashCache::load(&path).unwrap();
+        assert_eq!(back.infer(&qs), c.infer(&qs));
+        assert_eq!(back.cells(), c.cells());
+        assert_eq!(back.scene_content(), Some("abc123"));
+        let bytes = std::fs::read(&path).unwrap();
+        let mut flipped = bytes.clone();
+        let last = flipped.len() - 5;
+        flipped[last] ^= 0x40;
+        std::fs::write(&path, &flipped).unwrap();
+        let e = HashCache::load(&path).unwrap_err().to_string();
+        assert!(e.contains("checksum") || e.contains("malformed"), "{e}");
+        std::fs::write(&path, &bytes[..bytes.len() / 2]).unwrap();
+        let e = HashCache::load(&path).unwrap_err().to_string();
+        assert!(e.contains("truncated"), "{e}");
     }
 
     #[test]

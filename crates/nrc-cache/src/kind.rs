@@ -150,19 +150,36 @@ impl Cache {
 
     /// Names the scene the cache was trained on (written into snapshots).
     pub fn set_scene_content(&mut self, content: Option<String>) {
-        if let Self::Neural(c) = self {
-            c.set_scene_content(content);
+        match self {
+            Self::Neural(c) => c.set_scene_content(content),
+            Self::Hash(c) => c.set_scene_content(content),
         }
     }
 
-    /// Writes a snapshot (the neural cache's format; the hash cache has none yet and says so).
+    /// The content hash of the scene it was trained on, where known.
+    pub fn scene_content(&self) -> Option<&str> {
+        match self {
+            Self::Neural(c) => c.scene_content(),
+            Self::Hash(c) => c.scene_content(),
+        }
+    }
+
+    /// Writes a snapshot of its kind (both in the same safetensors envelope, told apart by
+    /// their `magic`), atomically.
     pub fn save(&mut self, path: &Path) -> Result<(), CacheError> {
         match self {
             Self::Neural(c) => c.save(path),
-            Self::Hash(_) => Err(CacheError::Input(format!(
-                "{}: snapshots of the hash cache are not written yet (issue 34); train it with --cache-kind neural to save one",
-                path.display()
-            ))),
+            Self::Hash(c) => c.save(path),
+        }
+    }
+
+    /// Loads a snapshot of either kind (the neural one onto `device`).
+    pub fn load(path: &Path, device: crate::CacheDevice) -> Result<Self, CacheError> {
+        let (_, _, magic) = crate::snapshot::read_envelope(path)?;
+        if magic == crate::hash_cache::SNAPSHOT_MAGIC {
+            Ok(HashCache::load(path)?.into())
+        } else {
+            Ok(RadianceCache::load(path, device)?.into())
         }
     }
 }

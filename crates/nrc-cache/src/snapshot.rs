@@ -23,6 +23,10 @@
 //! bytes in the order above (a final partial word zero-padded); it does not cover the metadata.
 //! The EMA tensors hold the raw EMA at `step`. Files are written to a temporary file in the same
 //! directory (`tempfile`), synced, and renamed into place.
+//!
+//! The spatial-hash cache's snapshots use the same envelope with their own `magic`
+//! ([`crate::hash_cache::SNAPSHOT_MAGIC`]) and tensors; [`crate::Cache::load`] tells the two
+//! apart.
 
 use std::io::Write;
 use std::path::Path;
@@ -95,7 +99,7 @@ fn arrays(s: &HostState) -> [&[f32]; 8] {
 }
 
 /// FNV-1a over 64-bit words.
-fn checksum(parts: &[&[u8]]) -> String {
+pub(crate) fn checksum(parts: &[&[u8]]) -> String {
     let mut h: u64 = 0xcbf2_9ce4_8422_2325;
     for p in parts {
         let mut chunks = p.chunks_exact(8);
@@ -114,14 +118,14 @@ fn checksum(parts: &[&[u8]]) -> String {
     format!("fnv1a64:{h:016x}")
 }
 
-fn io_err(path: &Path, e: impl std::fmt::Display) -> CacheError {
+pub(crate) fn io_err(path: &Path, e: impl std::fmt::Display) -> CacheError {
     CacheError::Io {
         path: path.display().to_string(),
         message: e.to_string(),
     }
 }
 
-fn bad(path: &Path, message: impl Into<String>) -> CacheError {
+pub(crate) fn bad(path: &Path, message: impl Into<String>) -> CacheError {
     CacheError::Snapshot {
         path: path.display().to_string(),
         message: message.into(),
@@ -152,16 +156,29 @@ pub fn write(
         param_count: state.grid.len() + state.mlp.len(),
         checksum: checksum(&bytes),
     };
-    let mut views = Vec::with_capacity(8);
-    for (name, (b, a)) in NAMES.iter().zip(bytes.iter().zip(arrays(state))) {
-        let view = TensorView::new(Dtype::F32, vec![a.len()], b)
+    let tensors: Vec<(&str, Dtype, Vec<usize>, &[u8])> = NAMES
+        .iter()
+        .zip(bytes.iter().zip(arrays(state)))
+        .map(|(name, (b, a))| (*name, Dtype::F32, vec![a.len()], *b))
+        .collect();
+    let json = serde_json::to_string(&meta).expect("metadata serialises");
+    write_envelope(path, &tensors, json)
+}
+
+/// Writes named tensors and the metadata JSON (under the `nrc_cache` key) as a safetensors file,
+/// atomically: a temporary file in the same directory, synced, then renamed over `path`.
+pub(crate) fn write_envelope(
+    path: &Path,
+    tensors: &[(&str, Dtype, Vec<usize>, &[u8])],
+    metadata_json: String,
+) -> Result<(), CacheError> {
+    let mut views = Vec::with_capacity(tensors.len());
+    for (name, dtype, shape, b) in tensors {
+        let view = TensorView::new(*dtype, shape.clone(), b)
             .map_err(|e| bad(path, format!("cannot encode tensor {name}: {e}")))?;
         views.push((name.to_string(), view));
     }
-    let metadata = std::collections::HashMap::from([(
-        METADATA_KEY.to_string(),
-        serde_json::to_string(&meta).expect("metadata serialises"),
-    )]);
+    let metadata = std::collections::HashMap::from([(METADATA_KEY.to_string(), metadata_json)]);
     let data = safetensors::tensor::serialize(views, Some(metadata))
         .map_err(|e| bad(path, format!("cannot encode: {e}")))?;
 
@@ -205,9 +222,9 @@ pub fn write(
     Ok(())
 }
 
-/// Reads and checks a snapshot: truncated, corrupted, foreign or inconsistent files are errors
-/// that say what is wrong.
-pub fn read(path: &Path) -> Result<Snapshot, CacheError> {
+/// A snapshot file's bytes and its metadata JSON (the `nrc_cache` entry of the safetensors
+/// header), with its `magic` field: the kind of snapshot it is.
+pub(crate) fn read_envelope(path: &Path) -> Result<(Vec<u8>, String, String), CacheError> {
     let data = std::fs::read(path).map_err(|e| io_err(path, e))?;
     let (_, header) = SafeTensors::read_metadata(&data).map_err(|e| {
         bad(
@@ -219,9 +236,23 @@ pub fn read(path: &Path) -> Result<Snapshot, CacheError> {
         .metadata()
         .as_ref()
         .and_then(|m| m.get(METADATA_KEY))
-        .ok_or_else(|| bad(path, format!("not an nrc-cache snapshot: the safetensors metadata has no {METADATA_KEY:?} entry")))?;
+        .ok_or_else(|| bad(path, format!("not an nrc-cache snapshot: the safetensors metadata has no {METADATA_KEY:?} entry")))?
+        .clone();
+    #[derive(Deserialize)]
+    struct Magic {
+        magic: String,
+    }
+    let magic: Magic =
+        serde_json::from_str(&json).map_err(|e| bad(path, format!("malformed metadata: {e}")))?;
+    Ok((data, json, magic.magic))
+}
+
+/// Reads and checks a snapshot: truncated, corrupted, foreign or inconsistent files are errors
+/// that say what is wrong.
+pub fn read(path: &Path) -> Result<Snapshot, CacheError> {
+    let (data, json, _) = read_envelope(path)?;
     let meta: Metadata =
-        serde_json::from_str(json).map_err(|e| bad(path, format!("malformed metadata: {e}")))?;
+        serde_json::from_str(&json).map_err(|e| bad(path, format!("malformed metadata: {e}")))?;
     if meta.magic != MAGIC {
         return Err(bad(
             path,

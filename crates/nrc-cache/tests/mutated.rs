@@ -119,6 +119,7 @@ fn run(cases: u32, seed: u64) -> (Tally, usize) {
         }
     }
     snapshots(&mut tally, cases * 4, &mut rng);
+    hash_snapshots(&mut tally, cases * 2, &mut rng);
     (tally, baseline)
 }
 
@@ -135,17 +136,8 @@ fn snapshots(tally: &mut Tally, cases: u32, rng: &mut Pcg64Mcg) {
     cache.train(&batch(1024, rng), 4).unwrap();
     cache.save(&file).unwrap();
     let bytes = std::fs::read(&file).unwrap();
-    let header = 8 + u64::from_le_bytes(bytes[..8].try_into().unwrap()) as usize;
     for case in 0..cases {
-        let mutated = if case % 2 == 0 {
-            let mut m = mutate(&bytes[8..header], true, rng);
-            let mut out = (m.len() as u64).to_le_bytes().to_vec();
-            out.append(&mut m);
-            out.extend_from_slice(&bytes[header..]);
-            out
-        } else {
-            mutate(&bytes, false, rng)
-        };
+        let mutated = mutated_snapshot(&bytes, case, rng);
         let f = dir.path().join(format!("m{case}.nrc"));
         std::fs::write(&f, &mutated).unwrap();
         let probe = batch(64, rng).queries;
@@ -157,6 +149,56 @@ fn snapshots(tally: &mut Tally, cases: u32, rng: &mut Pcg64Mcg) {
             (LIMIT, MAX_ALLOCATION),
             move || {
                 let c = RadianceCache::load(&f, CacheDevice::Cpu).ok()?;
+                Some(c.infer(&probe).iter().flatten().all(|x| x.is_finite()))
+            },
+        );
+    }
+}
+
+/// Mutation `case` of a safetensors snapshot: even cases mutate its JSON header (the length
+/// prefix kept consistent), odd ones the whole file.
+fn mutated_snapshot(bytes: &[u8], case: u32, rng: &mut Pcg64Mcg) -> Vec<u8> {
+    let header = 8 + u64::from_le_bytes(bytes[..8].try_into().unwrap()) as usize;
+    if case % 2 == 0 {
+        let mut m = mutate(&bytes[8..header], true, rng);
+        let mut out = (m.len() as u64).to_le_bytes().to_vec();
+        out.append(&mut m);
+        out.extend_from_slice(&bytes[header..]);
+        out
+    } else {
+        mutate(bytes, false, rng)
+    }
+}
+
+/// `cases` mutations of a spatial-hash cache's snapshot (a 2^12-slot table), half aimed at its
+/// JSON header (the settings that size the table among them).
+fn hash_snapshots(tally: &mut Tally, cases: u32, rng: &mut Pcg64Mcg) {
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("hash.nrc");
+    let config = nrc_cache::HashCacheConfig {
+        log2_capacity: 12,
+        ..Default::default()
+    };
+    let mut cache = nrc_cache::HashCache::new(config, Default::default()).unwrap();
+    cache.train(&batch(1024, rng)).unwrap();
+    cache.save(&file).unwrap();
+    // The unmutated file loads and answers as the cache did.
+    let probe = batch(64, rng).queries;
+    let loaded = nrc_cache::Cache::load(&file, CacheDevice::Cpu).unwrap();
+    assert_eq!(loaded.infer(&probe), cache.infer(&probe));
+    let bytes = std::fs::read(&file).unwrap();
+    for case in 0..cases {
+        let mutated = mutated_snapshot(&bytes, case, rng);
+        let f = dir.path().join(format!("h{case}.nrc"));
+        std::fs::write(&f, &mutated).unwrap();
+        let probe = batch(64, rng).queries;
+        tally.case(
+            "hash snapshot",
+            &format!("{case}-hash.nrc"),
+            &mutated,
+            (LIMIT, MAX_ALLOCATION),
+            move || {
+                let c = nrc_cache::Cache::load(&f, CacheDevice::Cpu).ok()?;
                 Some(c.infer(&probe).iter().flatten().all(|x| x.is_finite()))
             },
         );
@@ -182,6 +224,10 @@ fn mutated_configurations_and_snapshots_load_or_fail_cleanly() {
     assert!(
         tally.kinds["snapshot"].2 > 0,
         "some mutations must break a snapshot"
+    );
+    assert!(
+        tally.kinds["hash snapshot"].2 > 0,
+        "some mutations must break a hash snapshot"
     );
 }
 

@@ -7,7 +7,6 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
 use glam::Vec3;
-use nrc_cache::RadianceCache;
 use nrc_render::passes::{
     self, CacheTerminatedSettings, FrameInput, PassOutput, PassSpec, PathTracedPass,
     PathTracedSettings, RenderPass, path_traced::Progress,
@@ -157,7 +156,7 @@ pub fn train(
 /// Whether `cache` was trained on `scene` (loaded from `scene_path`): its content hash and box
 /// against the scene's. `Err` names the mismatch.
 pub fn check_snapshot_scene(
-    cache: &RadianceCache,
+    cache: &nrc_cache::Cache,
     scene: &Scene,
     scene_path: &Path,
 ) -> Result<std::result::Result<(), String>> {
@@ -253,8 +252,8 @@ pub fn load_snapshot(
     scene: &Scene,
     scene_path: &Path,
     allow_other_scene: bool,
-) -> Result<(RadianceCache, Option<String>)> {
-    let cache = RadianceCache::load(snapshot, device)
+) -> Result<(nrc_cache::Cache, Option<String>)> {
+    let cache = nrc_cache::Cache::load(snapshot, device)
         .with_context(|| format!("cannot load the cache snapshot {}", snapshot.display()))?;
     match check_snapshot_scene(&cache, scene, scene_path)? {
         Ok(()) => Ok((cache, None)),
@@ -319,7 +318,7 @@ pub fn choose_pass(
             let device = c.device.resolve_and_print();
             let (cache, warning) =
                 load_snapshot(snapshot, device, scene, c.scene_path, c.allow_other_scene)?;
-            Ok((spec, Some(cache.into()), warning.into_iter().collect()))
+            Ok((spec, Some(cache), warning.into_iter().collect()))
         }
     }
 }
