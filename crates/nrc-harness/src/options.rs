@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
 use glam::Vec3;
-use nrc_cache::{CacheConfig, CacheDevice};
+use nrc_cache::{CacheConfig, CacheDevice, HashCacheConfig};
 use nrc_render::{LightStrategy, PathTracer, Termination};
 use nrc_scene::{Camera, Scene};
 use nrc_train::mix::ProducerOptions;
@@ -314,6 +314,35 @@ pub struct RadianceCacheArgs {
     /// from the ball's, n·n < 0.9).
     #[arg(long)]
     pub sppc_no_normal_reject: bool,
+
+    /// Hash cache (`hash-…` methods, `--cache-kind hash`): finest cell edge as a fraction of the
+    /// scene box's largest extent.
+    #[arg(long, default_value_t = HashCacheConfig::default().cell)]
+    pub hash_cell: f32,
+
+    /// Hash cache: levels of detail (the cell doubles per level with the distance to the camera).
+    #[arg(long, default_value_t = HashCacheConfig::default().levels)]
+    pub hash_levels: u32,
+
+    /// Hash cache: also key cells by the outgoing direction's dominant axis (glossy surfaces).
+    #[arg(long)]
+    pub hash_direction_bins: bool,
+
+    /// Hash cache: jitter lookups by up to half a cell (hides cell borders, adds noise).
+    #[arg(long)]
+    pub hash_jitter: bool,
+
+    /// Hash cache: the table holds 2^N cells (its fixed memory budget).
+    #[arg(long, default_value_t = HashCacheConfig::default().log2_capacity)]
+    pub hash_log2_capacity: u32,
+
+    /// Hash cache: the running mean's sample count saturates here (its time constant).
+    #[arg(long, default_value_t = HashCacheConfig::default().max_samples)]
+    pub hash_max_samples: f32,
+
+    /// Hash cache: cells not updated for this many frames are evicted.
+    #[arg(long, default_value_t = HashCacheConfig::default().stale_frames)]
+    pub hash_stale_frames: u32,
 }
 
 /// A cache configuration named on the command line: a preset (`hashgrid`, `trianglewave`) or a
@@ -372,6 +401,17 @@ impl RadianceCacheArgs {
             sppc_normal_reject: !self.sppc_no_normal_reject,
         };
         s.producer_options.validate()?;
+        s.hash = HashCacheConfig {
+            cell: self.hash_cell,
+            levels: self.hash_levels,
+            direction_bins: self.hash_direction_bins,
+            jitter: self.hash_jitter,
+            log2_capacity: self.hash_log2_capacity,
+            max_samples: self.hash_max_samples,
+            stale_frames: self.hash_stale_frames,
+            ..HashCacheConfig::default()
+        };
+        s.hash.validate().map_err(anyhow::Error::msg)?;
         Ok(s)
     }
 }
