@@ -539,18 +539,7 @@ fn drift_study() {
     });
     let spread = PassSpec::default();
     // The spread render's queries (they depend on the geometry alone) and their answers.
-    let rec = Recording {
-        inner: &nrc_render::ZeroSource,
-        log: Default::default(),
-    };
-    nrc_render::passes::run(spread.build(&PathTracer::default()).as_mut(), &input, &rec);
-    let queries: Vec<_> = rec
-        .log
-        .into_inner()
-        .unwrap()
-        .into_iter()
-        .map(|(q, _)| q)
-        .collect();
+    let queries = queries_of(&spread, &input);
     let exact = nrc_render::source::PathTracedSource {
         scene: &scene,
         tracer: PathTracer::default(),
@@ -648,6 +637,17 @@ fn drift_study() {
     }
 }
 
+/// The radiance queries a frame of pass `spec` makes (they depend on the geometry alone).
+fn queries_of(spec: &PassSpec, input: &FrameInput) -> Vec<nrc_render::RadianceQuery> {
+    let rec = Recording {
+        inner: &nrc_render::ZeroSource,
+        log: Default::default(),
+    };
+    nrc_render::passes::run(spec.build(&PathTracer::default()).as_mut(), input, &rec);
+    let log = rec.log.into_inner().unwrap();
+    log.into_iter().map(|(q, _)| q).collect()
+}
+
 /// A source that remembers every query and its answer.
 struct Recording<'a> {
     inner: &'a dyn nrc_render::RadianceSource,
@@ -663,4 +663,70 @@ impl nrc_render::RadianceSource for Recording<'_> {
             .extend(queries.iter().copied().zip(a.iter().copied()));
         a
     }
+}
+
+/// The hash cache's relative error against path-traced radiance at the Cornell box's primary
+/// hits (32 × 32), after 16 frames of records whose targets are 64-spp path-traced estimates
+/// at those points (an unbiased, nearly exact source), for a finest cell of `cell` of the box.
+fn hash_cache_error_against_exact(cell: f32) -> f64 {
+    let scene = scene("cornell-box.gltf");
+    let input = FrameInput {
+        scene: &scene,
+        camera: &scene.camera,
+        width: 32,
+        height: 32,
+        spp: 1,
+        seed: 3,
+    };
+    let queries = queries_of(&"cache-first".parse().unwrap(), &input);
+    let maker = nrc_train::QueryMaker::new(&scene.bounds());
+    let config = nrc_cache::HashCacheConfig {
+        cell,
+        levels: 1,
+        ..Default::default()
+    };
+    let mut cache = nrc_cache::HashCache::new(config, maker.scene_box).unwrap();
+    cache.set_camera(scene.camera.position.to_array());
+    let exact = |samples, seed| nrc_render::source::PathTracedSource {
+        scene: &scene,
+        tracer: PathTracer::default(),
+        samples,
+        seed,
+    };
+    let records: Vec<_> = queries.iter().map(|q| maker.cache_query(q)).collect();
+    for frame in 0..16 {
+        let targets = nrc_render::RadianceSource::radiance(&exact(64, 100 + frame), &queries);
+        let batch = nrc_cache::TrainingBatch {
+            queries: records.clone(),
+            targets: targets.iter().map(|t| t.to_array()).collect(),
+            weights: None,
+        };
+        cache.train(&batch).unwrap();
+    }
+    let truth = nrc_render::RadianceSource::radiance(&exact(1024, 7), &queries);
+    let answers = cache.infer(&records);
+    let lum = |c: [f32; 3]| nrc_scene::sampling::luminance(glam::Vec3::from(c)) as f64;
+    let error = answers
+        .iter()
+        .zip(&truth)
+        .map(|(a, b)| (lum(*a) - lum(b.to_array())).abs() / (lum(b.to_array()) + 0.01))
+        .sum::<f64>()
+        / queries.len() as f64;
+    println!(
+        "hash cache, cell {cell}: mean relative error {error:.4} against 1,024-spp path tracing"
+    );
+    error
+}
+
+/// The hash cache converges to the radiance field it is fed: on the Cornell box, trained from
+/// nearly exact targets, its mean relative error at the trained points is below 0.1 with cells
+/// of 1/128 of the box (measured 0.029: the field's variation within a cell and the targets'
+/// own noise). Negative control: cells of 1/4 of the box (a wrong level of detail) average the
+/// walls' light and dark parts and must fail the same bound (measured 0.159).
+#[test]
+fn the_hash_cache_converges_to_the_field_it_is_fed() {
+    let fine = hash_cache_error_against_exact(1.0 / 128.0);
+    assert!(fine < 0.1, "mean relative error {fine}");
+    let coarse = hash_cache_error_against_exact(0.25);
+    assert!(coarse >= 0.1, "cells of 1/4 of the box passed: {coarse}");
 }
