@@ -19,8 +19,9 @@
 //!   so the cache follows a changing scene). Each record also accumulates into the coarser
 //!   levels of its point, so that a lookup whose own cell is empty falls back to a coarser
 //!   one.
-//! - **Eviction**: a cell not updated for `stale_frames` frames is removed (and the table
-//!   rebuilt without it), as SHaRC evicts stale entries.
+//! - **Eviction**: a cell not updated for `stale_frames` frames is removed by backward-shift
+//!   deletion (the probe runs stay whole), as SHaRC evicts stale entries; the sweep runs every
+//!   eighth of that age (a frame's own update touches only the cells its records reached).
 //! - **Lookups**: the cell of the query's level, or the first non-empty coarser one; with
 //!   `jitter`, the position is offset by up to half a cell per axis first (a hash of the query,
 //!   so answers are deterministic), which hides cell borders at the cost of noise.
@@ -28,6 +29,7 @@
 use rayon::prelude::*;
 
 use crate::batch::check_record;
+use crate::record::luminance;
 use crate::{CacheQuery, SceneBox, TrainingBatch};
 
 /// Slots probed before a key counts as a collision.
@@ -159,9 +161,7 @@ impl HashCache {
     /// An empty cache over `scene_box`.
     pub fn new(config: HashCacheConfig, scene_box: SceneBox) -> Result<Self, String> {
         config.validate()?;
-        let extent = (0..3)
-            .map(|k| scene_box.max[k] - scene_box.min[k])
-            .fold(0.0f32, f32::max);
+        let extent = scene_box.extent().into_iter().fold(0.0f32, f32::max);
         if !(extent > 0.0 && extent.is_finite()) {
             return Err(format!(
                 "hash cache: the scene box {scene_box:?} is degenerate"
@@ -327,9 +327,10 @@ impl HashCache {
     /// cells' running means and stale cells evicted.
     pub fn train(&mut self, batch: &TrainingBatch) -> Result<HashTrainStats, String> {
         let n = batch.queries.len();
-        if batch.targets.len() != n || batch.weights.as_ref().is_some_and(|w| w.len() != n) {
+        let weights = batch.weights.as_ref().map_or(n, Vec::len);
+        if batch.targets.len() != n || weights != n {
             return Err(format!(
-                "training batch has {n} queries but {} targets",
+                "training batch has {n} queries but {} targets and {weights} weights",
                 batch.targets.len()
             ));
         }
@@ -356,8 +357,7 @@ impl HashCache {
                 Ok(()) => {}
             }
             stats.used += 1;
-            let lum = |c: [f32; 3]| 0.2126 * c[0] + 0.7152 * c[1] + 0.0722 * c[2];
-            let (b, tl) = (lum(before[i]), lum(t));
+            let (b, tl) = (luminance(before[i]), luminance(t));
             loss += f64::from((b - tl).powi(2) / (b * b + 0.01));
             loss_n += 1;
             let p = self.world(q.position);
@@ -380,11 +380,11 @@ impl HashCache {
         }
         self.frame += 1;
         let (frame, max) = (self.frame, self.config.max_samples);
-        for s in self
-            .slots
-            .iter_mut()
-            .filter(|s| s.key != 0 && s.weight > 0.0)
-        {
+        for &i in &touched {
+            let s = &mut self.slots[i];
+            if s.weight <= 0.0 {
+                continue;
+            }
             let total = s.count + s.weight;
             for k in 0..3 {
                 s.value[k] = (s.value[k] * s.count + s.sum[k]) / total;
@@ -405,24 +405,41 @@ impl HashCache {
     /// Removes the cells not updated for `stale_frames` frames; returns how many.
     fn evict(&mut self) -> usize {
         let cutoff = self.frame.saturating_sub(self.config.stale_frames);
-        let stale = |s: &Slot| s.key != 0 && s.frame < cutoff;
-        let evicted = self.slots.iter().filter(|s| stale(s)).count();
-        if evicted > 0 {
-            // Rebuild: linear probing cannot leave holes in a chain.
-            let live: Vec<Slot> = self
-                .slots
-                .iter()
-                .filter(|s| s.key != 0 && !stale(s))
-                .copied()
-                .collect();
-            self.slots.iter_mut().for_each(|s| *s = Slot::default());
-            for s in live {
-                if let Some(i) = self.find(s.key) {
-                    self.slots[i] = s;
-                }
+        let mut evicted = 0;
+        let mut i = 0;
+        while i < self.slots.len() {
+            let s = &self.slots[i];
+            if s.key != 0 && s.frame < cutoff {
+                self.remove(i);
+                evicted += 1;
+                // The cell shifted into slot `i`, if any, is looked at next.
+            } else {
+                i += 1;
             }
         }
         evicted
+    }
+
+    /// Empties slot `i` by backward-shift deletion: each later cell of the probe run moves into
+    /// the hole when that brings it no farther from its home slot, so every cell stays within
+    /// its probe distance and no run is broken (no tombstones, no rebuild).
+    fn remove(&mut self, mut hole: usize) {
+        let mask = self.slots.len() - 1;
+        self.slots[hole] = Slot::default();
+        let mut j = hole;
+        loop {
+            j = (j + 1) & mask;
+            let key = self.slots[j].key;
+            if key == 0 {
+                return;
+            }
+            let home = key as usize & mask;
+            if j.wrapping_sub(home) & mask >= j.wrapping_sub(hole) & mask {
+                self.slots[hole] = self.slots[j];
+                self.slots[j] = Slot::default();
+                hole = j;
+            }
+        }
     }
 }
 
@@ -438,8 +455,8 @@ pub const SNAPSHOT_VERSION: u32 = 1;
 
 /// A hash-cache snapshot's metadata (the `nrc_cache` entry of the safetensors header; the
 /// envelope is the neural cache's, [`crate::snapshot`]). Tensors: `keys` (U64), `values`
-/// (F32, three per cell), `counts` (F32), `frames` (U32), one entry per cell in use, in table
-/// order; `checksum` is FNV-1a over the settings' JSON and the four tensors' bytes in that
+/// (F32, three per cell), `counts` (F32), `frames` (U32), one entry per cell in use, in slot
+/// order from just after a free slot (so that loading reinserts each cell in its own slot); `checksum` is FNV-1a over the settings' JSON and the four tensors' bytes in that
 /// order (the settings size the table, so a corrupted one is refused before it is allocated).
 #[derive(serde::Serialize, serde::Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -459,7 +476,14 @@ struct SnapshotMeta {
 impl HashCache {
     /// Writes the cells in use, the settings and the scene's identity, atomically.
     pub fn save(&self, path: &std::path::Path) -> Result<(), crate::CacheError> {
-        let live: Vec<&Slot> = self.slots.iter().filter(|s| s.key != 0).collect();
+        // Cells in slot order from just after a free slot: no probe run then wraps past the
+        // start, so inserting them in this order on load puts each back in its own slot.
+        let mask = self.slots.len() - 1;
+        let start = self.slots.iter().position(|s| s.key == 0).unwrap_or(0);
+        let live: Vec<&Slot> = (start..start + self.slots.len())
+            .map(|k| &self.slots[k & mask])
+            .filter(|s| s.key != 0)
+            .collect();
         let keys: Vec<u64> = live.iter().map(|s| s.key).collect();
         let values: Vec<f32> = live.iter().flat_map(|s| s.value).collect();
         let counts: Vec<f32> = live.iter().map(|s| s.count).collect();
@@ -805,6 +829,52 @@ mod tests {
         std::fs::write(&path, &bytes[..bytes.len() / 2]).unwrap();
         let e = HashCache::load(&path).unwrap_err().to_string();
         assert!(e.contains("truncated"), "{e}");
+        let json = r#"{"magic": "nrc-cache-snapshot", "version": 1}"#.to_string();
+        crate::snapshot::write_envelope(&path, &[], json).unwrap();
+        let e = HashCache::load(&path).unwrap_err().to_string();
+        assert!(e.contains("not a hash-cache snapshot"), "{e}");
+    }
+
+    /// Evicting part of a crowded table leaves every live cell findable (backward-shift
+    /// deletion keeps the probe runs whole), and a crowded table (150 cells in 256 slots) saves
+    /// and loads back with every cell in place.
+    #[test]
+    fn eviction_and_snapshots_keep_every_cell_of_a_crowded_table() {
+        let config = HashCacheConfig {
+            log2_capacity: 8,
+            levels: 1,
+            stale_frames: 2,
+            cell: 1.0 / 1024.0,
+            ..Default::default()
+        };
+        let mut c = cache(config);
+        let up = [0.0, 0.0, 1.0];
+        let qs: Vec<_> = (0..150)
+            .map(|i| query([i as f32 / 150.0, 0.5, 0.5], up))
+            .collect();
+        let recs =
+            |qs: &[CacheQuery]| batch(qs.iter().map(|q| (*q, [q.position[0] + 1.0; 3])).collect());
+        assert_eq!(c.train(&recs(&qs)).unwrap().collisions, 0);
+        assert_eq!(c.cells(), 150);
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("full.nrc");
+        c.save(&path).unwrap();
+        let back = HashCache::load(&path).unwrap();
+        assert_eq!(back.infer(&qs), c.infer(&qs), "every cell loads back");
+        // Every other cell kept alive while the rest go stale.
+        let kept: Vec<_> = qs.iter().step_by(2).copied().collect();
+        for _ in 0..4 {
+            c.train(&recs(&kept)).unwrap();
+        }
+        assert_eq!(c.cells(), kept.len(), "the stale half is evicted");
+        let answers = c.infer(&kept);
+        for (q, a) in kept.iter().zip(&answers) {
+            let want = q.position[0] + 1.0;
+            assert!(
+                (a[0] - want).abs() < 1e-5,
+                "a kept cell is lost or wrong: {a:?}"
+            );
+        }
     }
 
     #[test]

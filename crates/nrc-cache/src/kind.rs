@@ -175,8 +175,7 @@ impl Cache {
 
     /// Loads a snapshot of either kind (the neural one onto `device`).
     pub fn load(path: &Path, device: crate::CacheDevice) -> Result<Self, CacheError> {
-        let (_, _, magic) = crate::snapshot::read_envelope(path)?;
-        if magic == crate::hash_cache::SNAPSHOT_MAGIC {
+        if crate::snapshot::magic_of(path)? == crate::hash_cache::SNAPSHOT_MAGIC {
             Ok(HashCache::load(path)?.into())
         } else {
             Ok(RadianceCache::load(path, device)?.into())

@@ -222,6 +222,46 @@ pub(crate) fn write_envelope(
     Ok(())
 }
 
+/// The `magic` of a snapshot file (which kind of cache it holds), read from its header alone.
+pub(crate) fn magic_of(path: &Path) -> Result<String, CacheError> {
+    use std::io::Read;
+    let mut file = std::fs::File::open(path).map_err(|e| io_err(path, e))?;
+    let mut len = [0u8; 8];
+    file.read_exact(&mut len)
+        .map_err(|_| bad(path, "not a safetensors file or truncated header"))?;
+    let len = u64::from_le_bytes(len);
+    // The header is a JSON object of tensor entries; a larger one is not a snapshot of ours.
+    if len > 100_000_000 {
+        return Err(bad(path, format!("header of {len} bytes: not a snapshot")));
+    }
+    let mut header = Vec::new();
+    file.take(len)
+        .read_to_end(&mut header)
+        .map_err(|e| io_err(path, e))?;
+    #[derive(Deserialize)]
+    struct Header {
+        #[serde(rename = "__metadata__")]
+        metadata: Option<std::collections::HashMap<String, String>>,
+    }
+    #[derive(Deserialize)]
+    struct Magic {
+        magic: String,
+    }
+    let h: Header = serde_json::from_slice(&header).map_err(|e| {
+        bad(
+            path,
+            format!("not a safetensors file or truncated header ({e})"),
+        )
+    })?;
+    let json = h
+        .metadata
+        .and_then(|mut m| m.remove(METADATA_KEY))
+        .ok_or_else(|| bad(path, format!("not an nrc-cache snapshot: the safetensors metadata has no {METADATA_KEY:?} entry")))?;
+    let magic: Magic =
+        serde_json::from_str(&json).map_err(|e| bad(path, format!("malformed metadata: {e}")))?;
+    Ok(magic.magic)
+}
+
 /// A snapshot file's bytes and its metadata JSON (the `nrc_cache` entry of the safetensors
 /// header), with its `magic` field: the kind of snapshot it is.
 pub(crate) fn read_envelope(path: &Path) -> Result<(Vec<u8>, String, String), CacheError> {
