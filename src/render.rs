@@ -123,7 +123,8 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     for w in scene.warnings().iter().chain(&warnings) {
         eprintln!("warning: {w}");
     }
-    let pixels = args.width as u64 * args.height as u64;
+    // The path tracer counts pixels as its tiles finish, in every frame.
+    let pixels = args.width as u64 * args.height as u64 * u64::from(args.frames);
     let progress = Arc::new(Progress::new(pixels, Unit::Pixels, "render"));
     let cameras =
         nrc_harness::run::camera_path(args.camera_path.as_deref(), &scene.camera, args.frames)?;

@@ -93,9 +93,10 @@ impl HashCacheConfig {
                 self.lod_cells
             ));
         }
-        if !(8..=28).contains(&self.log2_capacity) {
+        // 2^26 cells are 3.2 GB; beyond that an allocation failure would abort the program.
+        if !(8..=26).contains(&self.log2_capacity) {
             return Err(format!(
-                "hash cache: log2_capacity must be in 8..=28, got {}",
+                "hash cache: log2_capacity must be in 8..=26, got {}",
                 self.log2_capacity
             ));
         }
@@ -188,7 +189,9 @@ impl HashCache {
         self.scene_box
     }
 
-    /// The camera the levels of detail are measured from (world units).
+    /// The camera the levels of detail are measured from (world units). The online loop sets it
+    /// every frame; a snapshot keeps the last one, so a render from it looks cells up at the
+    /// levels they were trained at (a level with no cell falls back to a coarser one).
     pub fn set_camera(&mut self, position: [f32; 3]) {
         self.camera = position;
     }
@@ -676,6 +679,17 @@ mod tests {
         HashCache::new(config, SceneBox::default()).unwrap()
     }
 
+    /// A 256-slot table of fine cells at one level that evicts after 2 frames.
+    fn crowded() -> HashCacheConfig {
+        HashCacheConfig {
+            log2_capacity: 8,
+            levels: 1,
+            stale_frames: 2,
+            cell: 1.0 / 1024.0,
+            ..Default::default()
+        }
+    }
+
     fn batch(records: Vec<(CacheQuery, [f32; 3])>) -> TrainingBatch {
         let (queries, targets) = records.into_iter().unzip();
         TrainingBatch {
@@ -775,14 +789,7 @@ mod tests {
     /// are evicted, freeing their slots.
     #[test]
     fn collisions_are_counted_and_stale_cells_evicted() {
-        let config = HashCacheConfig {
-            log2_capacity: 8,
-            levels: 1,
-            stale_frames: 2,
-            cell: 1.0 / 1024.0,
-            ..Default::default()
-        };
-        let mut c = cache(config);
+        let mut c = cache(crowded());
         let up = [0.0, 0.0, 1.0];
         let recs: Vec<_> = (0..400)
             .map(|i| (query([i as f32 / 400.0, 0.5, 0.5], up), [1.0; 3]))
@@ -840,14 +847,7 @@ mod tests {
     /// and loads back with every cell in place.
     #[test]
     fn eviction_and_snapshots_keep_every_cell_of_a_crowded_table() {
-        let config = HashCacheConfig {
-            log2_capacity: 8,
-            levels: 1,
-            stale_frames: 2,
-            cell: 1.0 / 1024.0,
-            ..Default::default()
-        };
-        let mut c = cache(config);
+        let mut c = cache(crowded());
         let up = [0.0, 0.0, 1.0];
         let qs: Vec<_> = (0..150)
             .map(|i| query([i as f32 / 150.0, 0.5, 0.5], up))
