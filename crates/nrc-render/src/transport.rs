@@ -16,7 +16,8 @@
 //! reference path tracer's images are bit for bit those it made before this module existed.
 
 use glam::Vec3;
-use nrc_scene::{Ray, Scene, SurfaceInteraction, bsdf::Bsdf, sampling::Frame, spawn_ray};
+use nrc_scene::bsdf::{Bsdf, BsdfSample};
+use nrc_scene::{Ray, Scene, SurfaceInteraction, sampling::Frame, spawn_ray};
 
 use crate::nee::{emission_mis_weight, environment_mis_weight, next_event};
 use crate::query::RadianceQuery;
@@ -231,6 +232,17 @@ impl PathWalk {
         }
     }
 
+    /// Continues the path from `v` along the BSDF sample `bs` drawn there (no Russian
+    /// roulette): the next [`PathWalk::arrive`] traces it and weighs the emission it finds
+    /// against NEE at `v` by `bs`'s density. For passes that sample the BSDF themselves.
+    pub fn follow(&mut self, v: &Vertex, bs: &BsdfSample) {
+        self.throughput *= bs.weight;
+        self.ray = spawn_ray(v.si.p, v.si.ng, v.frame.to_world(bs.wi));
+        self.segments += 1;
+        self.prev_pdf = bs.pdf;
+        self.prev_delta = bs.delta;
+    }
+
     /// Samples the BSDF at `v` for the next segment, updates the throughput and applies
     /// Russian roulette (Mitsuba's rule: from `rr_depth` scattering events on, continue with
     /// probability min(max throughput, 0.95) and divide by it, which keeps the estimate
@@ -239,9 +251,7 @@ impl PathWalk {
         let u_lobe = sampler.next_1d();
         let u_dir = sampler.next_2d();
         let bs = v.bsdf.sample(v.wo, u_dir, u_lobe)?;
-        self.throughput *= bs.weight;
-        self.ray = spawn_ray(v.si.p, v.si.ng, v.frame.to_world(bs.wi));
-        self.segments += 1;
+        self.follow(v, &bs);
         if self.zero_throughput_ends && self.throughput == Vec3::ZERO {
             return None;
         }
@@ -255,8 +265,6 @@ impl PathWalk {
             self.throughput /= q;
             weight /= q;
         }
-        self.prev_pdf = bs.pdf;
-        self.prev_delta = bs.delta;
         Some(Scatter {
             weight,
             pdf: bs.pdf,

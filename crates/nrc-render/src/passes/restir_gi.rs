@@ -33,7 +33,7 @@
 use std::time::Instant;
 
 use glam::Vec3;
-use nrc_scene::{Scene, sampling::luminance, spawn_ray};
+use nrc_scene::{Scene, sampling::luminance};
 use rayon::prelude::*;
 
 use crate::error::SettingsError;
@@ -42,7 +42,6 @@ use super::screen::{GBuffer, MAX, Phase, Primary, par_map, stream, visible_betwe
 use super::params::{Key, Params, Value};
 use super::spec::{PassConfig, PassKind, parse_variant};
 use super::frame::{FrameInput, PassOutput, PhaseTimes, RenderPass};
-use crate::nee::next_event;
 use crate::path_tracer::{PathStats, PathTracer};
 use crate::reservoir::Reservoir;
 use crate::source::{RadianceQuery, usable_answer};
@@ -341,6 +340,9 @@ struct Shading {
     direct: Vec3,
     /// The initial candidate: its vertex (radiance filled in later for `-nrc`) and BSDF pdf.
     candidate: Option<(GiSample, f32)>,
+    /// The candidate was drawn from a delta lobe, with this BSDF weight: it is not resampled
+    /// but estimated as `weight · L(y)` beside the reservoir (whose sample is then none).
+    delta: Option<Vec3>,
     /// `-nrc`: the cache query at the candidate's vertex, then its index in the frame's batch.
     query: Option<RadianceQuery>,
     query_index: Option<usize>,
@@ -462,22 +464,18 @@ impl RestirGiPass {
         if segments >= limit {
             return out;
         }
-        let direct = next_event(
-            scene,
-            &v.si,
-            &v.bsdf,
-            &v.frame,
-            v.wo,
-            false,
-            &mut s,
-            &mut out.stats,
-        );
+        // Direct light at x₁: NEE, weighted by MIS against the candidate's BSDF sample finding
+        // the emitter (the path tracer's rule; NEE alone turned glossy reflections of a small
+        // bright emitter into fireflies).
+        let mut walk = PathWalk::from_vertex(scene, &self.tracer, segments);
+        let direct = walk.next_event(scene, &v, &mut s, &mut out.stats);
         let mut shading = Shading {
             v,
             throughput,
             primary: segments == 1,
             direct,
             candidate: None,
+            delta: None,
             query: None,
             query_index: None,
         };
@@ -486,21 +484,24 @@ impl RestirGiPass {
             let mut sc = stream(seed, i, Phase::Candidates);
             let u_lobe = sc.next_1d();
             let u_dir = sc.next_2d();
-            if let Some(bs) = v
-                .bsdf
-                .sample(v.wo, u_dir, u_lobe)
-                .filter(|b| !b.delta && b.pdf > 0.0)
-            {
-                let ray = spawn_ray(v.si.p, v.si.ng, v.frame.to_world(bs.wi));
-                out.stats.closest_rays += 1;
-                if let Some(hit) = scene.intersect(&ray) {
-                    let si = scene.interaction(&ray, &hit);
-                    let y = Vertex::new(scene, &si, si.wo);
+            if let Some(bs) = v.bsdf.sample(v.wo, u_dir, u_lobe).filter(|b| b.pdf > 0.0) {
+                walk.follow(&v, &bs);
+                let y = match walk.arrive(scene, &mut out.stats) {
+                    Arrival::Escaped { le, mis } => {
+                        shading.direct += bs.weight * le * mis;
+                        None
+                    }
+                    Arrival::Hit(h) => {
+                        shading.direct += bs.weight * h.le * h.mis;
+                        Some(h.vertex)
+                    }
+                };
+                if let Some(y) = y {
                     let mut sample = GiSample {
-                        x: si.p,
-                        n: si.ng,
+                        x: y.si.p,
+                        n: y.si.ng,
                         l: Vec3::ZERO,
-                        tri: si.tri,
+                        tri: y.si.tri,
                     };
                     if self.settings.cache {
                         shading.query = Some(y.query());
@@ -514,6 +515,11 @@ impl RestirGiPass {
                         out.second = second
                             .filter(|_| self.settings.is_world() && unlimited && segments == 1)
                             .map(|y3| (y, y3));
+                    }
+                    // A delta lobe of a mixed BSDF (a smooth coat), which no reservoir can
+                    // hold, is estimated whole by its sample: `weight · L(y)`.
+                    if bs.delta {
+                        shading.delta = Some(bs.weight);
                     }
                     shading.candidate = Some((sample, bs.pdf));
                 }
@@ -678,17 +684,23 @@ impl RenderPass for RestirGiPass {
             ..Default::default()
         };
 
-        // Initial reservoirs: one candidate, W = 1/p.
+        // The initial candidate of a pixel sample, with its radiance (`-nrc`: the source's).
+        let candidate = |sh: &Shading| {
+            sh.candidate.map(|(mut y, pdf)| {
+                if let Some(q) = sh.query_index {
+                    y.l = usable_answer(answers[q]);
+                }
+                (y, pdf)
+            })
+        };
+        // Initial reservoirs: one candidate, W = 1/p (none for a delta lobe's sample).
         let initial: Vec<(GiReservoir, PathStats)> = par_map(n, |i| {
             let t = &traced[i];
             let mut r = GiReservoir::new();
             if let Some(sh) = &t.shading {
                 r.m = 0.0;
-                match sh.candidate {
-                    Some((mut y, pdf)) => {
-                        if let Some(q) = sh.query_index {
-                            y.l = usable_answer(answers[q]);
-                        }
+                match candidate(sh) {
+                    Some((y, pdf)) if sh.delta.is_none() => {
                         let target = target_at(&sh.v, &y);
                         r.update(
                             y,
@@ -697,7 +709,7 @@ impl RenderPass for RestirGiPass {
                             stream(seed, i, Phase::Extra).next_1d(),
                         );
                     }
-                    None => r.m = 1.0,
+                    _ => r.m = 1.0,
                 }
                 r.finish(r.m);
             }
@@ -767,7 +779,11 @@ impl RenderPass for RestirGiPass {
                         r.clear_sample();
                     }
                 }
-                l += sh.throughput * (sh.direct + indirect);
+                let delta = match (sh.delta, candidate(sh)) {
+                    (Some(weight), Some((y, _))) => weight * y.l,
+                    _ => Vec3::ZERO,
+                };
+                l += sh.throughput * (sh.direct + delta + indirect);
             }
             (l, r, stats)
         });
