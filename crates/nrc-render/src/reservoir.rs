@@ -109,6 +109,24 @@ impl<T: Copy> Reservoir<T> {
         }
     }
 
+    /// Merges `other` with a resampling weight the caller computed (generalised RIS:
+    /// `m(y) · p̂_here(y) · W · J`, the MIS weight `m` holding the confidence); `M` adds up.
+    /// Finish with [`Reservoir::finish_normalised`]. Returns whether its sample was selected.
+    #[inline]
+    pub fn merge_weighted(
+        &mut self,
+        other: &Reservoir<T>,
+        weight: f32,
+        target_here: f32,
+        u: f32,
+    ) -> bool {
+        self.m += other.m;
+        match other.sample {
+            Some(s) => self.offer(s, weight, target_here, u),
+            None => false,
+        }
+    }
+
     /// Finishes with `W = w_sum / (z · p̂(y))`: `z = M` for plain RIS and biased merging, the
     /// count of candidates whose domains hold `y` for unbiased merging. Zero without a sample
     /// or where `z` or `p̂(y)` is not positive.

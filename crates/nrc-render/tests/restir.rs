@@ -307,7 +307,9 @@ fn blocks(img: &Image, b: usize, variance: bool) -> Image {
 ///   a reused sample whose Jacobian is large — make a few runs' variance miss what they
 ///   never drew: 512 runs pass per pixel, 128 did not, in either GI pass);
 /// - as frames accumulate, a run's running average approaches the reference: the mean
-///   squared error of the average of 32 frames is below a third of a single frame's.
+///   squared error of the average of 32 frames is below half a single frame's;
+/// - pairwise MIS (the default merge) gives lower errors than 1/Z (`pairwise=0`), in one
+///   frame and accumulated.
 #[test]
 fn unbiased_wsrestir_gi_converges_to_the_reference_on_the_cornell_box() {
     let scene = cornell();
@@ -344,38 +346,49 @@ fn unbiased_wsrestir_gi_converges_to_the_reference_on_the_cornell_box() {
             .sum::<f64>()
             / a.data.len() as f64
     };
-    let mut pass = spec.build(&tracer);
-    let (mut single, mut accumulated) = (0.0, 0.0);
-    for run in 0..4u64 {
-        pass.reset();
-        let mut sum = vec![glam::Vec3::ZERO; (w * h) as usize];
-        let mut last = None;
-        for f in 0..32 {
-            let input = FrameInput {
-                scene: &scene,
-                camera: &scene.camera,
-                width: w,
-                height: h,
-                spp: 1,
-                seed: nrc_render::pass_seed(9000 + run, f),
-            };
-            let img = passes::run(pass.as_mut(), &input, &ZeroSource).image;
-            for (s, p) in sum.iter_mut().zip(&img.data) {
-                *s += *p / 32.0;
+    // (one frame's MSE, 32 accumulated frames' MSE), mean of 4 runs.
+    let errors = |spec: &PassSpec| {
+        let mut pass = spec.build(&tracer);
+        let (mut single, mut accumulated) = (0.0, 0.0);
+        for run in 0..4u64 {
+            pass.reset();
+            let mut sum = vec![glam::Vec3::ZERO; (w * h) as usize];
+            let mut last = None;
+            for f in 0..32 {
+                let input = FrameInput {
+                    scene: &scene,
+                    camera: &scene.camera,
+                    width: w,
+                    height: h,
+                    spp: 1,
+                    seed: nrc_render::pass_seed(9000 + run, f),
+                };
+                let img = passes::run(pass.as_mut(), &input, &ZeroSource).image;
+                for (s, p) in sum.iter_mut().zip(&img.data) {
+                    *s += *p / 32.0;
+                }
+                last = Some(img);
             }
-            last = Some(img);
+            single += mse(&last.unwrap());
+            accumulated += mse(&Image::from_data(w as usize, h as usize, sum).unwrap());
         }
-        single += mse(&last.unwrap());
-        accumulated += mse(&Image::from_data(w as usize, h as usize, sum).unwrap());
-    }
-    println!(
-        "wsrestir-gi: MSE of one frame {:.3e}, of 32 accumulated {:.3e}",
-        single / 4.0,
-        accumulated / 4.0
-    );
+        (single / 4.0, accumulated / 4.0)
+    };
+    let (single, accumulated) = errors(&spec);
+    println!("wsrestir-gi: MSE of one frame {single:.3e}, of 32 accumulated {accumulated:.3e}");
     assert!(
-        accumulated < single / 3.0,
+        accumulated < single / 2.0,
         "accumulation: {accumulated} vs {single}"
+    );
+    // Pairwise MIS against 1/Z: one frame's error 12x lower (2.9e-3 against 3.47e-2 when
+    // written), the accumulated one 4.8x (1.2e-3 against 5.8e-3); accumulation gains less
+    // than with 1/Z (2.4x against 6x) because less of the error is noise that averages out.
+    let count: PassSpec = "wsrestir-gi:jitter=0,pairwise=0".parse().unwrap();
+    let (single_z, accumulated_z) = errors(&count);
+    println!("with 1/Z: one frame {single_z:.3e}, 32 accumulated {accumulated_z:.3e}");
+    assert!(
+        single < 0.6 * single_z && accumulated < accumulated_z,
+        "pairwise MIS {single:.3e}/{accumulated:.3e} against 1/Z {single_z:.3e}/{accumulated_z:.3e}"
     );
 }
 
@@ -530,4 +543,148 @@ fn restir_gi_nrc_refreshes_its_history_from_the_source() {
         );
         assert!(g_stale > 1e-2, "{base}: a stale history passes ({g_stale})");
     }
+}
+
+/// A room built to provoke fireflies, as the kitchen does: a large, bright emitter on the back
+/// wall (the window) and a glossy coated floor and table top (glTF roughness 0.2 and 0.16, the
+/// kitchen's table) that reflect it toward the camera; diffuse walls elsewhere. NEE alone
+/// samples the emitter's area uniformly and rarely lands in a glossy lobe's small image of it.
+fn firefly_room() -> Scene {
+    use common::{Mesh, SceneBuilder, mat};
+    use glam::Vec3;
+    let mut b = SceneBuilder::new();
+    let walls = b.material(mat::diffuse(Vec3::splat(0.6)));
+    let floor = b.material(mat::plastic(Vec3::new(0.25, 0.1, 0.05), 0.2));
+    let table = b.material(mat::plastic(Vec3::splat(0.5), 0.16));
+    let window = b.material(mat::emissive(Vec3::ZERO, Vec3::splat(20.0), false));
+    b.mesh(
+        &Mesh::cuboid(Vec3::new(-1.0, 0.0, -1.0), Vec3::new(1.0, 1.5, 1.0), true),
+        walls,
+        false,
+    )
+    .mesh(
+        &Mesh::quad(
+            Vec3::new(0.0, 0.001, 0.0),
+            Vec3::new(0.0, 0.0, 0.999),
+            Vec3::new(0.999, 0.0, 0.0),
+        ),
+        floor,
+        false,
+    )
+    .mesh(
+        &Mesh::cuboid(Vec3::new(-0.6, 0.0, -0.7), Vec3::new(0.1, 0.4, -0.2), false),
+        table,
+        false,
+    )
+    .mesh(
+        &Mesh::quad(
+            Vec3::new(0.1, 0.9, -0.999),
+            Vec3::new(0.5, 0.0, 0.0),
+            Vec3::new(0.0, 0.35, 0.0),
+        ),
+        window,
+        false,
+    )
+    .camera(Vec3::new(0.2, 0.8, 0.95), Vec3::new(-0.1, 0.1, -0.6), 50.0);
+    b.build()
+}
+
+/// The firefly guard (issue 39): in [`firefly_room`], 8 independent runs of 8 frames of each
+/// resampling pass (the harness's accumulation; rays through pixel centres, so that the error
+/// is the estimator's), the 99.9th percentile over pixels and runs of the absolute luminance
+/// error of the accumulated image stays below 1.5 times the path tracer's at 8 spp through
+/// the same centres. Negative control: ReSTIR GI with the direct light at its shading vertex
+/// by NEE alone (the `LightOnly` strategy, which the pass follows; before this test that was
+/// the pass whatever the strategy, and the kitchen's fireflies) fails it: 5.9 against a bound
+/// of 3.9 when written, the passes 3.0 and below. Not asserted: ReSTIR DI with temporal reuse
+/// at its default M-cap (20) exceeds the bound (4.5; M-cap 4: 3.6, M-cap 1: 2.7, no temporal
+/// reuse: 2.4): a history that outweighs a frame's candidates 20 to 1 keeps one sample for
+/// many of the 8 accumulated frames, so they do not average out as independent ones do.
+#[test]
+fn resampling_passes_keep_the_path_tracers_tails_where_a_small_bright_emitter_meets_gloss() {
+    use nrc_render::LightStrategy;
+    let scene = firefly_room();
+    let tracer = PathTracer {
+        max_depth: 4,
+        ..Default::default()
+    };
+    let nee_alone = PathTracer {
+        strategy: LightStrategy::LightOnly,
+        ..tracer
+    };
+    let (w, h) = (48, 32);
+    let (reference, _) = reference_at_centres(&scene, &tracer, w, h, 4096);
+    let lum = |c: glam::Vec3| nrc_scene::sampling::luminance(c) as f64;
+    // The 99.9th percentile of |lum(x) − lum(ref)| over the pixels of `runs` images.
+    let p999 = |runs: &[Image]| {
+        let mut e: Vec<f64> = runs
+            .iter()
+            .flat_map(|img| img.data.iter().zip(&reference.data))
+            .map(|(x, r)| (lum(*x) - lum(*r)).abs())
+            .collect();
+        e.sort_by(f64::total_cmp);
+        e[(e.len() as f64 * 0.999) as usize]
+    };
+    let accumulate = |spec: &str, tracer: &PathTracer, run: u64| {
+        let spec: PassSpec = spec.parse().unwrap();
+        let mut pass = spec.build(tracer);
+        let mut sum = vec![glam::Vec3::ZERO; (w * h) as usize];
+        for f in 0..8 {
+            let input = FrameInput {
+                scene: &scene,
+                camera: &scene.camera,
+                width: w,
+                height: h,
+                spp: 1,
+                seed: nrc_render::pass_seed(7000 + run, f),
+            };
+            let img = passes::run(pass.as_mut(), &input, &ZeroSource).image;
+            for (s, p) in sum.iter_mut().zip(&img.data) {
+                *s += *p / 8.0;
+            }
+        }
+        Image::from_data(w as usize, h as usize, sum).unwrap()
+    };
+    let tails = |spec: &str, tracer: &PathTracer| {
+        let runs: Vec<Image> = (0..8).map(|r| accumulate(spec, tracer, r)).collect();
+        p999(&runs)
+    };
+    // The path tracer through pixel centres, 8 samples per pixel per run.
+    let pt_runs: Vec<Image> = (0..8u64)
+        .map(|run| {
+            let data = (0..w * h)
+                .map(|p| {
+                    let (x, y) = ((p % w) as f32 + 0.5, (p / w) as f32 + 0.5);
+                    let ray = scene.camera.generate_ray(glam::Vec2::new(x, y), w, h);
+                    let mut stats = nrc_render::PathStats::default();
+                    (0..8u64)
+                        .map(|s| {
+                            let mut u = PixelSampler::new(7000 + run, p as u64, s);
+                            tracer.radiance(&scene, ray, &mut u, &mut stats) / 8.0
+                        })
+                        .sum()
+                })
+                .collect();
+            Image::from_data(w as usize, h as usize, data).unwrap()
+        })
+        .collect();
+    let path_traced = p999(&pt_runs);
+    let bound = 1.5 * path_traced;
+    println!("pt, 8 spp: 99.9th-percentile error {path_traced:.3}");
+    let mut failures = Vec::new();
+    for (spec, tracer, calm) in [
+        ("restir-gi:jitter=0", &tracer, true),
+        ("wsrestir-gi:jitter=0", &tracer, true),
+        ("ddgi-restir:jitter=0", &tracer, true),
+        ("restir-di:jitter=0,temporal=0", &tracer, true),
+        ("restir-gi:jitter=0", &nee_alone, false),
+    ] {
+        let t = tails(spec, tracer);
+        let strategy = format!("{:?}", tracer.strategy);
+        println!("{spec} ({strategy}): 99.9th-percentile error {t:.3}, bound {bound:.3}");
+        if calm != (t < bound) {
+            failures.push(format!("{spec} ({strategy}): {t:.3} against {bound:.3}"));
+        }
+    }
+    assert!(failures.is_empty(), "{failures:?}");
 }

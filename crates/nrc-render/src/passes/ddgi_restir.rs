@@ -22,7 +22,8 @@
 //!    Punctual and environment samples enter in their own measures, unclamped, as in ReSTIR DI.
 //! 2. **Spatial then temporal reuse** (§3.2 step 2): `k` screen neighbours' initial
 //!    reservoirs, then the previous frame's final one at the reprojected pixel (`M` capped);
-//!    each merge finishes with the unbiased `Z` (owners that see `y`, one shadow ray each).
+//!    each merge is unbiased, by pairwise MIS ([`reuse::Merge`]; `pairwise=0`: `1/Z` over the
+//!    owners that see `y`), one shadow ray per reused reservoir.
 //!    A reused sample keeps the source radiance its finder stored (§3.7's query reuse: the
 //!    target is approximate, the estimator stays unbiased for its integrand because the BSDF
 //!    candidates cover every direction); `requery=1` (probes only) evaluates `L_DDGI+` toward
@@ -57,7 +58,7 @@ use nrc_scene::{LightSample, Scene, sampling::luminance, spawn_ray};
 
 use crate::error::SettingsError;
 use super::restir_di;
-use super::reuse::{self, History, Resampling, Slot};
+use super::reuse::{self, History, Merge, Resampling, Slot};
 use super::screen::{GBuffer, Phase, Primary, par_map, stream, visible_between};
 use super::params::{Key, Params, Value};
 use super::screen::MAX;
@@ -120,6 +121,8 @@ pub struct DdgiRestirSettings {
     pub temporal: bool,
     /// The history's `M` is capped at this multiple of the candidate count.
     pub m_cap: f32,
+    /// Merges by pairwise MIS (off: 1/Z), [`reuse::Merge`].
+    pub pairwise: bool,
     /// `G_max = 1/(clamp · diagonal)²`; 0: no clamp.
     pub clamp: f32,
     /// Estimate the clamped-away transport (eq. 9); off: biased.
@@ -153,6 +156,7 @@ impl Default for DdgiRestirSettings {
             spatial_radius: 30.0,
             temporal: true,
             m_cap: 20.0,
+            pairwise: true,
             clamp: 0.1,
             residual: true,
             requery: false,
@@ -219,7 +223,8 @@ impl Params for DdgiRestirSettings {
         let bsdf = Key::new("bsdf", "BSDF-sampled candidates (the first also for the residual)");
         f(&bsdf.range(1.0, MAX), &mut self.bsdf_candidates);
         let (k, radius) = (&mut self.spatial_neighbours, &mut self.spatial_radius);
-        reuse::visit_reuse(f, k, radius, &mut self.m_cap, &mut self.temporal);
+        let (m_cap, temporal, pairwise) = (&mut self.m_cap, &mut self.temporal, &mut self.pairwise);
+        reuse::visit_reuse(f, k, radius, m_cap, temporal, pairwise);
         let clamp = Key::new("clamp", "G_max = 1/(clamp · diagonal)²; 0: no clamp");
         f(&clamp.range(0.0, 10.0), &mut self.clamp);
         let residual = Key::new("residual", "estimate the clamped-away transport (eq. 9)");
@@ -970,6 +975,7 @@ impl RenderPass for DdgiRestirPass {
             g: &g,
             ctx,
             smooth: set.smooth,
+            merge: Merge::of(false, set.pairwise),
         };
         let slots: Vec<Slot<DdgiSample>> = initial
             .iter()
@@ -1043,6 +1049,7 @@ struct DdgiFrame<'a> {
     g: &'a GBuffer,
     ctx: Ctx<'a>,
     smooth: f32,
+    merge: Merge,
 }
 
 impl Resampling for DdgiFrame<'_> {
@@ -1064,8 +1071,8 @@ impl Resampling for DdgiFrame<'_> {
         sees(self.scene, v, y, stats)
     }
 
-    fn biased(&self) -> bool {
-        false
+    fn merge(&self) -> Merge {
+        self.merge
     }
 }
 

@@ -4,7 +4,10 @@
 //!
 //! A sample is a *reconnection vertex* `y` (a surface point reached from the shading vertex
 //! `x₁` by BSDF sampling) with the radiance `L` leaving it toward `x₁`, emission excluded (the
-//! direct light at `x₁` is next-event estimation's: NEE alone, weight 1). The target at a
+//! direct light at `x₁` is the path tracer's: NEE weighted by MIS against the candidate's BSDF
+//! ray finding the emitter; NEE alone, as before, turned glossy reflections of the kitchen's
+//! window into fireflies). A candidate drawn from a delta lobe of a mixed BSDF (a smooth coat)
+//! cannot be resampled; it is estimated whole, `weight · L(y)`, beside the reservoir. The target at a
 //! vertex `v` is `p̂_v(y) = lum(f_v(ω_o, ω_y) |cos θ| L)`, per solid angle at `v`; the initial
 //! reservoir holds one BSDF sample, `W = 1/p_ω`. `L` is a traced path tail (NEE and MIS at
 //! `y`, further bounces) or, for `-nrc`, one cache query at `y`.
@@ -26,8 +29,10 @@
 //!   their second bounce.
 //! - **Shift**: the donor's `y` and `L` kept, `W` carried by the reconnection Jacobian
 //!   [`reconnection_jacobian`]; visibility from the receiver tested by the final shadow ray.
-//! - **Bias**: unbiased (default) — `Z` sums the `M` of the inputs whose owner has `p̂ > 0` for
-//!   `y` and sees it (a shadow ray per input); `-biased`: `Z = Σ M`. Reusing `L` toward another
+//! - **Bias**: unbiased (default) — pairwise MIS ([`reuse::Merge`]: each input weighed against
+//!   the receiver's own by its target and visibility, a shadow ray per input; `pairwise=0`:
+//!   `Z` sums the `M` of the inputs whose owner has `p̂ > 0` for `y` and sees it); `-biased`:
+//!   `Z = Σ M`. Reusing `L` toward another
 //!   receiver is exact where `y` is diffuse; at glossy `y` it is the method's approximation.
 
 use std::time::Instant;
@@ -37,7 +42,7 @@ use nrc_scene::{Scene, sampling::luminance};
 use rayon::prelude::*;
 
 use crate::error::SettingsError;
-use super::reuse::{self, Entry, Resampling, Slot, WorldHistory};
+use super::reuse::{self, Entry, Merge, Resampling, Slot, WorldHistory};
 use super::screen::{GBuffer, MAX, Phase, Primary, par_map, stream, visible_between};
 use super::params::{Key, Params, Value};
 use super::spec::{PassConfig, PassKind, parse_variant};
@@ -71,7 +76,7 @@ pub const KIND: PassKind = PassKind {
     grammar: "restir-gi[-biased][-nrc], wsrestir-gi[-biased][-nrc]",
     about: "ReSTIR GI in screen space (restir-gi: screen neighbours) or world space \
             (wsrestir-gi: a hash grid of cells sized by eq. 11): the reconnection vertex and its \
-            outgoing radiance, shifted with the reconnection Jacobian; -biased: Z = sum M \
+            outgoing radiance, shifted with the reconnection Jacobian, merged by pairwise MIS; -biased: Z = sum M \
             without visibility rays; -nrc: the reconnection vertex's radiance from the cache",
     method: true,
     variants: || variants().into_iter().map(|(_, s)| s.into()).collect(),
@@ -146,6 +151,8 @@ pub struct RestirGiSettings {
     pub cache: bool,
     /// `Z = Σ M`: biased.
     pub biased: bool,
+    /// Unbiased merges by pairwise MIS (off: 1/Z), [`reuse::Merge`].
+    pub pairwise: bool,
     pub temporal: bool,
     /// The history's `M` cap (Ouyang et al.: 30 frames).
     pub m_cap: f32,
@@ -166,6 +173,7 @@ impl Default for RestirGiSettings {
             reuse: GiReuse::screen(),
             cache: false,
             biased: false,
+            pairwise: true,
             temporal: true,
             m_cap: 30.0,
             jitter: true,
@@ -241,6 +249,7 @@ impl Params for RestirGiSettings {
         let mcap = Key::new("mcap", "the history's M cap, frames");
         f(&mcap.positive(f64::INFINITY), &mut self.m_cap);
         f(&Key::new("temporal", "reuse the previous frame's reservoirs"), &mut self.temporal);
+        reuse::visit_pairwise(f, &mut self.pairwise);
         let jacobian = Key::new("jacobian", "shift W by the reconnection Jacobian (0: biased)");
         f(&jacobian, &mut self.jacobian);
         f(&Key::new("jitter", "jitter camera rays in the pixel"), &mut self.jitter);
@@ -614,8 +623,8 @@ impl Resampling for GiFrame<'_> {
         visible_between(self.scene, v.si.p, v.si.ng, y.x, y.n, stats)
     }
 
-    fn biased(&self) -> bool {
-        self.pass.settings.biased
+    fn merge(&self) -> Merge {
+        Merge::of(self.pass.settings.biased, self.pass.settings.pairwise)
     }
 }
 

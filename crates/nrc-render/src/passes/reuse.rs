@@ -51,14 +51,12 @@ pub trait Resampling: Sync {
     /// Whether `v` sees `y`; counts the ray in `stats`.
     fn visible(&self, v: &Vertex, y: &Self::Sample, stats: &mut PathStats) -> bool;
 
-    /// `Z = Σ M` (no visibility rays) instead of the unbiased count.
-    fn biased(&self) -> bool;
+    /// How merges weigh their inputs.
+    fn merge(&self) -> Merge;
 
     /// Merges `others` (reservoirs with their owners' vertices) into `own` (the reservoir of
-    /// `v`), each shifted by [`Resampling::jacobian`], finishing with the unbiased `Z`
-    /// (Bitterli et al. 2020, Alg. 6: the `M` of the inputs whose owner has a defined shift,
-    /// `p̂ > 0` for the chosen `y`, and sees it) or, [`Resampling::biased`], `Z = Σ M`. Returns
-    /// the merged reservoir and whether its sample is `own`'s.
+    /// `v`), each shifted by [`Resampling::jacobian`], weighted as [`Resampling::merge`] says
+    /// ([`Merge`]). Returns the merged reservoir and whether its sample is `own`'s.
     fn combine(
         &self,
         v: &Vertex,
@@ -67,6 +65,9 @@ pub trait Resampling: Sync {
         u: &mut PixelSampler,
         stats: &mut PathStats,
     ) -> (Reservoir<Self::Sample>, bool) {
+        if self.merge() == Merge::Pairwise && !others.is_empty() {
+            return self.combine_pairwise(v, own, others, u, stats);
+        }
         let mut out = Reservoir::new();
         let mut is_own = out.merge(own, own.target, u.next_1d());
         for (o, ov) in others {
@@ -79,7 +80,7 @@ pub trait Resampling: Sync {
             }
         }
         let z = match out.sample {
-            Some(y) if !self.biased() => {
+            Some(y) if self.merge() != Merge::Biased => {
                 let mut z = own.m;
                 for (o, ov) in others {
                     if self.jacobian(v, ov, &y) > 0.0
@@ -95,6 +96,108 @@ pub trait Resampling: Sync {
         };
         out.finish(z);
         (out, is_own)
+    }
+
+    /// `p̂` of neighbour `o` (owner `ov`) for `y`, carried into the measure of the receiver
+    /// `v` (`p̂_o(y) / J`, `J = ∂ω_v/∂ω_o`): the density, up to its normalisation, with which
+    /// `o`'s domain produces `y`. Zero where the shift is not defined or `p̂_o(y) = 0`, and,
+    /// with `test`, where `o`'s owner does not see `y` (a shadow ray, counted in `stats`).
+    fn target_from(
+        &self,
+        v: &Vertex,
+        ov: &Vertex,
+        y: &Self::Sample,
+        test: bool,
+        stats: &mut PathStats,
+    ) -> f32 {
+        let j = self.jacobian(v, ov, y);
+        let t = self.target(ov, y);
+        if !(j > 0.0 && t > 0.0) || (test && !self.visible(ov, y, stats)) {
+            return 0.0;
+        }
+        let p = t / j;
+        if p.is_finite() { p } else { 0.0 }
+    }
+
+    /// [`Resampling::combine`] with generalised pairwise MIS weights (Bitterli's thesis, 2022,
+    /// §9.1.3; Lin et al. 2022, "GRIS", §5): `own` is the canonical input `c` and each of the
+    /// `k` others `i` is weighed against it alone, with confidence weights `M`. With
+    /// `a_i(y) = M_i p̂_i(y) / (M_i p̂_i(y) + M_c/k · p̂_c(y))` (`p̂_i` in `v`'s measure,
+    /// [`Resampling::target_from`]) and each pair's share `b_i = (M_i + M_c/k) / Σ M`, the
+    /// weights are `m_i(y) = b_i a_i(y)` and `m_c(y) = Σ_i b_i (1 − a_i(y))`: they sum to 1
+    /// wherever `c` can produce `y` and vanish where their own input cannot, so the merge is
+    /// unbiased; and a neighbour whose target differs from the receiver's (a diffuse donor's
+    /// sample at a glossy receiver, a donor lit where the receiver is dark) gets the weight
+    /// its domain deserves instead of 1/Z's equal share, which is what made 1/Z's fireflies.
+    /// Each input enters with `m(y) · p̂_c(y) · W · J`, and `W = w_sum / p̂_c(y)`. Costs one
+    /// shadow ray per neighbour (the canonical sample seen from its owner), as 1/Z does.
+    fn combine_pairwise(
+        &self,
+        v: &Vertex,
+        own: &Reservoir<Self::Sample>,
+        others: &[(Reservoir<Self::Sample>, &Vertex)],
+        u: &mut PixelSampler,
+        stats: &mut PathStats,
+    ) -> (Reservoir<Self::Sample>, bool) {
+        let k = others.len() as f32;
+        let total = own.m + others.iter().map(|(o, _)| o.m).sum::<f32>();
+        let c_share = own.m / k;
+        let pair = |m_i: f32, p_i: f32, p_c: f32| {
+            let a = m_i * p_i;
+            let d = a + c_share * p_c;
+            if d > 0.0 && d.is_finite() { a / d } else { 0.0 }
+        };
+        let share = |m_i: f32| (m_i + c_share) / total;
+        let mut out = Reservoir::new();
+        let mut m_c = 0.0;
+        if let Some(y) = &own.sample {
+            for (o, ov) in others {
+                let p_i = self.target_from(v, ov, y, true, stats);
+                m_c += share(o.m) * (1.0 - pair(o.m, p_i, own.target));
+            }
+        }
+        let mut is_own = out.merge_weighted(own, m_c * own.target * own.w, own.target, u.next_1d());
+        for (o, ov) in others {
+            let weight = match &o.sample {
+                Some(y) => {
+                    let p_c = self.target(v, y);
+                    // `o` found `y` and sees it: no shadow ray for its own density.
+                    let p_i = self.target_from(v, ov, y, false, stats);
+                    let m_i = share(o.m) * pair(o.m, p_i, p_c);
+                    (m_i * p_c * o.w * self.jacobian(v, ov, y), p_c)
+                }
+                None => (0.0, 0.0),
+            };
+            if out.merge_weighted(o, weight.0, weight.1, u.next_1d()) {
+                is_own = false;
+            }
+        }
+        out.finish_normalised();
+        (out, is_own)
+    }
+}
+
+/// How a merge of reservoirs weighs its inputs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Merge {
+    /// `Z = Σ M`: no visibility rays; biased where the inputs' domains differ.
+    Biased,
+    /// Unbiased `1/Z` (Bitterli et al. 2020, Alg. 6): `Z` sums the `M` of the inputs whose
+    /// owner has a defined shift, `p̂ > 0` for the chosen `y`, and sees it. Every input that
+    /// could have produced `y` gets the same share, however unlikely it was to.
+    Count,
+    /// Unbiased generalised pairwise MIS ([`Resampling::combine_pairwise`]), the default.
+    Pairwise,
+}
+
+impl Merge {
+    /// The merge of a pass's settings: `-biased`, else pairwise MIS unless `pairwise` is off.
+    pub fn of(biased: bool, pairwise: bool) -> Self {
+        match (biased, pairwise) {
+            (true, _) => Self::Biased,
+            (false, true) => Self::Pairwise,
+            (false, false) => Self::Count,
+        }
     }
 }
 
@@ -279,14 +382,25 @@ pub fn world_spatial<'a, R: Resampling>(
     })
 }
 
+/// The key choosing pairwise MIS over 1/Z for unbiased merges ([`Merge`]).
+pub(super) fn visit_pairwise(f: &mut dyn FnMut(&Key, &mut dyn Value), pairwise: &mut bool) {
+    let key = Key::new(
+        "pairwise",
+        "unbiased merges by pairwise MIS (0: 1/Z, an equal share for every input)",
+    );
+    f(&key, pairwise);
+}
+
 /// The keys of the screen-space reuse every resampling pass of the primary vertex shares:
-/// `k` neighbours in a disc of `radius` pixels, the history's `mcap`, and `temporal`.
+/// `k` neighbours in a disc of `radius` pixels, the history's `mcap`, `temporal`, and
+/// `pairwise`.
 pub(super) fn visit_reuse(
     f: &mut dyn FnMut(&Key, &mut dyn Value),
     neighbours: &mut u32,
     radius: &mut f32,
     m_cap: &mut f32,
     temporal: &mut bool,
+    pairwise: &mut bool,
 ) {
     let k = Key::new("k", "spatial neighbours (0: no spatial reuse)");
     f(&k.range(0.0, MAX), neighbours);
@@ -301,6 +415,7 @@ pub(super) fn visit_reuse(
         &Key::new("temporal", "reuse the previous frame's reservoirs"),
         temporal,
     );
+    visit_pairwise(f, pairwise);
 }
 
 /// The bounds every resampling pass puts on its reuse settings (`counts`: its candidate and
