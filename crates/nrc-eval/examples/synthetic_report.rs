@@ -131,6 +131,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             metrics: compute_metrics(&test, &reference_view, &options)?,
             bias_variance: Some(acc.finish(&reference_view, None)?),
             temporal: None,
+            concentration: None,
         });
         report.sweeps.push(series);
     }

@@ -5,6 +5,8 @@
 //! - [`metrics`]: MSE, relMSE, MAPE; [`hdr_flip`](mod@hdr_flip) (with the LDR core in [`flip`]): HDR-FLIP,
 //!   checked against NVIDIA's published tool on the fixtures in `tests/fixtures/flip`;
 //! - [`bias_variance`](mod@bias_variance): bias² and variance from R independent renders;
+//! - [`concentration`](mod@concentration): where the error sits (the worst 1 % of pixels, the
+//!   pixels that see an emitter);
 //! - [`temporal`]: frame-to-frame change and the error measures |E|, |E′|;
 //! - [`sweep`]: error against time, "time to reach the error of X";
 //! - [`convergence`]: frames to equal error (progressive frames of one state, the
@@ -32,6 +34,7 @@
 
 pub mod atomic;
 pub mod bias_variance;
+pub mod concentration;
 pub mod convergence;
 pub mod error;
 pub mod flip;
@@ -46,6 +49,7 @@ pub mod sweep;
 pub mod temporal;
 
 pub use bias_variance::{BiasVariance, BiasVarianceAccumulator, bias_variance};
+pub use concentration::{ErrorConcentration, concentration, mean_concentration};
 pub use error::{EvalError, Result};
 pub use hdr_flip::{HdrFlipParams, HdrFlipResult, ToneMapper, hdr_flip};
 pub use image::{ImageView, RgbImage, ScalarImage};

@@ -8,8 +8,8 @@ use nrc_eval::png_output::{ColorMap, Scale, write_false_color_png, write_srgb_pn
 use nrc_eval::report::{fmt_num, read_report_json};
 use nrc_eval::sweep::time_to_error_table;
 use nrc_eval::{
-    BiasVariance, EvalError, ImageView, Report, ReportRow, ScalarImage, SweepPoint, SweepSeries,
-    TemporalStats, write_report,
+    BiasVariance, ErrorConcentration, EvalError, ImageView, Report, ReportRow, ScalarImage,
+    SweepPoint, SweepSeries, TemporalStats, write_report,
 };
 
 fn decode_png(path: &Path) -> (u32, u32, Vec<u8>) {
@@ -75,6 +75,11 @@ fn sample_report() -> Report {
                 variance: 0.5,
             }),
             temporal: None,
+            concentration: Some(ErrorConcentration {
+                top_percent: 0.64,
+                emitters: Some(0.5),
+                p999: 12.5,
+            }),
         },
         ReportRow {
             method: "pt-16spp".into(),
@@ -87,6 +92,7 @@ fn sample_report() -> Report {
                 flip: Some(0.05),
             },
             bias_variance: None,
+            concentration: None,
             temporal: Some(TemporalStats {
                 frames: 3,
                 mean_abs_change: 0.1,
@@ -129,6 +135,13 @@ fn report_files_round_trip() {
     );
     assert!(md.contains("| pt-1spp | 3.250 | 1.000 | 0.5000 |"), "{md}");
     assert!(md.contains("## Temporal stability"));
+    // The concentration table holds the rows that have one.
+    assert!(md.contains("## Where the error is"), "{md}");
+    assert!(
+        md.contains("| pt-1spp | 0.5000 | 64 % | 50 % | 12.50 |"),
+        "{md}"
+    );
+    assert!(!md.contains("| pt-16spp | 0.03100 | "), "{md}");
     assert!(
         md.contains("## Time to reach the MSE of pt-bsdf at 24.00 ms"),
         "{md}"

@@ -24,7 +24,8 @@ use nrc_eval::png_output::{ColorMap, Scale, write_false_color_png};
 use nrc_eval::sweep::time_to_error_table;
 use nrc_eval::{
     BiasVarianceAccumulator, ErrorMetrics, HdrFlipParams, ImageView, Report, ReportRow,
-    ScalarImage, SweepPoint, SweepSeries, hdr_flip, write_report,
+    ScalarImage, SweepPoint, SweepSeries, concentration, hdr_flip, mean_concentration,
+    write_report,
 };
 use nrc_render::emitters::{emitter_pixels, exclude};
 use nrc_render::sampler::Stream;
@@ -247,7 +248,10 @@ pub fn compare(
         .transpose()?;
     ref_image.write_png_preview(&c.out.join("reference.png"), c.exposure)?;
 
-    let emitter_mask = c.exclude_emitters.then(|| emitter_pixels(scene, w, h));
+    // The pixels that see an emitter: excluded from the errors with `--exclude-emitters`, and
+    // the concentration table's share either way.
+    let emitter_pixels = emitter_pixels(scene, w, h);
+    let emitter_mask = c.exclude_emitters.then_some(&emitter_pixels);
     let steps = c.sweep_steps.unwrap_or(1);
     let mode = match budget {
         Budget::Time(t) => format!("equal time, {} ms per frame", t.as_secs_f64() * 1e3),
@@ -266,9 +270,11 @@ pub fn compare(
         None => format!("{} (no variance)", ref_location.display()),
     });
     if let Some(v) = &ref_var_view {
-        report
-            .notes
-            .push(reference_error_note(&ref_view, v, emitter_mask.as_deref()));
+        report.notes.push(reference_error_note(
+            &ref_view,
+            v,
+            emitter_mask.map(|m| m.as_slice()),
+        ));
     }
     let mut runs = Vec::new();
     let mut plot_series = Vec::new();
@@ -302,13 +308,23 @@ pub fn compare(
                     budget,
                 },
             )?;
-            exclude(&mut frame.image, emitter_mask.as_deref(), ref_image);
+            exclude(
+                &mut frame.image,
+                emitter_mask.map(|m| m.as_slice()),
+                ref_image,
+            );
             let (m, flip_map) = errors(&frame.image, &ref_view, c.flip, &name)?;
-            anyhow::Ok((frame, m, flip_map))
+            let spread = concentration(
+                &ImageView::of_scene_image(&name, &frame.image)?,
+                &ref_view,
+                Some(&emitter_pixels),
+            )?;
+            anyhow::Ok((frame, m, flip_map, spread))
         };
         let base = c.seed ^ name_hash(&name);
         let mut acc = BiasVarianceAccumulator::new(w as usize, h as usize);
         let mut metrics = Vec::new();
+        let mut spreads = Vec::new();
         let (mut time_ms, mut spp) = (0.0, 0.0);
         let mut first: Option<(Frame, ErrorMetrics)> = None;
         for r in 0..c.runs {
@@ -316,7 +332,8 @@ pub fn compare(
             method
                 .restart(scene, &scene.camera, w, h, r, seed)
                 .map_err(|e| anyhow::anyhow!("{name}: {e}"))?;
-            let (frame, m, flip_map) = measure(method.as_mut(), seed, budget)?;
+            let (frame, m, flip_map, spread) = measure(method.as_mut(), seed, budget)?;
+            spreads.push(spread);
             if c.runs >= 2 {
                 acc.add(&ImageView::of_scene_image(&name, &frame.image)?)?;
             }
@@ -351,6 +368,7 @@ pub fn compare(
                 None
             },
             temporal: None,
+            concentration: mean_concentration(&spreads),
         });
 
         // Plot points: the sweep (run 0 is its first budget), else every run.
@@ -367,7 +385,7 @@ pub fn compare(
             for step in 1..steps {
                 let seed = Stream::SweepStep(step).seed(base);
                 let b = scaled_budget(budget, step);
-                let (frame, m, _) = measure(method.as_mut(), seed, b)?;
+                let (frame, m, _, _) = measure(method.as_mut(), seed, b)?;
                 runs.push(record(&name, None, Some(step), seed, b, &frame, m));
                 series.points.push(SweepPoint {
                     time_ms: frame.elapsed.as_secs_f64() * 1e3,
@@ -414,7 +432,7 @@ pub fn compare(
             let mut stop_at = cv.frames;
             for f in 1..=cv.frames {
                 let seed = Stream::ConvergeFrame(f).seed(base);
-                let (frame, _, _) = measure(method.as_mut(), seed, budget)?;
+                let (frame, _, _, _) = measure(method.as_mut(), seed, budget)?;
                 time_ms += frame.elapsed.as_secs_f64() * 1e3;
                 for (s, x) in sum.iter_mut().zip(&frame.image.data) {
                     *s += x.as_dvec3();

@@ -14,14 +14,16 @@ use crate::tracer::PathStats;
 
 /// The MIS weight (power heuristic) of emission found at `si` by a ray of length `dist` that
 /// BSDF sampling at the previous vertex chose with solid-angle density `prev_pdf`, against NEE
-/// choosing the same point. `force_one`: the previous event could not have been light-sampled
-/// (a camera ray, delta scattering, or NEE off), so the emission counts fully.
+/// (`light_samples` light samples there) choosing the same point. `force_one`: the previous
+/// event could not have been light-sampled (a camera ray, delta scattering, or NEE off), so
+/// the emission counts fully.
 #[inline]
 pub fn emission_mis_weight(
     scene: &Scene,
     si: &SurfaceInteraction,
     dist: f32,
     prev_pdf: f32,
+    light_samples: f32,
     force_one: bool,
 ) -> f32 {
     // Area density with which NEE picks this point (0: NEE cannot reach it).
@@ -33,26 +35,34 @@ pub fn emission_mis_weight(
     // vertex.
     let cos_light = si.ng.dot(si.wo).abs();
     let pdf_light = pdf_area * dist * dist / cos_light;
-    power_heuristic(1.0, prev_pdf, 1.0, pdf_light)
+    power_heuristic(1.0, prev_pdf, light_samples, pdf_light)
 }
 
 /// The MIS weight (power heuristic) of environment radiance reached by a ray leaving in unit
 /// direction `d` that BSDF sampling chose with solid-angle density `prev_pdf`, against NEE
-/// choosing the same direction. `force_one` as for [`emission_mis_weight`].
+/// choosing the same direction. `light_samples` and `force_one` as for
+/// [`emission_mis_weight`].
 #[inline]
-pub fn environment_mis_weight(scene: &Scene, d: Vec3, prev_pdf: f32, force_one: bool) -> f32 {
+pub fn environment_mis_weight(
+    scene: &Scene,
+    d: Vec3,
+    prev_pdf: f32,
+    light_samples: f32,
+    force_one: bool,
+) -> f32 {
     let pdf_light = scene.environment_light_pdf(d);
     if force_one || pdf_light == 0.0 {
         return 1.0;
     }
-    power_heuristic(1.0, prev_pdf, 1.0, pdf_light)
+    power_heuristic(1.0, prev_pdf, light_samples, pdf_light)
 }
 
 /// Next-event estimation at a non-delta vertex: one light sample chosen by power (a point on
 /// an emissive triangle, a punctual light, or an environment direction), its unoccluded
 /// contribution `f · L_i · |cos| / pdf`, weighted against BSDF sampling by the power heuristic
 /// when `mis` (else weight 1; delta lights always have weight 1, BSDF sampling cannot find
-/// them). Draws three numbers from `sampler` always.
+/// them), as one of `light_samples` such samples (the caller averages them; the heuristic
+/// counts them). Draws three numbers from `sampler` always.
 #[inline]
 pub fn next_event(
     scene: &Scene,
@@ -61,6 +71,7 @@ pub fn next_event(
     frame: &Frame,
     wo: Vec3,
     mis: bool,
+    light_samples: f32,
     sampler: &mut PixelSampler,
     stats: &mut PathStats,
 ) -> Vec3 {
@@ -83,7 +94,7 @@ pub fn next_event(
         return Vec3::ZERO;
     }
     let weight = if mis && !inc.delta {
-        power_heuristic(1.0, inc.pdf, 1.0, bsdf.pdf(wo, wi_local))
+        power_heuristic(light_samples, inc.pdf, 1.0, bsdf.pdf(wo, wi_local))
     } else {
         1.0
     };

@@ -107,6 +107,8 @@ pub struct PathWalk {
     prev_delta: bool,
     /// Segments used, including the one in flight.
     segments: u32,
+    /// Light samples NEE takes at each vertex (their MIS against BSDF sampling counts them).
+    light_samples: u32,
     limit: u32,
     /// End the path when its throughput from the start is zero (rendering); training-record
     /// producers keep going, since a later vertex's own record does not depend on it.
@@ -125,6 +127,7 @@ impl PathWalk {
             prev_pdf: 0.0,
             prev_delta: true,
             segments: 1,
+            light_samples: 1,
             limit: tracer.segment_limit(),
             zero_throughput_ends: true,
         }
@@ -170,7 +173,13 @@ impl PathWalk {
             {
                 0.0
             } else {
-                environment_mis_weight(scene, d, self.prev_pdf, self.prev_delta || !self.use_nee)
+                environment_mis_weight(
+                    scene,
+                    d,
+                    self.prev_pdf,
+                    self.light_samples as f32,
+                    self.prev_delta || !self.use_nee,
+                )
             };
             return Arrival::Escaped { le, mis };
         };
@@ -194,6 +203,7 @@ impl PathWalk {
                 &si,
                 dist,
                 self.prev_pdf,
+                self.light_samples as f32,
                 self.prev_delta || !self.use_nee,
             )
         };
@@ -206,14 +216,24 @@ impl PathWalk {
         })
     }
 
+    /// The same walk taking `n` (at least 1) light samples per NEE, weighed against BSDF
+    /// sampling by the power heuristic with the counts (Veach 1997, §9.2): more shadow rays
+    /// where the direct light is the noise, none of the path's further bounces.
+    pub fn with_light_samples(self, n: u32) -> Self {
+        Self {
+            light_samples: n.max(1),
+            ..self
+        }
+    }
+
     /// Whether a further segment would exceed the maximum depth.
     pub fn at_depth_limit(&self) -> bool {
         self.segments >= self.limit
     }
 
     /// Next-event estimation at `v` (zero at delta vertices or with NEE off): the direct light
-    /// leaving `v` toward its `wo`, not yet multiplied by the throughput. Draws three numbers
-    /// always.
+    /// leaving `v` toward its `wo`, not yet multiplied by the throughput, the mean of the walk's
+    /// light samples. Draws three numbers per light sample always.
     pub fn next_event(
         &self,
         scene: &Scene,
@@ -221,13 +241,21 @@ impl PathWalk {
         sampler: &mut PixelSampler,
         stats: &mut PathStats,
     ) -> Vec3 {
+        let n = self.light_samples;
         if self.use_nee && !v.bsdf.is_delta() {
             let mis = self.tracer.strategy == LightStrategy::Mis;
-            next_event(scene, &v.si, &v.bsdf, &v.frame, v.wo, mis, sampler, stats)
+            let one = |sampler: &mut PixelSampler, stats: &mut PathStats| {
+                next_event(
+                    scene, &v.si, &v.bsdf, &v.frame, v.wo, mis, n as f32, sampler, stats,
+                )
+            };
+            (0..n).map(|_| one(sampler, stats)).sum::<Vec3>() / n as f32
         } else {
             // Keep the random stream aligned whatever the strategy.
-            sampler.next_1d();
-            sampler.next_2d();
+            for _ in 0..n {
+                sampler.next_1d();
+                sampler.next_2d();
+            }
             Vec3::ZERO
         }
     }

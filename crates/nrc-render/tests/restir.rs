@@ -242,8 +242,10 @@ fn the_reconnection_jacobian_is_the_ratio_of_solid_angles() {
 }
 
 /// Per-pixel unbiasedness of the GI passes at `--max-depth 3` (one indirect bounce), as for
-/// ReSTIR DI: 256 independent runs of 6 frames through pixel centres, both spatial reuses
-/// (screen neighbours, the world-space grid) and temporal reuse at work. Negative control:
+/// ReSTIR GI: 256 independent runs of 6 frames through pixel centres, both spatial reuses
+/// (screen neighbours, the world-space grid) and temporal reuse at work; screen space also
+/// with four light samples at the shading vertex (their MIS weights against the candidate's
+/// BSDF ray must still sum to one) and 1/Z merges. Negative control:
 /// world-space reuse without the reconnection Jacobian (`jacobian=0`) fails it (its donors lie
 /// anywhere in a cell; screen-space neighbours are so close that dropping the Jacobian stayed
 /// within the bound here, worst |z| 4.69, so it is not the control).
@@ -259,6 +261,7 @@ fn unbiased_restir_gi_passes_match_the_depth_three_reference_per_pixel() {
     let (reference, ref_var) = reference_at_centres(&scene, &tracer, w, h, ref_spp);
     for (name, unbiased) in [
         ("restir-gi:jitter=0", true),
+        ("restir-gi:jitter=0,nee=4,pairwise=0", true),
         ("wsrestir-gi:jitter=0", true),
         ("wsrestir-gi:jitter=0,jacobian=0", false),
     ] {

@@ -937,6 +937,7 @@ impl RenderPass for InstantRadiosityPass {
                         &v.frame,
                         v.wo,
                         false,
+                        1.0,
                         &mut sampler,
                         &mut stats,
                     );

@@ -153,6 +153,8 @@ pub struct RestirGiSettings {
     pub biased: bool,
     /// Unbiased merges by pairwise MIS (off: 1/Z), [`reuse::Merge`].
     pub pairwise: bool,
+    /// Light samples of NEE at the shading vertex `x₁` (MIS counts them).
+    pub light_samples: u32,
     pub temporal: bool,
     /// The history's `M` cap (Ouyang et al.: 30 frames).
     pub m_cap: f32,
@@ -174,6 +176,7 @@ impl Default for RestirGiSettings {
             cache: false,
             biased: false,
             pairwise: true,
+            light_samples: 1,
             temporal: true,
             m_cap: 30.0,
             jitter: true,
@@ -186,16 +189,19 @@ impl Default for RestirGiSettings {
 impl RestirGiSettings {
     /// Errors for settings that cannot work.
     pub fn validate(&self) -> Result<(), SettingsError> {
+        if self.light_samples == 0 {
+            return Err(SettingsError::bounds("light samples", "be at least 1", 0));
+        }
         match self.reuse {
             GiReuse::Screen { neighbours, radius } => {
-                reuse::validate_reuse(&[neighbours], radius, self.m_cap)
+                reuse::validate_reuse(&[neighbours, self.light_samples], radius, self.m_cap)
             }
             GiReuse::World {
                 samples,
                 cell_scale,
                 d_min,
             } => {
-                reuse::validate_reuse(&[samples], 0.0, self.m_cap)?;
+                reuse::validate_reuse(&[samples, self.light_samples], 0.0, self.m_cap)?;
                 if !(cell_scale > 0.0 && d_min > 0.0) {
                     return Err(SettingsError::bounds(
                         "cell scale and d_min",
@@ -250,6 +256,8 @@ impl Params for RestirGiSettings {
         f(&mcap.positive(f64::INFINITY), &mut self.m_cap);
         f(&Key::new("temporal", "reuse the previous frame's reservoirs"), &mut self.temporal);
         reuse::visit_pairwise(f, &mut self.pairwise);
+        let nee = Key::new("nee", "light samples of NEE at the shading vertex");
+        f(&nee.range(1.0, MAX), &mut self.light_samples);
         let jacobian = Key::new("jacobian", "shift W by the reconnection Jacobian (0: biased)");
         f(&jacobian, &mut self.jacobian);
         f(&Key::new("jitter", "jitter camera rays in the pixel"), &mut self.jitter);
@@ -476,7 +484,8 @@ impl RestirGiPass {
         // Direct light at x₁: NEE, weighted by MIS against the candidate's BSDF sample finding
         // the emitter (the path tracer's rule; NEE alone turned glossy reflections of a small
         // bright emitter into fireflies).
-        let mut walk = PathWalk::from_vertex(scene, &self.tracer, segments);
+        let mut walk = PathWalk::from_vertex(scene, &self.tracer, segments)
+            .with_light_samples(self.settings.light_samples);
         let direct = walk.next_event(scene, &v, &mut s, &mut out.stats);
         let mut shading = Shading {
             v,
