@@ -310,6 +310,24 @@ impl Bsdf {
         }
     }
 
+    /// Reflects and transmits nothing, in any direction (`eval` is identically 0 and no
+    /// sample carries energy): a black Lambertian surface, or a metallic-roughness one with a
+    /// black base, no metal and no specular layer (glTF's `KHR_materials_specular` factor 0,
+    /// as the converted scenes' emitters have). A conductor or a dielectric layer always
+    /// reflects at grazing angles (Fresnel), whatever its colour.
+    pub fn is_black(&self) -> bool {
+        match *self {
+            Bsdf::Diffuse { albedo } => albedo == Vec3::ZERO,
+            Bsdf::Conductor { .. } | Bsdf::Dielectric { .. } => false,
+            Bsdf::MetallicRoughness {
+                base_color,
+                metallic,
+                specular,
+                ..
+            } => base_color == Vec3::ZERO && metallic == 0.0 && specular == 0.0,
+        }
+    }
+
     /// Perceptual roughness `√α` in `[0, 1]` (1 for Lambertian): a radiance-cache input.
     pub fn roughness(&self) -> f32 {
         match *self {

@@ -1080,3 +1080,44 @@ fn summaries_for_the_radiance_cache() {
     );
     assert!(!b.is_delta() && mr(base, 1.0, 0.0, 0.0, 1.5, 1.0, Vec3::ONE).is_delta());
 }
+
+/// `is_black` says exactly which BSDFs carry no energy: over 4,000 random direction pairs and
+/// samples, those it calls black evaluate and sample to zero, and each of the others (the
+/// negative controls: a metal and a specular layer on a black base, which still reflect at
+/// grazing angles, a black conductor, a grey diffuse surface) returns some energy.
+#[test]
+fn black_bsdfs_carry_no_energy_and_the_others_do() {
+    let mut rng = Pcg64::seed_from_u64(11);
+    let cases = [
+        (Bsdf::Diffuse { albedo: Vec3::ZERO }, true),
+        (mr(Vec3::ZERO, 0.0, 0.5, 0.5, 1.5, 0.0, Vec3::ONE), true),
+        (mr(Vec3::ZERO, 1.0, 0.5, 0.0, 1.5, 0.0, Vec3::ONE), false),
+        (mr(Vec3::ZERO, 0.0, 0.5, 0.0, 1.5, 1.0, Vec3::ONE), false),
+        (
+            Bsdf::Conductor {
+                f0: Vec3::ZERO,
+                alpha: 0.25,
+            },
+            false,
+        ),
+        (
+            Bsdf::Diffuse {
+                albedo: Vec3::splat(0.5),
+            },
+            false,
+        ),
+    ];
+    for (bsdf, black) in cases {
+        assert_eq!(bsdf.is_black(), black, "{bsdf:?}");
+        let mut energy = 0.0f32;
+        for _ in 0..4000 {
+            let (wo, wi) = (random_dir(&mut rng), random_dir(&mut rng));
+            energy += bsdf.eval(wo, wi).max_element();
+            let u = Vec2::new(rng.random(), rng.random());
+            if let Some(s) = bsdf.sample(wo, u, rng.random()) {
+                energy += s.weight.max_element();
+            }
+        }
+        assert_eq!(energy == 0.0, black, "{bsdf:?}: energy {energy}");
+    }
+}

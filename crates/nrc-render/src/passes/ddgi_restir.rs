@@ -406,7 +406,8 @@ fn sees(scene: &Scene, v: &Vertex, y: &DdgiSample, stats: &mut PathStats) -> boo
 }
 
 /// A candidate before its source radiance is known: the sample, and the vertex at a surface
-/// point (asked for its radiance toward the finder).
+/// point (asked for its radiance toward the finder; none for a light sample or a black
+/// surface, whose reflected radiance is zero).
 #[derive(Clone, Copy, Debug)]
 struct Candidate {
     y: DdgiSample,
@@ -498,6 +499,10 @@ impl DdgiRestirPass {
                 rho: at.bsdf.diffuse_reflectance(),
             })
         };
+        // The vertex at a surface candidate, for the source to answer the radiance it
+        // reflects; none where its BSDF is black (the converted scenes' emitters): that
+        // radiance is exactly zero, and asking costs a cache query or a probe lookup.
+        let reflecting = |at: Vertex| (!at.bsdf.is_black()).then_some(at);
         for _ in 0..set.light_candidates {
             let u_select = s.next_1d();
             let u_point = s.next_2d();
@@ -508,7 +513,7 @@ impl DdgiRestirPass {
                     let at = Vertex::new(scene, &si, wo);
                     Some(Candidate {
                         y: surface(&si, at),
-                        at: Some(at),
+                        at: reflecting(at),
                         from_bsdf: false,
                     })
                 }
@@ -535,7 +540,7 @@ impl DdgiRestirPass {
                     let at = Vertex::new(scene, &si, si.wo);
                     Some(Candidate {
                         y: surface(&si, at),
-                        at: Some(at),
+                        at: reflecting(at),
                         from_bsdf: true,
                     })
                 }
