@@ -7,6 +7,10 @@
 //! plotted as error against wall time with the "time to reach the error of the first method"
 //! table. The budget and its tolerance are those of `nrc_harness::budget::render_frame`.
 //!
+//! The report also says where each method's error is (`nrc_eval::concentration`): the share of
+//! its squared error in its worst 1 % of pixels and in the pixels that see an emitter, and the
+//! 99.9th percentile of pixel squared error, averaged over runs.
+//!
 //! Output folder: `report.md`, `report.json`, `runs.json` (every frame: seed, passes, spp, time,
 //! longest pass, errors), `error-vs-time.png`/`.svg` (relMSE against time per frame),
 //! `reference.png`, and per method (its first run) `<method>.exr`, `<method>.png` (tone-mapped
