@@ -249,6 +249,10 @@ impl PathWalk {
                     scene, &v.si, &v.bsdf, &v.frame, v.wo, mis, n as f32, sampler, stats,
                 )
             };
+            if n == 1 {
+                // The path tracer's case: no averaging on its hot path.
+                return one(sampler, stats);
+            }
             (0..n).map(|_| one(sampler, stats)).sum::<Vec3>() / n as f32
         } else {
             // Keep the random stream aligned whatever the strategy.

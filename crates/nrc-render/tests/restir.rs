@@ -4,7 +4,9 @@ mod common;
 #[path = "../../nrc-scene/tests/stat/mod.rs"]
 mod stat;
 
-use common::{last_frame, per_pixel_z, reference_at_centres, reference_at_centres_from};
+use common::{
+    accumulate_frames, last_frame, per_pixel_z, reference_at_centres, reference_at_centres_from,
+};
 use nrc_render::passes::{self, FrameInput, PassSpec};
 use nrc_render::reservoir::Reservoir;
 use nrc_render::{PathTracer, PixelSampler, ZeroSource};
@@ -354,26 +356,9 @@ fn unbiased_wsrestir_gi_converges_to_the_reference_on_the_cornell_box() {
         let mut pass = spec.build(&tracer);
         let (mut single, mut accumulated) = (0.0, 0.0);
         for run in 0..4u64 {
-            pass.reset();
-            let mut sum = vec![glam::Vec3::ZERO; (w * h) as usize];
-            let mut last = None;
-            for f in 0..32 {
-                let input = FrameInput {
-                    scene: &scene,
-                    camera: &scene.camera,
-                    width: w,
-                    height: h,
-                    spp: 1,
-                    seed: nrc_render::pass_seed(9000 + run, f),
-                };
-                let img = passes::run(pass.as_mut(), &input, &ZeroSource).image;
-                for (s, p) in sum.iter_mut().zip(&img.data) {
-                    *s += *p / 32.0;
-                }
-                last = Some(img);
-            }
-            single += mse(&last.unwrap());
-            accumulated += mse(&Image::from_data(w as usize, h as usize, sum).unwrap());
+            let (mean, last) = accumulate_frames(pass.as_mut(), &scene, w, h, 32, 9000 + run);
+            single += mse(&last);
+            accumulated += mse(&mean);
         }
         (single / 4.0, accumulated / 4.0)
     };
@@ -630,23 +615,7 @@ fn resampling_passes_keep_the_path_tracers_tails_where_a_small_bright_emitter_me
     };
     let accumulate = |spec: &str, tracer: &PathTracer, run: u64| {
         let spec: PassSpec = spec.parse().unwrap();
-        let mut pass = spec.build(tracer);
-        let mut sum = vec![glam::Vec3::ZERO; (w * h) as usize];
-        for f in 0..8 {
-            let input = FrameInput {
-                scene: &scene,
-                camera: &scene.camera,
-                width: w,
-                height: h,
-                spp: 1,
-                seed: nrc_render::pass_seed(7000 + run, f),
-            };
-            let img = passes::run(pass.as_mut(), &input, &ZeroSource).image;
-            for (s, p) in sum.iter_mut().zip(&img.data) {
-                *s += *p / 8.0;
-            }
-        }
-        Image::from_data(w as usize, h as usize, sum).unwrap()
+        accumulate_frames(spec.build(tracer).as_mut(), &scene, w, h, 8, 7000 + run).0
     };
     let tails = |spec: &str, tracer: &PathTracer| {
         let runs: Vec<Image> = (0..8).map(|r| accumulate(spec, tracer, r)).collect();

@@ -100,8 +100,8 @@ pub trait Resampling: Sync {
 
     /// `p̂` of neighbour `o` (owner `ov`) for `y`, carried into the measure of the receiver
     /// `v` (`p̂_o(y) / J`, `J = ∂ω_v/∂ω_o`): the density, up to its normalisation, with which
-    /// `o`'s domain produces `y`. Zero where the shift is not defined or `p̂_o(y) = 0`, and,
-    /// with `test`, where `o`'s owner does not see `y` (a shadow ray, counted in `stats`).
+    /// `o`'s domain produces `y`; and `J`. Zero where the shift is not defined or `p̂_o(y) = 0`,
+    /// and, with `test`, where `o`'s owner does not see `y` (a shadow ray, counted in `stats`).
     fn target_from(
         &self,
         v: &Vertex,
@@ -109,14 +109,17 @@ pub trait Resampling: Sync {
         y: &Self::Sample,
         test: bool,
         stats: &mut PathStats,
-    ) -> f32 {
+    ) -> (f32, f32) {
         let j = self.jacobian(v, ov, y);
+        if j <= 0.0 {
+            return (0.0, 0.0);
+        }
         let t = self.target(ov, y);
-        if !(j > 0.0 && t > 0.0) || (test && !self.visible(ov, y, stats)) {
-            return 0.0;
+        if t <= 0.0 || (test && !self.visible(ov, y, stats)) {
+            return (0.0, j);
         }
         let p = t / j;
-        if p.is_finite() { p } else { 0.0 }
+        (if p.is_finite() { p } else { 0.0 }, j)
     }
 
     /// [`Resampling::combine`] with generalised pairwise MIS weights (Bitterli's thesis, 2022,
@@ -152,20 +155,22 @@ pub trait Resampling: Sync {
         let mut m_c = 0.0;
         if let Some(y) = &own.sample {
             for (o, ov) in others {
-                let p_i = self.target_from(v, ov, y, true, stats);
+                let (p_i, _) = self.target_from(v, ov, y, true, stats);
                 m_c += share(o.m) * (1.0 - pair(o.m, p_i, own.target));
             }
         }
         let mut is_own = out.merge_weighted(own, m_c * own.target * own.w, own.target, u.next_1d());
         for (o, ov) in others {
             let weight = match &o.sample {
-                Some(y) => {
-                    let p_c = self.target(v, y);
-                    // `o` found `y` and sees it: no shadow ray for its own density.
-                    let p_i = self.target_from(v, ov, y, false, stats);
-                    let m_i = share(o.m) * pair(o.m, p_i, p_c);
-                    (m_i * p_c * o.w * self.jacobian(v, ov, y), p_c)
-                }
+                Some(y) => match self.target(v, y) {
+                    p_c if p_c > 0.0 => {
+                        // `o` found `y` and sees it: no shadow ray for its own density.
+                        let (p_i, j) = self.target_from(v, ov, y, false, stats);
+                        let m_i = share(o.m) * pair(o.m, p_i, p_c);
+                        (m_i * p_c * o.w * j, p_c)
+                    }
+                    _ => (0.0, 0.0),
+                },
                 None => (0.0, 0.0),
             };
             if out.merge_weighted(o, weight.0, weight.1, u.next_1d()) {

@@ -378,6 +378,38 @@ pub fn last_frame_with(
     image.unwrap()
 }
 
+/// `frames` consecutive frames of `pass` (restarted first) through `scene`'s camera, seed
+/// `seed`, at 1 spp: their mean (what the harness accumulates) and the last frame.
+pub fn accumulate_frames(
+    pass: &mut dyn nrc_render::passes::RenderPass,
+    scene: &Scene,
+    w: u32,
+    h: u32,
+    frames: u32,
+    seed: u64,
+) -> (Image, Image) {
+    pass.reset();
+    let mut sum = vec![Vec3::ZERO; (w * h) as usize];
+    let mut last = None;
+    for f in 0..frames {
+        let input = FrameInput {
+            scene,
+            camera: &scene.camera,
+            width: w,
+            height: h,
+            spp: 1,
+            seed: nrc_render::pass_seed(seed, f),
+        };
+        let img = passes::run(pass, &input, &ZeroSource).image;
+        for (s, p) in sum.iter_mut().zip(&img.data) {
+            *s += *p / frames as f32;
+        }
+        last = Some(img);
+    }
+    let mean = Image::from_data(w as usize, h as usize, sum).unwrap();
+    (mean, last.expect("at least one frame"))
+}
+
 /// Per pixel and channel: the mean of `runs` against the reference (its variance of one
 /// sample `ref_var` over `ref_spp`), as the largest |z| and the count of pixel channels
 /// beyond the Bonferroni bound for a family-wise false alarm of 10⁻³.
