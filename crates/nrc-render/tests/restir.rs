@@ -356,7 +356,8 @@ fn unbiased_wsrestir_gi_converges_to_the_reference_on_the_cornell_box() {
         let mut pass = spec.build(&tracer);
         let (mut single, mut accumulated) = (0.0, 0.0);
         for run in 0..4u64 {
-            let (mean, last) = accumulate_frames(pass.as_mut(), &scene, w, h, 32, 9000 + run);
+            let (mean, last) =
+                accumulate_frames(pass.as_mut(), &scene, w, h, 32, 9000 + run, &ZeroSource);
             single += mse(&last);
             accumulated += mse(&mean);
         }
@@ -615,7 +616,16 @@ fn resampling_passes_keep_the_path_tracers_tails_where_a_small_bright_emitter_me
     };
     let accumulate = |spec: &str, tracer: &PathTracer, run: u64| {
         let spec: PassSpec = spec.parse().unwrap();
-        accumulate_frames(spec.build(tracer).as_mut(), &scene, w, h, 8, 7000 + run).0
+        accumulate_frames(
+            spec.build(tracer).as_mut(),
+            &scene,
+            w,
+            h,
+            8,
+            7000 + run,
+            &ZeroSource,
+        )
+        .0
     };
     let tails = |spec: &str, tracer: &PathTracer| {
         let runs: Vec<Image> = (0..8).map(|r| accumulate(spec, tracer, r)).collect();

@@ -362,24 +362,12 @@ pub fn last_frame_with(
     source: &dyn RadianceSource,
 ) -> Image {
     let mut pass = spec.build(tracer);
-    pass.reset();
-    let mut image = None;
-    for f in 0..frames {
-        let input = FrameInput {
-            scene,
-            camera: &scene.camera,
-            width: w,
-            height: h,
-            spp: 1,
-            seed: nrc_render::pass_seed(seed, f),
-        };
-        image = Some(passes::run(pass.as_mut(), &input, source).image);
-    }
-    image.unwrap()
+    accumulate_frames(pass.as_mut(), scene, w, h, frames, seed, source).1
 }
 
 /// `frames` consecutive frames of `pass` (restarted first) through `scene`'s camera, seed
-/// `seed`, at 1 spp: their mean (what the harness accumulates) and the last frame.
+/// `seed`, at 1 spp, its queries answered by `source`: their mean (what the harness
+/// accumulates) and the last frame.
 pub fn accumulate_frames(
     pass: &mut dyn nrc_render::passes::RenderPass,
     scene: &Scene,
@@ -387,6 +375,7 @@ pub fn accumulate_frames(
     h: u32,
     frames: u32,
     seed: u64,
+    source: &dyn RadianceSource,
 ) -> (Image, Image) {
     pass.reset();
     let mut sum = vec![Vec3::ZERO; (w * h) as usize];
@@ -400,7 +389,7 @@ pub fn accumulate_frames(
             spp: 1,
             seed: nrc_render::pass_seed(seed, f),
         };
-        let img = passes::run(pass, &input, &ZeroSource).image;
+        let img = passes::run(pass, &input, source).image;
         for (s, p) in sum.iter_mut().zip(&img.data) {
             *s += *p / frames as f32;
         }
