@@ -236,5 +236,17 @@ pub fn run(args: &TrainArgs) -> Result<()> {
         sum.dropped,
         sum.skipped
     );
+    if let Some(ms) = args.cache.train_budget_ms {
+        println!(
+            "training budget {ms} ms/frame: {:.0} records/frame on average; {} of {} frames after the warm-up over 1.2 × their plan",
+            sum.records, sum.over_budget, sum.budgeted_frames
+        );
+    }
+    if sum.changes > 0 {
+        println!(
+            "{} change(s) in the scene detected; {} frames recovering",
+            sum.changes, sum.recovering_frames
+        );
+    }
     Ok(())
 }

@@ -69,6 +69,9 @@ pub struct RadianceCache {
     ema_base: Option<u32>,
     state: Option<TensorState>,
     inference: Mutex<Option<InferenceWeights>>,
+    /// Inference from the training weights instead of their average (see
+    /// [`RadianceCache::set_follow`]).
+    follow: bool,
 }
 
 impl RadianceCache {
@@ -148,6 +151,7 @@ impl RadianceCache {
             ema_base: None,
             state: Some(state),
             inference: Mutex::new(None),
+            follow: false,
         })
     }
 
@@ -417,7 +421,8 @@ impl RadianceCache {
             return (w.grid.clone(), w.mlp.clone());
         }
         let state = self.state.as_ref().expect("state present");
-        let (grid, mlp) = match (self.path, self.ema) {
+        let ema = self.ema.filter(|_| !self.follow);
+        let (grid, mlp) = match (self.path, ema) {
             (ComputePath::Fused, ema) => {
                 // The op takes the state by value; the clones share storage and the kernel only
                 // reads it.
@@ -449,6 +454,56 @@ impl RadianceCache {
             mlp: mlp.clone(),
         });
         (grid, mlp)
+    }
+
+    /// Whether inference reads the training weights instead of their average.
+    pub fn follows(&self) -> bool {
+        self.follow
+    }
+
+    /// Switches inference between the weights' EMA (the default: the average of the recent
+    /// steps, calmer than the last step's weights) and the training weights themselves
+    /// ("follow"). After the scene changes the average lags the training weights by about
+    /// `1/(1 − α)` steps (100 at the preset's α = 0.99: on `cornell-box-jump` the first-vertex
+    /// render has not recovered 60 frames after the light jumps); following, inference sees
+    /// each step's progress at once. Leaving follow mode restarts the average at the
+    /// weights (the bias-corrected EMA equals them), so that inference goes on from where it
+    /// is instead of jumping back to the stale average. No effect without an EMA.
+    pub fn set_follow(&mut self, follow: bool) {
+        if self.follow == follow || self.ema.is_none() {
+            return;
+        }
+        self.follow = follow;
+        *self.inference.lock().expect("inference lock") = None;
+        if !follow {
+            self.restart_average();
+        }
+    }
+
+    /// Sets the EMA so that its bias-corrected value `e_t / (1 − α^t)` equals the weights at
+    /// the current step `t`: `e_t = (1 − α^t)·w`, or in the fused records' gap form based at
+    /// `b` (`e_t = w + α^(t−b)·q`) `q = −α^b·w`.
+    fn restart_average(&mut self) {
+        let (Some(alpha), t) = (self.ema, self.step) else {
+            return;
+        };
+        if t == 0 {
+            return;
+        }
+        let keep = 1.0 - crate::cpu::optim::decay_pow(alpha, t);
+        if self.path == ComputePath::Fused {
+            let scale = match self.ema_base {
+                Some(b) => -crate::cpu::optim::decay_pow(alpha, b),
+                None => keep,
+            };
+            self.convert_ema(EmaConversion::ScaledWeights { scale });
+        } else {
+            let s = self.state.as_mut().expect("state present");
+            s.grid_ema = s.grid.clone().mul_scalar(keep);
+        }
+        let s = self.state.as_mut().expect("state present");
+        s.mlp_ema = s.mlp.clone().mul_scalar(keep);
+        *self.inference.lock().expect("inference lock") = None;
     }
 
     /// The state on the host with the raw EMA (the form snapshots store).

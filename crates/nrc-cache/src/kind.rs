@@ -112,6 +112,14 @@ impl Cache {
         }
     }
 
+    /// [`RadianceCache::set_follow`]; the hash cache has no average to follow past (its cells'
+    /// running means are its state).
+    pub fn set_follow(&mut self, follow: bool) {
+        if let Self::Neural(c) = self {
+            c.set_follow(follow);
+        }
+    }
+
     pub fn infer(&self, queries: &[CacheQuery]) -> Vec<[f32; 3]> {
         match self {
             Self::Neural(c) => c.infer(queries),

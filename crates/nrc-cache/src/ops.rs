@@ -151,6 +151,12 @@ pub enum EmaConversion {
     },
     /// Raw EMA → gap based at the current step: `q = e − w`.
     ToGap,
+    /// The EMA slot (raw EMA or gap, whichever the records hold) set to `scale·w`: how the
+    /// average is restarted at the weights ([`crate::RadianceCache::set_follow`]).
+    ScaledWeights {
+        /// The factor of the weights.
+        scale: f32,
+    },
 }
 
 /// Fused, non-differentiable custom ops of the training loop.
@@ -520,6 +526,9 @@ impl NrcFusedOps for Flex {
                         cpu::optim::ema_raw_from_gap(alpha, shift, f, records)
                     }
                     EmaConversion::ToGap => cpu::optim::ema_gap_from_raw(f, records),
+                    EmaConversion::ScaledWeights { scale } => {
+                        cpu::optim::ema_scaled_weights(scale, f, records)
+                    }
                 }
             }
         })

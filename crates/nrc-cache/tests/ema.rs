@@ -153,6 +153,29 @@ fn batch(n: usize, seed: u64) -> TrainingBatch {
     }
 }
 
+/// The hash-grid preset with a 2^12 table, the average read in f32 (the average itself, not
+/// its half-precision rounding, tested on its own below) and EMA decay `alpha`.
+fn small_config(alpha: f32) -> CacheConfig {
+    let mut config = CacheConfig::hash_grid_preset();
+    if let Some(NestedEncoding::HashGrid {
+        log2_hashmap_size,
+        inference_precision,
+        ..
+    }) = config.encoding.nested.first_mut()
+    {
+        *log2_hashmap_size = 12;
+        *inference_precision = nrc_cache::encoding::hash_grid::TablePrecision::F32;
+    }
+    if let nrc_cache::config::OptimizerConfig::EMA { decay, .. } = &mut config.optimizer {
+        *decay = alpha;
+    }
+    config
+}
+
+fn cache_on(config: &CacheConfig, path: ComputePath) -> RadianceCache {
+    RadianceCache::with_path(config.clone(), SceneBox::default(), CacheDevice::Cpu, path).unwrap()
+}
+
 /// The cache's inference weights are the closed-form average of its weight history, on the
 /// fused path (the table's EMA as a gap, see `nrc_cache::cpu::optim`) and on the tensor path
 /// (dense EMA): with decay 0.8 over 12 steps, and with decay 0.5 over 100 steps, where the fused
@@ -161,29 +184,10 @@ fn batch(n: usize, seed: u64) -> TrainingBatch {
 #[test]
 fn cache_inference_weights_are_the_closed_form_average() {
     for (alpha, steps) in [(0.8f32, 12u64), (0.5, 100)] {
-        let mut config = CacheConfig::hash_grid_preset();
-        if let Some(NestedEncoding::HashGrid {
-            log2_hashmap_size,
-            inference_precision,
-            ..
-        }) = config.encoding.nested.first_mut()
-        {
-            *log2_hashmap_size = 12;
-            // The average itself, not its half-precision rounding (tested on its own below).
-            *inference_precision = nrc_cache::encoding::hash_grid::TablePrecision::F32;
-        }
-        if let nrc_cache::config::OptimizerConfig::EMA { decay, .. } = &mut config.optimizer {
-            *decay = alpha;
-        }
+        let config = small_config(alpha);
         assert_eq!(nrc_cache::cpu::optim::ema_rebase_interval(0.5), 40);
         for path in [ComputePath::Fused, ComputePath::Unfused] {
-            let mut cache = RadianceCache::with_path(
-                config.clone(),
-                SceneBox::default(),
-                CacheDevice::Cpu,
-                path,
-            )
-            .unwrap();
+            let mut cache = cache_on(&config, path);
             let (mut grid_hist, mut mlp_hist) = (Vec::new(), Vec::new());
             for step in 0..steps {
                 // Small batches leave most fine-level entries unreferenced in most steps.
@@ -207,6 +211,85 @@ fn cache_inference_weights_are_the_closed_form_average() {
                         "decay {alpha}, {path} {what} {j}: {a} vs {b}"
                     );
                 }
+            }
+        }
+    }
+}
+
+/// Follow mode: while it is on, inference reads the training weights; leaving it restarts the
+/// average at them, so that afterwards the inference weights are the average of the weights
+/// from that step on, started at the weights (`e = (1 − α^t0)·w_t0`, then the EMA's
+/// recursion), on the fused path (the table's EMA as a gap, rebased every 40 steps at decay 0.5:
+/// a rebase falls after the restart) and on the tensor path. A cache that never follows
+/// keeps the closed-form average (the negative control: the restarted average is not it).
+#[test]
+fn following_reads_the_weights_and_leaving_restarts_the_average_at_them() {
+    for (alpha, steps, follow_from, follow_to) in [(0.8f32, 16u64, 5u64, 9u64), (0.5, 44, 30, 38)] {
+        let config = small_config(alpha);
+        for path in [ComputePath::Fused, ComputePath::Unfused] {
+            let mut cache = cache_on(&config, path);
+            let (mut grid_hist, mut mlp_hist) = (Vec::new(), Vec::new());
+            for step in 0..steps {
+                if step == follow_from {
+                    cache.set_follow(true);
+                    assert!(cache.follows());
+                }
+                if step == follow_to {
+                    cache.set_follow(false);
+                }
+                cache.train(&batch(16, step), 1).unwrap();
+                let (g, m) = cache.weights();
+                if cache.follows() {
+                    let (gi, mi) = cache.inference_weights();
+                    assert_eq!(
+                        tensor_vec(gi),
+                        g,
+                        "{path}: following, the table is the weights"
+                    );
+                    assert_eq!(
+                        tensor_vec(mi),
+                        m,
+                        "{path}: following, the MLP is the weights"
+                    );
+                }
+                grid_hist.push(g);
+                mlp_hist.push(m);
+            }
+            let (g, m) = cache.inference_weights();
+            for (got, hist, what) in [
+                (tensor_vec(g), &grid_hist, "table"),
+                (tensor_vec(m), &mlp_hist, "mlp"),
+            ] {
+                // The average restarted after step `follow_to` (the weights of that step, hist
+                // index follow_to − 1) and run on.
+                let a = f64::from(alpha);
+                let t0 = follow_to as usize;
+                let mut e: Vec<f64> = hist[t0 - 1]
+                    .iter()
+                    .map(|w| (1.0 - a.powi(t0 as i32)) * f64::from(*w))
+                    .collect();
+                for w in &hist[t0..] {
+                    for (e, w) in e.iter_mut().zip(w) {
+                        *e = a * *e + (1.0 - a) * f64::from(*w);
+                    }
+                }
+                let norm = 1.0 - a.powi(hist.len() as i32);
+                let never = closed_form(a, hist);
+                let (mut worst, mut apart) = (0.0f64, 0.0f64);
+                for ((got, e), n) in got.iter().zip(&e).zip(&never) {
+                    let expect = e / norm;
+                    worst = worst.max((f64::from(*got) - expect).abs() / (1.0 + expect.abs()));
+                    apart = apart.max((expect - n).abs() / (1.0 + n.abs()));
+                }
+                assert!(
+                    worst < 1e-5,
+                    "decay {alpha}, {path} {what}: off by {worst:e}"
+                );
+                assert!(
+                    apart > (10.0 * worst).max(1e-5),
+                    "decay {alpha}, {path} {what}: the restarted average ({worst:e} off) is not told \
+                     from the never restarted one ({apart:e} apart)"
+                );
             }
         }
     }

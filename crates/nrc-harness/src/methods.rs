@@ -291,6 +291,12 @@ pub struct CacheMethodSettings {
     pub train_frames: u32,
     pub records_per_frame: usize,
     pub batch_size: usize,
+    /// Watch for changes in the scene and recover from them (`OnlineSettings::recover`).
+    pub recover: bool,
+    /// Optimisation steps on each batch while recovering (`OnlineSettings::recovery_steps`).
+    pub recovery_steps: u32,
+    /// Milliseconds a frame may spend producing and training (`OnlineSettings::train_budget_ms`).
+    pub train_budget_ms: Option<f64>,
     /// Keep training during measurement (each estimate is a full online frame); else frozen.
     pub online: bool,
     /// The producers' own settings.
@@ -310,6 +316,9 @@ impl CacheMethodSettings {
             train_frames: 64,
             records_per_frame: nrc_train::online::DEFAULT_RECORDS_PER_FRAME,
             batch_size: 1 << 14,
+            recover: true,
+            recovery_steps: 1,
+            train_budget_ms: None,
             online: true,
             producer_options: ProducerOptions::default(),
             seed: 0,
@@ -472,6 +481,9 @@ pub fn scene_trainer(
     online.records_per_frame = settings.records_per_frame;
     online.producer_options = settings.producer_options;
     online.batch_size = settings.batch_size;
+    online.recover = settings.recover;
+    online.recovery_steps = settings.recovery_steps;
+    online.train_budget_ms = settings.train_budget_ms;
     online.pass = pass;
     online.queries = queries;
     online.seed = settings.seed;

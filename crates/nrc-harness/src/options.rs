@@ -278,9 +278,27 @@ pub struct RadianceCacheArgs {
     #[arg(long, default_value_t = nrc_train::online::DEFAULT_RECORDS_PER_FRAME)]
     pub records: usize,
 
+    /// Milliseconds a frame may spend producing training records and training on them: the
+    /// loop chooses the records (from --records on) to fit, half the budget once the cache has
+    /// settled and all of it while it warms up or recovers from a change; the statistics show
+    /// what each frame chose. Default: no budget, --records every frame (reproducible).
+    #[arg(long)]
+    pub train_budget_ms: Option<f64>,
+
     /// Records per optimisation step (a frame trains records/batch steps).
     #[arg(long, default_value_t = 1 << 14)]
     pub batch: usize,
+
+    /// Do not watch for changes in the scene: the cache always infers from the average of its
+    /// weights (by default a jump in how far the training targets are from the cache's
+    /// predictions switches inference to the training weights until the cache has caught up;
+    /// nrc-train's `schedule` module).
+    #[arg(long)]
+    pub no_recover: bool,
+
+    /// Optimisation steps on each batch while the cache recovers from a change in the scene.
+    #[arg(long, default_value_t = 1)]
+    pub recovery_steps: u32,
 
     /// Light training: fraction of its records at uniformly chosen surface points.
     #[arg(long, default_value_t = 0.0)]
@@ -388,6 +406,20 @@ impl RadianceCacheArgs {
         s.resolution = self.resolution;
         s.records_per_frame = self.records;
         s.batch_size = self.batch;
+        s.recover = !self.no_recover;
+        if self.recovery_steps == 0 || self.recovery_steps > 64 {
+            bail!(
+                "--recovery-steps must be in 1..=64, got {}",
+                self.recovery_steps
+            );
+        }
+        s.recovery_steps = self.recovery_steps;
+        if let Some(ms) = self.train_budget_ms
+            && !(ms.is_finite() && ms > 0.0)
+        {
+            bail!("--train-budget-ms must be finite and > 0, got {ms}");
+        }
+        s.train_budget_ms = self.train_budget_ms;
         s.train_frames = train_frames;
         s.seed = seed;
         s.producer_options = ProducerOptions {

@@ -13,6 +13,7 @@ use nrc_render::passes::{
 };
 use nrc_render::{LightStrategy, PathTracer, Termination, ZeroSource};
 use nrc_scene::{Camera, Scene};
+use nrc_train::schedule::Phase;
 use nrc_train::{FrameStats, OnlineTrainer, QueryMaker};
 
 /// One keyframe of a camera path.
@@ -69,11 +70,11 @@ pub fn write_stats(path: &Path, stats: &[FrameStats]) -> Result<()> {
         serde_json::to_vec_pretty(stats)?
     } else {
         let mut s = String::from(
-            "frame,produce_ms,train_ms,infer_ms,records,used,dropped_nonfinite,dropped_absurd,steps,loss,target_mean,paths,rays,cache_queries,invalid_samples,producer_dropped,producer_skipped\n",
+            "frame,produce_ms,train_ms,infer_ms,records,used,dropped_nonfinite,dropped_absurd,steps,loss,target_mean,change_z,phase,spend_ms,paths,rays,cache_queries,invalid_samples,producer_dropped,producer_skipped\n",
         );
         for f in stats {
             s.push_str(&format!(
-                "{},{:.3},{:.3},{:.3},{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
+                "{},{:.3},{:.3},{:.3},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
                 f.frame,
                 f.produce_ms,
                 f.train_ms,
@@ -85,6 +86,9 @@ pub fn write_stats(path: &Path, stats: &[FrameStats]) -> Result<()> {
                 f.steps,
                 f.loss,
                 f.target_mean,
+                f.change_z,
+                f.phase.name(),
+                f.spend_ms,
                 f.producer.paths,
                 f.producer.rays + f.inference.rays,
                 f.inference.queries,
@@ -335,12 +339,26 @@ pub struct TrainSummary {
     pub dropped: u64,
     /// Light-path contributions the producers skipped as non-finite.
     pub skipped: u64,
+    /// Mean records produced per frame.
+    pub records: f64,
+    /// Changes in the scene the loop detected, and frames it spent recovering.
+    pub changes: usize,
+    pub recovering_frames: usize,
+    /// Under a training budget: frames after the warm-up
+    /// ([`nrc_train::schedule::BUDGET_WARM_UP_FRAMES`]), and those whose producing and training
+    /// took more than 1.2 × what they planned to spend.
+    pub budgeted_frames: usize,
+    pub over_budget: usize,
 }
 
 impl TrainSummary {
     pub fn of(all: &[FrameStats]) -> Self {
         let n = all.len().max(1) as f64;
         let mean = |f: fn(&FrameStats) -> f64| all.iter().map(f).sum::<f64>() / n;
+        let budgeted = all
+            .iter()
+            .skip(nrc_train::schedule::BUDGET_WARM_UP_FRAMES)
+            .filter(|s| s.spend_ms > 0.0);
         Self {
             produce_ms: mean(|s| s.produce_ms),
             train_ms: mean(|s| s.train_ms),
@@ -351,6 +369,16 @@ impl TrainSummary {
                 .map(|s| (s.dropped_nonfinite + s.dropped_absurd) as u64 + s.producer.dropped)
                 .sum(),
             skipped: all.iter().map(|s| s.producer.skipped).sum(),
+            records: mean(|s| s.records as f64),
+            changes: all.iter().filter(|s| s.phase == Phase::Changed).count(),
+            recovering_frames: all
+                .iter()
+                .filter(|s| matches!(s.phase, Phase::Recovering | Phase::Recovered))
+                .count(),
+            budgeted_frames: budgeted.clone().count(),
+            over_budget: budgeted
+                .filter(|s| s.produce_ms + s.train_ms > 1.2 * s.spend_ms)
+                .count(),
         }
     }
 }

@@ -91,6 +91,109 @@ struct LongRun {
 }
 
 /// A reference of `scene` at `w × h` (`spp` samples), with its emitter mask.
+/// The change detector on a scene: on `cornell-box-jump` (the lamp jumps 0.17 m at 1 s, frame
+/// 30 at 30 fps) the frame of the jump or the next is called a change, and none before; the
+/// cache then infers from its training weights and stops once it has caught up, within the
+/// recovery's frame limit. The negative control, the same run on the scene held at its first
+/// pose, has no change at all.
+#[test]
+fn a_jumping_light_is_called_a_change_and_recovered_from_and_a_still_scene_is_not() {
+    let path =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/cornell-box-jump.gltf");
+    let animated = nrc_scene::AnimatedScene::load(&path).unwrap();
+    let first = animated.at(0.0).unwrap();
+    // Posing each frame (also the still run's, at 0 s) keeps the two runs alike but for the jump.
+    let run = |jump: bool| {
+        let mut t = trainer(&first, "pt-sl", 4096);
+        let mut phases = Vec::new();
+        let mut followed = Vec::new();
+        for f in 0..70u32 {
+            let posed = animated
+                .at(if jump { f as f32 / 30.0 } else { 0.0 })
+                .unwrap();
+            let (stats, _) = t.frame(&posed, &posed.camera, 32, 32, true).unwrap();
+            phases.push(stats.phase);
+            followed.push(t.cache.neural().unwrap().follows());
+        }
+        (phases, followed)
+    };
+    use nrc_train::schedule::Phase;
+    let (phases, followed) = run(true);
+    let changes: Vec<usize> = (0..phases.len())
+        .filter(|&f| phases[f] == Phase::Changed)
+        .collect();
+    assert!(
+        !changes.is_empty() && (30..=31).contains(&changes[0]),
+        "changes called at frames {changes:?}, the light jumps at frame 30"
+    );
+    let c = changes[0];
+    assert!(
+        followed[c],
+        "the cache does not follow its weights after the change"
+    );
+    let end = (c..phases.len()).find(|&f| phases[f] == Phase::Recovered);
+    let end = end.unwrap_or_else(|| panic!("no recovery ended: {phases:?}"));
+    assert!(
+        end - c <= nrc_train::schedule::RECOVERY_MAX_FRAMES as usize && !followed[end],
+        "recovery from frame {c} to {end}"
+    );
+    let (still, followed) = run(false);
+    assert!(
+        !still.contains(&Phase::Changed) && !followed.contains(&true),
+        "a change called in a still scene: {still:?}"
+    );
+}
+
+/// Under a training budget the loop sizes each frame's records so that producing and training
+/// them takes about what it planned to spend (half the budget once the cache has settled): at
+/// 100 ms a frame the median frame after warm-up within 20 % of its plan, and ten times the
+/// budget buys more than twice the records (the negative control: a loop that ignored the
+/// budget would produce the same records at both). The bar, every frame within 20 %,
+/// is measured on a quiet machine by `scripts/budget-study.sh`; a test shares its cores with
+/// the other tests.
+#[test]
+fn a_training_budget_sizes_the_records_to_fit() {
+    let scene = scene("cornell-box.gltf");
+    let run = |budget: f64| {
+        let mut s = CacheMethodSettings::new(CacheConfig::hash_grid_preset(), CacheDevice::Cpu);
+        s.resolution = 128;
+        s.seed = 11;
+        s.train_budget_ms = Some(budget);
+        let mut t = scene_trainer(
+            &scene,
+            "pt-sl".parse().unwrap(),
+            PassSpec::default(),
+            &s,
+            PathTracer::default(),
+        )
+        .unwrap();
+        let (mut ratios, mut records) = (Vec::new(), 0usize);
+        for f in 0..40 {
+            let (stats, _) = t.frame(&scene, &scene.camera, 16, 16, true).unwrap();
+            assert!(
+                stats.spend_ms == budget || stats.spend_ms == budget / 2.0,
+                "{stats:?}"
+            );
+            if f >= nrc_train::schedule::BUDGET_WARM_UP_FRAMES {
+                ratios.push((stats.produce_ms + stats.train_ms) / stats.spend_ms);
+                records += stats.records;
+            }
+        }
+        ratios.sort_by(f64::total_cmp);
+        (
+            ratios[ratios.len() / 2],
+            records as f64 / ratios.len() as f64,
+        )
+    };
+    let (median, generous) = run(100.0);
+    assert!(median <= 1.2, "median frame at {median:.2} of its plan");
+    let (_, tight) = run(10.0);
+    assert!(
+        generous > 2.0 * tight,
+        "records a frame: {generous:.0} at 100 ms, {tight:.0} at 10 ms"
+    );
+}
+
 fn reference_of(scene: &Scene, (w, h): (u32, u32), spp: u32) -> (nrc_scene::Image, Vec<bool>) {
     let reference = nrc_render::render(
         scene,

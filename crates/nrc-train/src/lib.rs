@@ -12,6 +12,8 @@
 //! - [`source`]: the cache as an [`nrc_render::RadianceSource`] (the adapter the passes
 //!   reach it through).
 //! - [`online`]: the per-frame loop produce → train → infer, with per-phase statistics.
+//! - [`schedule`]: the loop's control: noticing that the scene changed under the cache (and
+//!   recovering), and fitting a frame's training records to a time budget.
 //!
 //! Shared vocabulary: [`query::QueryMaker`] turns a surface point into a
 //! [`nrc_cache::CacheQuery`]. The inference passes, the path-vertex step, light paths and the
@@ -23,6 +25,7 @@ pub mod online;
 pub mod producer;
 pub mod producers;
 pub mod query;
+pub mod schedule;
 pub mod source;
 pub mod starts;
 

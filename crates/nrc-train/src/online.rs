@@ -13,11 +13,16 @@ use crate::error::TrainError;
 use crate::mix::{ProducerMix, ProducerOptions, ProducerSpec};
 use crate::producer::{ProducerContext, ProducerStats};
 use crate::query::QueryMaker;
+use crate::schedule::{ChangeDetector, ChangeMonitor, Phase, TrainBudget};
 use crate::source::CacheSource;
 use crate::starts::{self, TerminationPoint};
 
 /// Training records produced per frame by default.
 pub const DEFAULT_RECORDS_PER_FRAME: usize = 1 << 12;
+
+/// Training records of a frame at which the cache's predictions are compared with the targets
+/// before the frame trains ([`crate::schedule`]).
+pub const PROBE_RECORDS: usize = 4096;
 
 /// Settings of the online loop.
 #[derive(Clone, Debug, PartialEq)]
@@ -43,6 +48,17 @@ pub struct OnlineSettings {
     /// Samples per pixel of the inference pass.
     pub spp: u32,
     pub seed: u64,
+    /// Watch for changes in the scene and recover from them ([`crate::schedule`]): after a
+    /// change the cache infers from its training weights and takes `recovery_steps` steps
+    /// on each batch until its predictions are back at their level before it.
+    pub recover: bool,
+    /// Optimisation steps on each batch while the cache recovers (RESULTS.md, "Recovery after
+    /// a sudden change").
+    pub recovery_steps: u32,
+    /// Milliseconds a frame may spend producing and training ([`TrainBudget`]); `None`: every
+    /// frame produces [`OnlineSettings::records_per_frame`] records (reproducible bit for bit,
+    /// which a budget measured in time is not).
+    pub train_budget_ms: Option<f64>,
 }
 
 impl OnlineSettings {
@@ -61,6 +77,9 @@ impl OnlineSettings {
             queries: QueryMaker::new(&scene.bounds()),
             spp: 1,
             seed: 0,
+            recover: true,
+            recovery_steps: 1,
+            train_budget_ms: None,
         }
     }
 
@@ -77,6 +96,22 @@ impl OnlineSettings {
                 "the fraction of queries from termination points",
                 "be in [0, 1]",
                 self.from_terminations,
+            ));
+        }
+        if self.recovery_steps == 0 {
+            return Err(TrainError::bounds(
+                "steps while recovering",
+                "be at least 1",
+                0,
+            ));
+        }
+        if let Some(ms) = self.train_budget_ms
+            && !(ms.is_finite() && ms > 0.0)
+        {
+            return Err(TrainError::bounds(
+                "the training budget (ms per frame)",
+                "be finite and > 0",
+                ms,
             ));
         }
         if self.spp == 0 {
@@ -110,6 +145,14 @@ pub struct FrameStats {
     pub loss: f32,
     /// Mean luminance of the frame's finite targets (zero: the producers found no light).
     pub target_mean: f32,
+    /// How far the frame's targets were from the cache's predictions beyond their noise
+    /// ([`crate::schedule::change_score`]).
+    pub change_z: f32,
+    /// What the change detector made of the frame.
+    pub phase: Phase,
+    /// Under a training budget, the milliseconds the frame planned to spend producing and
+    /// training (0 without a budget).
+    pub spend_ms: f64,
     pub producer: ProducerStats,
     pub inference: PassStats,
 }
@@ -126,6 +169,9 @@ pub struct OnlineTrainer {
     warm_frames: u32,
     previous: Vec<TerminationPoint>,
     frame: u64,
+    monitor: ChangeMonitor,
+    detector: ChangeDetector,
+    budget: Option<TrainBudget>,
 }
 
 impl OnlineTrainer {
@@ -145,9 +191,14 @@ impl OnlineTrainer {
             pass: settings.pass.build(&settings.tracer),
             warmth: Warmth::default(),
             warm_frames: 0,
-            settings,
             previous: Vec::new(),
             frame: 0,
+            monitor: ChangeMonitor::default(),
+            detector: ChangeDetector::default(),
+            budget: settings
+                .train_budget_ms
+                .map(|ms| TrainBudget::new(ms, settings.records_per_frame)),
+            settings,
         })
     }
 
@@ -190,6 +241,18 @@ impl OnlineTrainer {
         };
 
         self.cache.set_camera(camera.position.to_array());
+        // The frame's records: fixed, or what the budget affords at the steps the cache is
+        // taking (more while it recovers).
+        let recovering = s.recover && self.detector.recovering();
+        let steps = if recovering { s.recovery_steps } else { 1 };
+        let records = match &self.budget {
+            Some(b) => {
+                let plan = b.plan(steps, self.detector.settled());
+                stats.spend_ms = plan.spend_ms;
+                plan.records
+            }
+            None => s.records_per_frame,
+        };
         let t = Instant::now();
         let starts = starts::predict(
             camera,
@@ -197,7 +260,7 @@ impl OnlineTrainer {
             height,
             &self.previous,
             s.from_terminations,
-            s.records_per_frame,
+            records,
             seed,
         );
         let ctx = ProducerContext {
@@ -211,7 +274,7 @@ impl OnlineTrainer {
             starts: &starts,
             tracer: s.tracer,
         };
-        let produced = self.mix.produce(&ctx, s.records_per_frame, seed);
+        let produced = self.mix.produce(&ctx, records, seed);
         stats.produce_ms = t.elapsed().as_secs_f64() * 1e3;
         stats.records = produced.batch.queries.len();
         stats.producer = produced.stats;
@@ -225,10 +288,25 @@ impl OnlineTrainer {
         stats.target_mean = finite.iter().sum::<f32>() / finite.len().max(1) as f32;
 
         let t = Instant::now();
+        // The change score: the cache's predictions (what the passes read) at the frame's
+        // training queries, before it learns from them.
+        let probe = produced.batch.queries.len().min(PROBE_RECORDS);
+        let predictions = self.cache.infer(&produced.batch.queries[..probe]);
+        stats.change_z = self.monitor.score(&produced.batch, &predictions).z;
+        stats.phase = self.detector.observe(stats.change_z);
+        if s.recover {
+            match stats.phase {
+                Phase::Changed => self.cache.set_follow(true),
+                Phase::Recovered => self.cache.set_follow(false),
+                _ => {}
+            }
+        }
+        // Recovering, the cache takes more steps on each batch (decided before this frame's
+        // score, which may start or end a recovery: the steps follow one frame later).
         let order = shuffled(produced.batch.queries.len(), seed);
         for chunk in order.chunks(s.batch_size) {
             let batch = produced.batch.select(chunk);
-            let st = self.cache.train(&batch, 1)?;
+            let st = self.cache.train(&batch, steps)?;
             stats.used += st.used;
             stats.dropped_nonfinite += st.dropped_nonfinite;
             stats.dropped_absurd += st.dropped_absurd;
@@ -238,6 +316,9 @@ impl OnlineTrainer {
             }
         }
         stats.train_ms = t.elapsed().as_secs_f64() * 1e3;
+        if let Some(b) = &mut self.budget {
+            b.observe(stats.records, steps, stats.produce_ms, stats.train_ms);
+        }
 
         let mut output = None;
         if render {

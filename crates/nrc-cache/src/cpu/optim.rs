@@ -436,6 +436,11 @@ pub fn ema_raw_from_gap(alpha: f32, shift: u32, features: usize, records: &mut [
     for_each_gap(features, records, |w, q| *q = w + a * *q);
 }
 
+/// Sets the records' EMA slot to `scale·w` (see [`crate::ops::EmaConversion::ScaledWeights`]).
+pub fn ema_scaled_weights(scale: f32, features: usize, records: &mut [f32]) {
+    for_each_gap(features, records, |w, q| *q = scale * w);
+}
+
 /// Moves the base of the records' EMA gap `shift` steps on (`q ← α^shift·q`).
 pub fn rebase_ema_gap(alpha: f32, shift: u32, features: usize, records: &mut [f32]) {
     let a = decay_pow(alpha, shift);
