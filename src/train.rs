@@ -164,6 +164,7 @@ pub fn run(args: &TrainArgs) -> Result<()> {
     trainer.settings.spp = args.spp;
     trainer.settings.from_terminations = args.from_terminations;
     eprintln!("{}", trainer.cache.describe());
+    eprintln!("{}", trainer.settings.describe_control());
     let pool = nrc_harness::options::thread_pool(args.threads)?;
     let progress = Progress::new(args.frames as u64, Unit::Frames, "train");
     let frames = args
@@ -241,6 +242,13 @@ pub fn run(args: &TrainArgs) -> Result<()> {
             "training budget {ms} ms/frame: {:.0} records/frame on average; {} of {} frames after the warm-up over 1.2 × their plan",
             sum.records, sum.over_budget, sum.budgeted_frames
         );
+        if sum.over_at_minimum > 0 {
+            eprintln!(
+                "warning: {} frames were over their plan with the fewest records a budget allows ({}): producing and training that few records costs more than the budget; raise --train-budget-ms",
+                sum.over_at_minimum,
+                nrc_train::schedule::MIN_BUDGET_RECORDS
+            );
+        }
     }
     if sum.changes > 0 {
         println!(

@@ -290,9 +290,11 @@ pub struct RadianceCacheArgs {
     pub batch: usize,
 
     /// Do not watch for changes in the scene: the cache always infers from the average of its
-    /// weights (by default a jump in how far the training targets are from the cache's
-    /// predictions switches inference to the training weights until the cache has caught up;
-    /// nrc-train's `schedule` module).
+    /// weights, and no frame predicts its training records to score them (by default a jump in
+    /// how far the training targets are from the cache's predictions switches inference to the
+    /// training weights until the cache has caught up; nrc-train's `schedule` module). Under
+    /// --train-budget-ms the cache is then never taken as settled: every frame spends the whole
+    /// budget.
     #[arg(long)]
     pub no_recover: bool,
 

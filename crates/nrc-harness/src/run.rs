@@ -349,6 +349,9 @@ pub struct TrainSummary {
     /// took more than 1.2 × what they planned to spend.
     pub budgeted_frames: usize,
     pub over_budget: usize,
+    /// Of those, frames that produced only the fewest records a budget allows
+    /// ([`nrc_train::schedule::MIN_BUDGET_RECORDS`]): the budget is below their fixed cost.
+    pub over_at_minimum: usize,
 }
 
 impl TrainSummary {
@@ -359,6 +362,9 @@ impl TrainSummary {
             .iter()
             .skip(nrc_train::schedule::BUDGET_WARM_UP_FRAMES)
             .filter(|s| s.spend_ms > 0.0);
+        let over = budgeted
+            .clone()
+            .filter(|s| s.produce_ms + s.train_ms > 1.2 * s.spend_ms);
         Self {
             produce_ms: mean(|s| s.produce_ms),
             train_ms: mean(|s| s.train_ms),
@@ -376,8 +382,9 @@ impl TrainSummary {
                 .filter(|s| matches!(s.phase, Phase::Recovering | Phase::Recovered))
                 .count(),
             budgeted_frames: budgeted.clone().count(),
-            over_budget: budgeted
-                .filter(|s| s.produce_ms + s.train_ms > 1.2 * s.spend_ms)
+            over_budget: over.clone().count(),
+            over_at_minimum: over
+                .filter(|s| s.records <= nrc_train::schedule::MIN_BUDGET_RECORDS)
                 .count(),
         }
     }

@@ -83,6 +83,25 @@ impl OnlineSettings {
         }
     }
 
+    /// One line on how the loop controls training: recovery after changes, and the budget.
+    pub fn describe_control(&self) -> String {
+        let recovery = if self.recover {
+            format!(
+                "watching for changes in the scene (after one: inference from the training weights, {} step(s) a batch, until the cache has caught up)",
+                self.recovery_steps
+            )
+        } else {
+            "not watching for changes in the scene".to_string()
+        };
+        let budget = match self.train_budget_ms {
+            Some(ms) => format!(
+                "records chosen to fit {ms} ms a frame of producing and training (half once settled)"
+            ),
+            None => format!("{} records a frame", self.records_per_frame),
+        };
+        format!("online loop: {recovery}; {budget}")
+    }
+
     /// Checks the settings, naming the first bad one.
     pub fn validate(&self) -> Result<(), TrainError> {
         if self.records_per_frame == 0 {
@@ -289,12 +308,12 @@ impl OnlineTrainer {
 
         let t = Instant::now();
         // The change score: the cache's predictions (what the passes read) at the frame's
-        // training queries, before it learns from them.
-        let probe = produced.batch.queries.len().min(PROBE_RECORDS);
-        let predictions = self.cache.infer(&produced.batch.queries[..probe]);
-        stats.change_z = self.monitor.score(&produced.batch, &predictions).z;
-        stats.phase = self.detector.observe(stats.change_z);
+        // training queries, before it learns from them (not watched without recovery).
         if s.recover {
+            let probe = produced.batch.queries.len().min(PROBE_RECORDS);
+            let predictions = self.cache.infer(&produced.batch.queries[..probe]);
+            stats.change_z = self.monitor.score(&produced.batch, &predictions).z;
+            stats.phase = self.detector.observe(stats.change_z);
             match stats.phase {
                 Phase::Changed => self.cache.set_follow(true),
                 Phase::Recovered => self.cache.set_follow(false),
