@@ -583,6 +583,11 @@ impl RadianceCache {
 
     /// Writes a snapshot (see [`crate::snapshot`] for the format), atomically.
     pub fn save(&mut self, path: &Path) -> Result<(), CacheError> {
+        if self.follow {
+            // Inference reads the weights: the snapshot's average is restarted at them, so
+            // that a loaded cache answers as this one does.
+            self.restart_average();
+        }
         let host = self.host_state();
         snapshot::write(
             path,

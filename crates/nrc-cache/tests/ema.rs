@@ -295,6 +295,58 @@ fn following_reads_the_weights_and_leaving_restarts_the_average_at_them() {
     }
 }
 
+/// A snapshot saved while the cache follows its weights answers as the cache does: the loaded
+/// cache's inference weights (its average) are the saved cache's weights.
+#[test]
+fn a_snapshot_saved_while_following_answers_as_the_cache_does() {
+    let mut cache = cache_on(&small_config(0.99), ComputePath::Fused);
+    for step in 0..6 {
+        cache.train(&batch(64, step), 1).unwrap();
+    }
+    cache.set_follow(true);
+    for step in 6..9 {
+        cache.train(&batch(64, step), 1).unwrap();
+    }
+    let (grid, mlp) = cache.weights();
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("following.nrc");
+    cache.save(&path).unwrap();
+    assert!(cache.follows(), "saving does not end follow mode");
+    let loaded = RadianceCache::load(&path, CacheDevice::Cpu).unwrap();
+    let (g, m) = loaded.inference_weights();
+    for (got, want, what) in [(tensor_vec(g), grid, "table"), (tensor_vec(m), mlp, "mlp")] {
+        let worst = got
+            .iter()
+            .zip(&want)
+            .map(|(a, b)| (a - b).abs() / (1.0 + b.abs()))
+            .fold(0.0f32, f32::max);
+        assert!(
+            worst < 1e-5,
+            "{what}: the loaded average is {worst:e} off the weights"
+        );
+    }
+    // The negative control: a cache that does not follow saves an average that is not its
+    // weights (what the loaded cache would answer without the restart).
+    let mut plain = cache_on(&small_config(0.99), ComputePath::Fused);
+    for step in 0..9 {
+        plain.train(&batch(64, step), 1).unwrap();
+    }
+    let (_, mlp) = plain.weights();
+    plain.save(&path).unwrap();
+    let (_, m) = RadianceCache::load(&path, CacheDevice::Cpu)
+        .unwrap()
+        .inference_weights();
+    let apart = tensor_vec(m)
+        .iter()
+        .zip(&mlp)
+        .map(|(a, b)| (a - b).abs())
+        .fold(0.0f32, f32::max);
+    assert!(
+        apart > 1e-4,
+        "the average is the weights anyway ({apart:e})"
+    );
+}
+
 /// The AVX2 sparse update (four entries of two features at once) gives the same bits as the
 /// portable loop: weights, moments, EMA gaps, zeroed gradients, cleared bitmap and
 /// the half-precision copy of the weights (each updated entry's weights rounded as

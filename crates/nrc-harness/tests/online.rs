@@ -88,6 +88,8 @@ struct LongRun {
     trajectory: Vec<f64>,
     ms_per_frame: f64,
     loss: f32,
+    /// Changes in the scene the loop called (the scenes are still: false alarms).
+    changes: usize,
 }
 
 /// A reference of `scene` at `w × h` (`spp` samples), with its emitter mask.
@@ -256,6 +258,7 @@ fn long_run(
         trajectory: Vec::new(),
         ms_per_frame: 0.0,
         loss: f32::NAN,
+        changes: 0,
     };
     let start = std::time::Instant::now();
     let mut checking = std::time::Duration::ZERO;
@@ -272,6 +275,7 @@ fn long_run(
         run.dropped_nonfinite += s.dropped_nonfinite;
         run.dropped_absurd += s.dropped_absurd;
         run.loss = s.loss;
+        run.changes += usize::from(s.phase == nrc_train::schedule::Phase::Changed);
         if let Some(out) = out {
             assert_eq!(out.stats.invalid_samples, 0, "{producer} frame {f}");
             assert!(
@@ -355,7 +359,7 @@ fn long_runs(
     (slack, known): (f64, bool),
 ) {
     println!(
-        "| scene | producer | frames | records | dropped (non-finite / absurd) | relMSE at frame {early} | at frame {frames} | ms per frame | relMSE at every tenth of the run |\n|---|---|---|---|---|---|---|---|---|"
+        "| scene | producer | frames | records | dropped (non-finite / absurd) | relMSE at frame {early} | at frame {frames} | ms per frame | changes called | relMSE at every tenth of the run |\n|---|---|---|---|---|---|---|---|---|---|"
     );
     let mut failures = Vec::new();
     for (name, scene) in hard_scenes() {
@@ -364,13 +368,14 @@ fn long_runs(
             let r = long_run(&scene, producer, (frames, early, records), &reference);
             let trajectory: Vec<String> = r.trajectory.iter().map(|e| format!("{e:.3}")).collect();
             println!(
-                "| {name} | {producer} | {frames} | {} | {} / {} | {:.4} | {:.4} | {:.1} | {} |",
+                "| {name} | {producer} | {frames} | {} | {} / {} | {:.4} | {:.4} | {:.1} | {} | {} |",
                 r.records,
                 r.dropped_nonfinite,
                 r.dropped_absurd,
                 r.early,
                 r.end,
                 r.ms_per_frame,
+                r.changes,
                 trajectory.join(" ")
             );
             assert!(r.loss.is_finite());
