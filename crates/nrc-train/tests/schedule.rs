@@ -58,6 +58,16 @@ fn the_change_score_is_calm_on_a_stationary_stream_and_jumps_when_the_radiance_m
         mean.abs() < 0.5 && sd < 2.0,
         "stationary score: mean {mean}, sd {sd}"
     );
+    // A burst in one place (every record of two cells 10 × as bright this frame, as when a
+    // caustic is found by many paths at once): two bins move a lot, which a change is not.
+    let (mut b, p) = frame(&mut r, 4096, 0.0);
+    for (q, t) in b.queries.iter().zip(b.targets.iter_mut()) {
+        if q.position[0] < 0.125 && q.position[2] < 0.25 {
+            *t = [t[0] * 10.0; 3];
+        }
+    }
+    let z = monitor.score(&b, &p).z;
+    assert!(z < 8.0, "a burst in two bins scores {z}");
     // The radiance of half the floor doubles (a light moved towards it).
     let (b, p) = frame(&mut r, 4096, 1.5);
     let z = monitor.score(&b, &p).z;
