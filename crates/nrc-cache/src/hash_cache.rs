@@ -325,6 +325,17 @@ impl HashCache {
             .collect()
     }
 
+    /// Lets every cell's running mean weigh at most `keep` samples (`keep` ≥ 0): after a change
+    /// in the scene the next records move the cells by `k/(keep + k)` instead of
+    /// `k/(max_samples + k)`, the hash cache's way to follow a change quickly (its values stay:
+    /// a cell nobody trains again still answers as before).
+    pub fn forget(&mut self, keep: f32) {
+        let keep = keep.max(0.0);
+        for s in &mut self.slots {
+            s.count = s.count.min(keep);
+        }
+    }
+
     /// Learns one frame's records: each (checked as the neural cache checks them) adds to its
     /// cell at its level and every coarser one; then the frame's sums are blended into the
     /// cells' running means and stale cells evicted.
@@ -723,6 +734,38 @@ mod tests {
         // Far away, nothing: a counted miss.
         assert_eq!(c.infer(&[query([0.05, 0.9, 0.1], up)])[0], [0.0; 3]);
         assert_eq!(c.misses(), 1);
+    }
+
+    /// After `forget`, a cell follows the next frame's records by `k/(keep + k)`; without it, by
+    /// `k/(max_samples + k)` (the control).
+    #[test]
+    fn forgetting_lets_the_next_records_move_the_cells() {
+        let p = [0.5, 0.5, 0.5];
+        let up = [0.0, 1.0, 0.0];
+        let frame = |c: &mut HashCache, v: f32| {
+            c.train(&batch((0..4).map(|_| (query(p, up), [v; 3])).collect()))
+                .unwrap();
+        };
+        let after_change = |forget: bool| {
+            let mut c = cache(HashCacheConfig::default());
+            for _ in 0..100 {
+                frame(&mut c, 1.0);
+            }
+            if forget {
+                c.forget(4.0);
+            }
+            frame(&mut c, 2.0);
+            c.infer(&[query(p, up)])[0][0]
+        };
+        // 4 records against 4 kept samples: halfway to the new value.
+        assert!(
+            (after_change(true) - 1.5).abs() < 1e-4,
+            "{}",
+            after_change(true)
+        );
+        // 4 records against a saturated count of 256: 4/260 of the way.
+        let slow = after_change(false);
+        assert!((slow - (1.0 + 4.0 / 260.0)).abs() < 1e-4, "{slow}");
     }
 
     /// Statistical check of the running mean over 32 cells: noisy records of a constant

@@ -315,8 +315,8 @@ impl OnlineTrainer {
             stats.change_z = self.monitor.score(&produced.batch, &predictions).z;
             stats.phase = self.detector.observe(stats.change_z);
             match stats.phase {
-                Phase::Changed => self.cache.set_follow(true),
-                Phase::Recovered => self.cache.set_follow(false),
+                Phase::Changed => self.cache.begin_recovery(),
+                Phase::Recovered => self.cache.end_recovery(),
                 _ => {}
             }
         }

@@ -15,7 +15,8 @@
 //! level and spread, and calls a change when one stands far above them; the recovery that
 //! follows lasts until the score is back at its level. What the online loop does about a
 //! change is [`crate::online`]'s business (the cache infers from its training weights while
-//! it recovers: [`nrc_cache::RadianceCache::set_follow`]).
+//! it recovers, [`nrc_cache::RadianceCache::set_follow`]; the hash cache forgets most of its
+//! cells' samples, [`nrc_cache::HashCache::forget`]: [`nrc_cache::Cache::begin_recovery`]).
 
 use glam::Vec3;
 use nrc_cache::TrainingBatch;
