@@ -165,7 +165,7 @@ pub struct FrameStats {
     /// Mean luminance of the frame's finite targets (zero: the producers found no light).
     pub target_mean: f32,
     /// How far the frame's targets were from the cache's predictions beyond their noise
-    /// ([`crate::schedule::change_score`]).
+    /// ([`crate::schedule::ChangeMonitor::score`]).
     pub change_z: f32,
     /// What the change detector made of the frame.
     pub phase: Phase,
@@ -307,12 +307,19 @@ impl OnlineTrainer {
         stats.target_mean = finite.iter().sum::<f32>() / finite.len().max(1) as f32;
 
         let t = Instant::now();
+        let order = shuffled(produced.batch.queries.len(), seed);
         // The change score: the cache's predictions (what the passes read) at the frame's
-        // training queries, before it learns from them (not watched without recovery).
+        // training queries, before it learns from them (not watched without recovery). Beyond
+        // PROBE_RECORDS records a shuffled subset, so that a mix's producers all take part.
         if s.recover {
             let probe = produced.batch.queries.len().min(PROBE_RECORDS);
-            let predictions = self.cache.infer(&produced.batch.queries[..probe]);
-            stats.change_z = self.monitor.score(&produced.batch, &predictions).z;
+            let probed = if probe < produced.batch.queries.len() {
+                std::borrow::Cow::Owned(produced.batch.select(&order[..probe]))
+            } else {
+                std::borrow::Cow::Borrowed(&produced.batch)
+            };
+            let predictions = self.cache.infer(&probed.queries);
+            stats.change_z = self.monitor.score(&probed, &predictions).z;
             stats.phase = self.detector.observe(stats.change_z);
             match stats.phase {
                 Phase::Changed => self.cache.begin_recovery(),
@@ -322,7 +329,6 @@ impl OnlineTrainer {
         }
         // Recovering, the cache takes more steps on each batch (decided before this frame's
         // score, which may start or end a recovery: the steps follow one frame later).
-        let order = shuffled(produced.batch.queries.len(), seed);
         for chunk in order.chunks(s.batch_size) {
             let batch = produced.batch.select(chunk);
             let st = self.cache.train(&batch, steps)?;

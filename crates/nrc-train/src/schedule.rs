@@ -29,7 +29,7 @@ pub const BIN_CAP: f64 = 16.0;
 /// Cells per axis of the binning grid.
 const GRID: usize = 8;
 /// Weight a bin's history keeps per frame (the history spans about 1/(1 − λ) = 5 frames).
-const HISTORY_DECAY: f64 = 0.8;
+pub const HISTORY_DECAY: f64 = 0.8;
 
 /// How far a frame's training targets are from the cache's predictions, beyond their noise.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -151,11 +151,11 @@ pub const WARM_UP_FRAMES: u32 = 8;
 /// Weight of a new frame in the detector's running level and spread.
 const SMOOTHING: f32 = 0.2;
 /// A change is a score above the running level by this many spreads ...
-const CHANGE_SPREADS: f32 = 4.0;
+pub const CHANGE_SPREADS: f32 = 4.0;
 /// ... and by at least this much (the score's own scale: ≈ N(0, 1) for an unbiased cache).
-const CHANGE_MIN_RISE: f32 = 8.0;
+pub const CHANGE_MIN_RISE: f32 = 8.0;
 /// Recovery lasts at least this many frames ...
-const RECOVERY_MIN_FRAMES: u32 = 4;
+pub const RECOVERY_MIN_FRAMES: u32 = 4;
 /// ... and at most this many.
 pub const RECOVERY_MAX_FRAMES: u32 = 64;
 
@@ -189,7 +189,7 @@ impl Phase {
     }
 }
 
-/// Tells a change in the scene from the noise of the change score ([`change_score`]): a
+/// Tells a change in the scene from the noise of the change score ([`ChangeMonitor::score`]): a
 /// running level (exponential average) and spread (mean absolute deviation × 1.25, σ for a
 /// normal score) of the scores; a score above the level by [`CHANGE_SPREADS`] spreads and at
 /// least [`CHANGE_MIN_RISE`] is a change. The recovery that follows ends when the score is back
@@ -341,7 +341,7 @@ impl CostLine {
 ///
 /// The cost of a frame is modelled as `a_p + b_p·records` for producing (with the change
 /// score's prediction) and `a_t + b_t·records·steps` for training, each line fitted to the
-/// recent frames ([`CostLine`]: the fixed parts are the per-frame work that does not grow with
+/// recent frames (weighted least squares: the fixed parts are the per-frame work that does not grow with
 /// the records, such as preparing the inference weights). A frame plans its records so that
 /// the two lines plus twice their mean absolute residuals fit what it spends:
 /// [`SETTLED_SHARE`] of the budget while the cache is settled, all of it otherwise, changing
