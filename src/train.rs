@@ -9,7 +9,7 @@ use nrc_render::PassSpec;
 use nrc_render::Termination;
 use nrc_render::passes::CacheTerminatedSettings;
 use nrc_scene::Scene;
-use nrc_train::ProducerSpec;
+use nrc_train::{OnlineTrainer, ProducerSpec};
 
 use nrc_harness::options::{RadianceCacheArgs, SceneArgs, TracerArgs, parse_termination};
 use nrc_harness::progress::{Progress, Unit};
@@ -112,6 +112,27 @@ pub struct TrainArgs {
     pub tracer: TracerArgs,
 }
 
+/// The online trainer `args` describe, on `scene` (loaded from `args.scene`); `print`: say
+/// which device the cache computes on.
+pub fn trainer(args: &TrainArgs, scene: &Scene, print: bool) -> Result<OnlineTrainer> {
+    let mut settings = args.cache.method_settings(0, args.seed, print)?;
+    settings.kind = args.cache_kind;
+    let tracer = args.tracer.tracer();
+    let pass = args.pass.clone().unwrap_or_else(|| {
+        CacheTerminatedSettings {
+            termination: args.termination,
+            nee: !args.no_nee,
+        }
+        .into()
+    });
+    let mut trainer =
+        nrc_harness::methods::scene_trainer(scene, args.producer.clone(), pass, &settings, tracer)
+            .map_err(anyhow::Error::msg)?;
+    trainer.settings.spp = args.spp;
+    trainer.settings.from_terminations = args.from_terminations;
+    Ok(trainer)
+}
+
 /// Runs `nrc train`.
 pub fn run(args: &TrainArgs) -> Result<()> {
     if args.width == 0 || args.height == 0 {
@@ -148,21 +169,7 @@ pub fn run(args: &TrainArgs) -> Result<()> {
                 .with_context(|| format!("cannot create {}", parent.display()))?;
         }
     }
-    let mut settings = args.cache.method_settings(0, args.seed, true)?;
-    settings.kind = args.cache_kind;
-    let tracer = args.tracer.tracer();
-    let pass = args.pass.clone().unwrap_or_else(|| {
-        CacheTerminatedSettings {
-            termination: args.termination,
-            nee: !args.no_nee,
-        }
-        .into()
-    });
-    let mut trainer =
-        nrc_harness::methods::scene_trainer(&scene, args.producer.clone(), pass, &settings, tracer)
-            .map_err(anyhow::Error::msg)?;
-    trainer.settings.spp = args.spp;
-    trainer.settings.from_terminations = args.from_terminations;
+    let mut trainer = trainer(args, &scene, true)?;
     eprintln!("{}", trainer.cache.describe());
     eprintln!("{}", trainer.settings.describe_control());
     let pool = nrc_harness::options::thread_pool(args.threads)?;

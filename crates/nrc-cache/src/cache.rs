@@ -456,6 +456,13 @@ impl RadianceCache {
         (grid, mlp)
     }
 
+    /// [`Self::inference_weights`] on the host as f32 (a half-precision table widened): the
+    /// values inference reads (hash table, MLP).
+    pub fn inference_weights_host(&self) -> (Vec<f32>, Vec<f32>) {
+        let (grid, mlp) = self.inference_weights();
+        (tensor_vec(grid), tensor_vec(mlp))
+    }
+
     /// Whether inference reads the training weights instead of their average.
     pub fn follows(&self) -> bool {
         self.follow

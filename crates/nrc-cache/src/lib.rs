@@ -31,6 +31,7 @@ pub mod cpu;
 pub mod device;
 pub mod encoding;
 pub mod error;
+pub mod export;
 pub mod gpu;
 pub mod hash_cache;
 pub mod hash_grid_op;

@@ -181,7 +181,12 @@ pub(crate) fn write_envelope(
     let metadata = std::collections::HashMap::from([(METADATA_KEY.to_string(), metadata_json)]);
     let data = safetensors::tensor::serialize(views, Some(metadata))
         .map_err(|e| bad(path, format!("cannot encode: {e}")))?;
+    write_atomically(path, &data)
+}
 
+/// Writes `data` to `path` atomically: a temporary file in the same directory, synced, then
+/// renamed over `path` (a failure leaves `path` as it was).
+pub(crate) fn write_atomically(path: &Path, data: &[u8]) -> Result<(), CacheError> {
     let dir = path
         .parent()
         .filter(|p| !p.as_os_str().is_empty())
@@ -208,11 +213,11 @@ pub(crate) fn write_envelope(
     })?;
     // On any error below, dropping `tmp` removes the temporary file.
     let written = (|| {
-        tmp.write_all(&data)?;
+        tmp.write_all(data)?;
         tmp.flush()?;
         tmp.as_file().sync_all()
     })();
-    written.map_err(|e| io_err(path, format!("cannot write the snapshot: {e}")))?;
+    written.map_err(|e| io_err(path, format!("cannot write: {e}")))?;
     tmp.persist(path).map_err(|e| {
         io_err(
             path,

@@ -448,6 +448,33 @@ struct CacheMethod {
     trainer: Option<OnlineTrainer>,
 }
 
+/// A new cache of `settings.kind` over `scene_box`: the neural one sized to it (its finest
+/// resolution `settings.resolution` cells along the longest axis), or the hash cache.
+pub fn scene_cache(
+    scene_box: nrc_cache::SceneBox,
+    settings: &CacheMethodSettings,
+) -> Result<Cache, HarnessError> {
+    let longest = scene_box.extent().iter().copied().fold(0.0f32, f32::max);
+    if settings.resolution == 0 {
+        return Err(HarnessError::bounds(
+            "the cache resolution",
+            "be at least 1",
+            0,
+        ));
+    }
+    Ok(match settings.kind {
+        CacheKind::Neural => RadianceCache::for_scene_extent(
+            &settings.config,
+            scene_box,
+            longest / settings.resolution as f32,
+            settings.device,
+        )?
+        .0
+        .into(),
+        CacheKind::Hash => Cache::hash(settings.hash, scene_box)?,
+    })
+}
+
 /// Builds a cache sized for `scene` and its online trainer, rendering with `pass`.
 pub fn scene_trainer(
     scene: &Scene,
@@ -457,26 +484,7 @@ pub fn scene_trainer(
     tracer: PathTracer,
 ) -> Result<OnlineTrainer, HarnessError> {
     let queries = QueryMaker::new(&scene.bounds());
-    let ext = queries.scene_box.extent();
-    let longest = ext.iter().copied().fold(0.0f32, f32::max);
-    if settings.resolution == 0 {
-        return Err(HarnessError::bounds(
-            "the cache resolution",
-            "be at least 1",
-            0,
-        ));
-    }
-    let cache: Cache = match settings.kind {
-        CacheKind::Neural => RadianceCache::for_scene_extent(
-            &settings.config,
-            queries.scene_box,
-            longest / settings.resolution as f32,
-            settings.device,
-        )?
-        .0
-        .into(),
-        CacheKind::Hash => Cache::hash(settings.hash, queries.scene_box)?,
-    };
+    let cache = scene_cache(queries.scene_box, settings)?;
     let mut online = OnlineSettings::new(producer, scene, tracer);
     online.records_per_frame = settings.records_per_frame;
     online.producer_options = settings.producer_options;

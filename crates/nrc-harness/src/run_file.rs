@@ -66,11 +66,25 @@ fn flags_of(
     let text = std::fs::read_to_string(path).with_context(|| format!("cannot read {}", what()))?;
     let value: serde_json::Value =
         serde_json::from_str(&text).with_context(|| format!("{} is not JSON", what()))?;
-    let Some(fields) = value.as_object() else {
-        bail!("{}: expected an object of flags", what());
-    };
     let Some(sub_cmd) = command.find_subcommand(sub) else {
         bail!("{}: unknown subcommand `{sub}`", what());
+    };
+    fields_to_flags(&value, sub_cmd, &what(), given)
+}
+
+/// The fields of the JSON object `value` as flags of the command `sub_cmd` (the run file's
+/// conversion: see the module documentation), but for the flags in `given`; `what` names the
+/// object in errors (the run file, or the keyword arguments of a Python call).
+pub fn fields_to_flags(
+    value: &serde_json::Value,
+    sub_cmd: &clap::Command,
+    what: &str,
+    given: &[&str],
+) -> Result<Vec<OsString>> {
+    let what = || what.to_string();
+    let sub = sub_cmd.get_name();
+    let Some(fields) = value.as_object() else {
+        bail!("{}: expected an object of flags", what());
     };
     let known: Vec<String> = sub_cmd
         .get_arguments()

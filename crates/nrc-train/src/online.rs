@@ -11,7 +11,7 @@ use nrc_scene::{Camera, Scene};
 
 use crate::error::TrainError;
 use crate::mix::{ProducerMix, ProducerOptions, ProducerSpec};
-use crate::producer::{ProducerContext, ProducerStats};
+use crate::producer::{Produced, ProducerContext, ProducerStats};
 use crate::query::QueryMaker;
 use crate::schedule::{ChangeDetector, ChangeMonitor, Phase, TrainBudget};
 use crate::source::CacheSource;
@@ -273,27 +273,25 @@ impl OnlineTrainer {
             None => s.records_per_frame,
         };
         let t = Instant::now();
-        let starts = starts::predict(
+        let source = CacheSource {
+            cache: &self.cache,
+            queries: s.queries,
+        };
+        let view = FrameView {
+            scene,
             camera,
             width,
             height,
+        };
+        let produced = produce_frame(
+            &mut self.mix,
+            s,
+            &source,
+            &view,
             &self.previous,
-            s.from_terminations,
             records,
             seed,
         );
-        let ctx = ProducerContext {
-            scene,
-            camera,
-            cache: &CacheSource {
-                cache: &self.cache,
-                queries: s.queries,
-            },
-            queries: &s.queries,
-            starts: &starts,
-            tracer: s.tracer,
-        };
-        let produced = self.mix.produce(&ctx, records, seed);
         stats.produce_ms = t.elapsed().as_secs_f64() * 1e3;
         stats.records = produced.batch.queries.len();
         stats.producer = produced.stats;
@@ -370,6 +368,49 @@ impl OnlineTrainer {
         self.frame += 1;
         Ok((stats, output))
     }
+}
+
+/// The scene and camera of a frame, and its image size (query prediction's tiles).
+#[derive(Clone, Copy)]
+pub struct FrameView<'a> {
+    pub scene: &'a Scene,
+    pub camera: &'a Camera,
+    pub width: u32,
+    pub height: u32,
+}
+
+/// A frame's training records as the online loop produces them ([`OnlineTrainer::frame`]):
+/// query prediction from the camera (the fraction `settings.from_terminations` aimed at the
+/// previous frame's termination points `previous`), then the mix's producers on `records`
+/// records, reading `source` (the cache) for self-learning; `seed` is the frame's
+/// ([`pass_seed`] of the settings' seed and the frame index).
+pub fn produce_frame(
+    mix: &mut ProducerMix,
+    settings: &OnlineSettings,
+    source: &dyn nrc_render::RadianceSource,
+    view: &FrameView,
+    previous: &[TerminationPoint],
+    records: usize,
+    seed: u64,
+) -> Produced {
+    let starts = starts::predict(
+        view.camera,
+        view.width,
+        view.height,
+        previous,
+        settings.from_terminations,
+        records,
+        seed,
+    );
+    let ctx = ProducerContext {
+        scene: view.scene,
+        camera: view.camera,
+        cache: source,
+        queries: &settings.queries,
+        starts: &starts,
+        tracer: settings.tracer,
+    };
+    mix.produce(&ctx, records, seed)
 }
 
 /// A permutation of `0..n` (Fisher–Yates on the stream `seed`).

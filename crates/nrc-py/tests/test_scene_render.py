@@ -1,0 +1,78 @@
+"""Scenes and renders: what a scene holds, and renders with the same bits as `nrc render`."""
+
+import numpy as np
+import pytest
+
+import nrc
+from conftest import SCENES
+
+
+def test_scene_holds_what_nrc_info_says(cornell):
+    assert cornell.triangle_count == 32
+    assert cornell.light_count >= 1
+    lo, hi = cornell.bounds
+    assert all(h > l for l, h in zip(lo, hi))
+    tris = cornell.triangles()
+    assert tris.shape == (32, 3, 3) and tris.dtype == np.float32
+    # Every vertex lies in the bounds.
+    assert (tris >= np.array(lo) - 1e-6).all() and (tris <= np.array(hi) + 1e-6).all()
+    assert "triangles" in cornell.summary()
+    assert abs(cornell.camera["fov_y"] - 39.3077) < 1e-3
+
+
+def test_camera_override_moves_the_camera():
+    s = nrc.Scene.load(SCENES / "cornell-box.gltf", camera_pos=(0.3, 0.3, -0.5), fov_y=50)
+    assert np.allclose(s.camera["position"], (0.3, 0.3, -0.5))
+    assert abs(s.camera["fov_y"] - 50) < 1e-4
+
+
+def test_animated_scene_moves_with_time():
+    s = nrc.Scene.load(SCENES / "cornell-box-moving.gltf")
+    assert s.is_animated and s.duration > 0
+
+    def triangle_set(scene):
+        # The acceleration structure orders triangles as it likes: compare them as a set.
+        t = scene.triangles().reshape(-1, 9)
+        return t[np.lexsort(t.T[::-1])]
+
+    a, b = triangle_set(s.at(0.0)), triangle_set(s.at(0.7))
+    assert a.shape == b.shape
+    assert not np.array_equal(a, b)
+    # Posing is a function of time.
+    assert np.array_equal(triangle_set(s.at(0.7)), b)
+
+
+def test_render_has_the_same_bits_as_the_program(cornell, tmp_path):
+    out = tmp_path / "pt.exr"
+    nrc.cli([
+        "render", "--scene", str(SCENES / "cornell-box.gltf"), "--spp", "4",
+        "--width", "40", "--height", "24", "--seed", "7", "--out", str(out),
+    ])
+    program = nrc.read_exr(out)
+    image = nrc.render(cornell, spp=4, width=40, height=24, seed=7)
+    assert image.shape == (24, 40, 3) and image.dtype == np.float32
+    assert np.array_equal(image, program)
+    # Another seed is another image (the comparison above could not pass by accident).
+    assert not np.array_equal(nrc.render(cornell, spp=4, width=40, height=24, seed=8), program)
+
+
+def test_cache_render_has_the_same_bits_as_the_program(cornell, trained, tmp_path):
+    snapshot = tmp_path / "c.nrc"
+    trained.save(snapshot)
+    out = tmp_path / "cache.exr"
+    nrc.cli([
+        "render", "--scene", str(SCENES / "cornell-box.gltf"), "--spp", "2",
+        "--width", "32", "--height", "32", "--cache", str(snapshot),
+        "--termination", "first", "--out", str(out),
+    ])
+    image = nrc.render(cornell, spp=2, width=32, height=32, cache=trained, termination="first")
+    assert np.array_equal(image, nrc.read_exr(out))
+    assert image.mean() > 0
+
+
+def test_passes_by_name(cornell, trained):
+    for pass_ in ["pt", "pt-nonee", "restir-di"]:
+        img = nrc.render(cornell, pass_=pass_, spp=1, width=16, height=16)
+        assert img.shape == (16, 16, 3) and np.isfinite(img).all()
+    img = nrc.render(cornell, pass_="cache-first", width=16, height=16, cache=trained)
+    assert np.isfinite(img).all() and img.mean() > 0

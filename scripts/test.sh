@@ -1,0 +1,23 @@
+#!/usr/bin/env bash
+# The README's test command: every test, Rust and Python, in the release profile (one build:
+# the Python module is the workspace build's `libnrc_py.so`, copied beside the package's
+# Python files, not built a second time). Arguments go to `cargo test`.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+export CARGO_TARGET_DIR="${CARGO_TARGET_DIR:-${XDG_CACHE_HOME:-$HOME/.cache}/nrc-target}"
+python="${PYTHON:-python3}"
+if ! "$python" -c "import numpy, pytest" 2>/dev/null; then
+  echo "error: the Python tests need numpy and pytest: $python -m pip install numpy pytest" >&2
+  exit 1
+fi
+
+# The same selection as CI's build, so that nothing is rebuilt with other features.
+cargo build --release --locked --workspace --all-targets
+cargo test --release --locked --workspace "$@"
+
+pkg="$CARGO_TARGET_DIR/python-test/nrc"
+rm -rf "$pkg"
+mkdir -p "$pkg"
+cp crates/nrc-py/python/nrc/* "$pkg/"
+cp "$CARGO_TARGET_DIR/release/libnrc_py.so" "$pkg/_nrc.abi3.so"
+PYTHONPATH="$(dirname "$pkg")" "$python" -m pytest -q crates/nrc-py/tests

@@ -1,0 +1,102 @@
+//! `nrc`: the neural radiance cache command line, as a library (the `nrc` program and the
+//! Python module `nrc` both run its commands).
+//!
+//! Subcommands: `render` (the reference path tracer, or rendering from a cache snapshot),
+//! `train` (the online loop), `compare` (methods against a reference), `reference`, `info`,
+//! `export` (a snapshot as portable weights) and `bench` (measured throughput). Every failure
+//! is an error whose [`one_line`] is the program's `error: ...` line.
+
+mod bench;
+mod compare;
+mod export;
+mod info;
+mod reference;
+pub mod render;
+pub mod train;
+
+use std::ffi::OsString;
+
+use clap::{CommandFactory, Parser, Subcommand};
+
+/// Neural radiance cache trainer and reference renderer.
+#[derive(Parser, Debug)]
+#[command(name = "nrc", version, about, long_about = None)]
+pub struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand, Debug)]
+enum Command {
+    /// Render a scene with the unbiased reference path tracer and write an EXR.
+    Render(render::RenderArgs),
+    /// Print what a scene holds: triangles, materials, lights, bounds and camera.
+    Info(info::InfoArgs),
+    /// Measure throughput.
+    #[command(subcommand)]
+    Bench(bench::BenchCommand),
+    /// Render (or find in the cache) a reference image with its per-pixel variance.
+    Reference(reference::ReferenceArgs),
+    /// Compare rendering methods against a reference: errors, bias and variance, equal-time
+    /// and equal-sample studies, report, plots and images.
+    Compare(Box<compare::CompareArgs>),
+    /// Train a neural radiance cache online on a scene: per frame produce training records,
+    /// train, and render with paths ending in the cache; statistics, frames and a snapshot.
+    Train(Box<train::TrainArgs>),
+    /// Export a neural cache snapshot as portable weights (safetensors) and a
+    /// tiny-cuda-nn–style JSON description of the encoding and network (docs/export.md).
+    Export(export::ExportArgs),
+}
+
+/// The command line (program name first) with a run file (`--run FILE`) expanded into flags.
+pub fn expand(args: Vec<OsString>) -> anyhow::Result<Vec<OsString>> {
+    nrc_harness::run_file::expand(args, &Cli::command())
+}
+
+/// Runs a parsed command.
+pub fn run(cli: Cli) -> anyhow::Result<()> {
+    match cli.command {
+        Command::Render(a) => render::run(&a),
+        Command::Info(a) => info::run(&a),
+        Command::Bench(b) => bench::run(&b),
+        Command::Reference(a) => reference::run(&a),
+        Command::Compare(a) => compare::run(&a),
+        Command::Train(a) => train::run(&a),
+        Command::Export(a) => export::run(&a),
+    }
+}
+
+/// Expands, parses and runs a command line (program name first) as the program would, but
+/// returns every failure, a malformed command line included (with clap's message), instead of
+/// exiting.
+pub fn run_args(args: Vec<OsString>) -> anyhow::Result<()> {
+    let args = expand(args)?;
+    let cli = Cli::try_parse_from(args).map_err(|e| {
+        let text = e.render().to_string();
+        let first = text
+            .lines()
+            .map(|l| l.trim_start_matches("error: ").trim())
+            .find(|l| !l.is_empty())
+            .unwrap_or("malformed command line")
+            .to_string();
+        anyhow::anyhow!(first)
+    })?;
+    run(cli)
+}
+
+/// The error and its causes, outermost first, on one line. A cause whose text the message
+/// already contains (errors that print their source themselves) is not repeated.
+pub fn one_line(e: &anyhow::Error) -> String {
+    let mut line = String::new();
+    for cause in e.chain() {
+        let text = cause.to_string();
+        if line.contains(&text) {
+            continue;
+        }
+        if !line.is_empty() {
+            line.push_str(": ");
+        }
+        line.push_str(&text);
+    }
+    line.replace('\n', " ")
+}
