@@ -3,7 +3,12 @@
 //! Producers and inference passes build these without knowing anything of burn.
 
 /// One point of the radiance field to evaluate: where, in which direction, on what surface.
-#[derive(Clone, Copy, Debug, PartialEq, Default)]
+///
+/// Laid out as 16 consecutive `f32` in field order (`repr(C)`, no padding), so that rows of a
+/// `[N, 16]` float array are queries without a copy (`bytemuck::cast_slice`; the Python
+/// module's query rows).
+#[derive(Clone, Copy, Debug, PartialEq, Default, bytemuck::Pod, bytemuck::Zeroable)]
+#[repr(C)]
 pub struct CacheQuery {
     /// Position normalised to the scene box, in [0,1]³ (values outside are clamped).
     pub position: [f32; 3],

@@ -32,6 +32,7 @@ create_exception!(
 /// Floats per query row: position (3, in the scene box's [0,1]³), direction (3), normal (3),
 /// roughness (1), diffuse (3), specular (3).
 const QUERY_DIMS: usize = 16;
+const _: () = assert!(std::mem::size_of::<CacheQuery>() == QUERY_DIMS * 4);
 
 fn nrc_err(e: anyhow::Error) -> PyErr {
     NrcError::new_err(nrc::one_line(&e))
@@ -82,9 +83,13 @@ fn parse_options<T: Parser>(
 // ---------------------------------------------------------------------------------------------
 // Arrays.
 
-/// The rows of a 2-D `float32`, C-contiguous array with `cols` columns, finite throughout,
-/// copied (the GIL is released afterwards).
-fn f32_rows(obj: &Bound<'_, PyAny>, name: &str, cols: usize) -> PyResult<(Vec<f32>, usize)> {
+/// A 2-D `float32`, C-contiguous array with `cols` columns, borrowed (its shape and type
+/// checked; its values are checked by the reader: [`queries_of`], [`f32_rows`]).
+fn f32_matrix<'py>(
+    obj: &Bound<'py, PyAny>,
+    name: &str,
+    cols: usize,
+) -> PyResult<numpy::PyReadonlyArray2<'py, f32>> {
     let arr = obj.cast::<PyUntypedArray>().map_err(|_| {
         PyTypeError::new_err(format!(
             "{name} must be a NumPy array (float32, shape (N, {cols})), got {}",
@@ -112,33 +117,52 @@ fn f32_rows(obj: &Bound<'_, PyAny>, name: &str, cols: usize) -> PyResult<(Vec<f3
             "{name} must be C-contiguous (use numpy.ascontiguousarray)"
         )));
     }
-    let typed = arr.cast::<PyArray2<f32>>()?.readonly();
-    let slice = typed
-        .as_slice()
-        .map_err(|e| PyValueError::new_err(format!("{name}: {e}")))?;
+    Ok(arr.cast::<PyArray2<f32>>()?.readonly())
+}
+
+/// The array's data (`f32_matrix` checked its layout).
+fn data<'a>(arr: &'a numpy::PyReadonlyArray2<'_, f32>, name: &str) -> PyResult<&'a [f32]> {
+    arr.as_slice()
+        .map_err(|e| PyValueError::new_err(format!("{name}: {e}")))
+}
+
+/// The error for a non-finite value at flat index `i` of rows of `cols` values.
+fn not_finite(name: &str, i: usize, cols: usize) -> PyErr {
+    PyValueError::new_err(format!(
+        "{name} holds a NaN or infinite value (row {}, column {})",
+        i / cols,
+        i % cols
+    ))
+}
+
+/// The rows of a 2-D float32 array with `cols` columns, finite throughout, copied.
+fn f32_rows(obj: &Bound<'_, PyAny>, name: &str, cols: usize) -> PyResult<(Vec<f32>, usize)> {
+    let arr = f32_matrix(obj, name, cols)?;
+    let slice = data(&arr, name)?;
     if let Some(i) = slice.iter().position(|v| !v.is_finite()) {
-        return Err(PyValueError::new_err(format!(
-            "{name} holds a NaN or infinite value (row {}, column {})",
-            i / cols,
-            i % cols
-        )));
+        return Err(not_finite(name, i, cols));
     }
-    Ok((slice.to_vec(), arr.shape()[0]))
+    Ok((slice.to_vec(), slice.len() / cols))
+}
+
+/// Query rows (16 floats each) as queries, without a copy ([`CacheQuery`] is 16 `f32` in
+/// the rows' order); a non-finite value is an error naming its row and column. Checked in
+/// parallel (called without the GIL).
+fn queries_of(rows: &[f32]) -> PyResult<&[CacheQuery]> {
+    use rayon::prelude::*;
+    if !rows
+        .par_chunks(1 << 14)
+        .all(|c| c.iter().all(|v| v.is_finite()))
+    {
+        let i = rows.iter().position(|v| !v.is_finite()).unwrap_or(0);
+        return Err(not_finite("queries", i, QUERY_DIMS));
+    }
+    Ok(bytemuck::cast_slice(rows))
 }
 
 fn queries_from(obj: &Bound<'_, PyAny>) -> PyResult<Vec<CacheQuery>> {
-    let (rows, _) = f32_rows(obj, "queries", QUERY_DIMS)?;
-    Ok(rows
-        .chunks_exact(QUERY_DIMS)
-        .map(|r| CacheQuery {
-            position: [r[0], r[1], r[2]],
-            direction: [r[3], r[4], r[5]],
-            normal: [r[6], r[7], r[8]],
-            roughness: r[9],
-            diffuse: [r[10], r[11], r[12]],
-            specular: [r[13], r[14], r[15]],
-        })
-        .collect())
+    let arr = f32_matrix(obj, "queries", QUERY_DIMS)?;
+    Ok(queries_of(data(&arr, "queries")?)?.to_vec())
 }
 
 fn query_row(q: &CacheQuery) -> [f32; QUERY_DIMS] {
@@ -541,11 +565,12 @@ impl Cache {
         py: Python<'py>,
         queries: &Bound<'py, PyAny>,
     ) -> PyResult<Bound<'py, PyAny>> {
-        let queries = queries_from(queries)?;
-        let n = queries.len();
-        let out = self.with(py, |c| Ok(c.infer(&queries)))?;
-        let flat: Vec<f32> = out.into_iter().flatten().collect();
-        array2(py, flat, n, 3)
+        let arr = f32_matrix(queries, "queries", QUERY_DIMS)?;
+        let rows = data(&arr, "queries")?;
+        let n = rows.len() / QUERY_DIMS;
+        // The rows are read without the GIL, as NumPy's own functions read arrays.
+        let out = self.with(py, |c| Ok(c.infer(queries_of(rows)?)))?;
+        array2(py, out.into_flattened(), n, 3)
     }
 
     /// Writes a snapshot (atomically).
