@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
-# The README's test command: every test, Rust and Python, in the release profile (one build:
-# the Python module is the workspace build's `libnrc_py.so`, copied beside the package's
-# Python files, not built a second time). Arguments go to `cargo test`.
+# The README's test command: every test, Rust and Python, in the release profile, from one build
+# (the Python module is the workspace build's, see scripts/python-env.sh). Arguments go to
+# `cargo test`.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 export CARGO_TARGET_DIR="${CARGO_TARGET_DIR:-${XDG_CACHE_HOME:-$HOME/.cache}/nrc-target}"
@@ -14,10 +14,4 @@ fi
 # The same selection as CI's build, so that nothing is rebuilt with other features.
 cargo build --release --locked --workspace --all-targets
 cargo test --release --locked --workspace "$@"
-
-pkg="$CARGO_TARGET_DIR/python-test/nrc"
-rm -rf "$pkg"
-mkdir -p "$pkg"
-cp crates/nrc-py/python/nrc/* "$pkg/"
-cp "$CARGO_TARGET_DIR/release/libnrc_py.so" "$pkg/_nrc.abi3.so"
-PYTHONPATH="$(dirname "$pkg")" "$python" -m pytest -q crates/nrc-py/tests
+bash scripts/python-env.sh "$python" -m pytest -q crates/nrc-py/tests

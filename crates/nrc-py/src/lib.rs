@@ -399,6 +399,42 @@ impl Scene {
         Ok(d)
     }
 
+    /// The lights: `emissive_triangles` (int64 indices into `triangles()`), `punctual` (a
+    /// list of dicts: `kind` (`point`, `spot` with `cos_inner` and `cos_outer`,
+    /// `directional`), `position`, `direction`, `intensity`, `range`) and
+    /// `environment` (whether an environment lights the scene).
+    fn lights<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let sampler = self.scene.lights();
+        let d = PyDict::new(py);
+        let tris: Vec<i64> = sampler.triangles().iter().map(|&t| i64::from(t)).collect();
+        d.set_item("emissive_triangles", PyArray1::from_vec(py, tris))?;
+        let punctual = pyo3::types::PyList::empty(py);
+        for l in self.scene.punctual_lights() {
+            let e = PyDict::new(py);
+            let kind = match l.kind {
+                nrc_scene::light::PunctualKind::Point => "point",
+                nrc_scene::light::PunctualKind::Spot {
+                    cos_inner,
+                    cos_outer,
+                } => {
+                    e.set_item("cos_inner", cos_inner)?;
+                    e.set_item("cos_outer", cos_outer)?;
+                    "spot"
+                }
+                nrc_scene::light::PunctualKind::Directional => "directional",
+            };
+            e.set_item("kind", kind)?;
+            e.set_item("position", l.position.to_array())?;
+            e.set_item("direction", l.direction.to_array())?;
+            e.set_item("intensity", l.intensity.to_array())?;
+            e.set_item("range", l.range)?;
+            punctual.append(e)?;
+        }
+        d.set_item("punctual", punctual)?;
+        d.set_item("environment", sampler.counts().2 > 0)?;
+        Ok(d)
+    }
+
     /// The triangles' vertices, `float32` of shape `(T, 3, 3)` (triangle, vertex, xyz).
     fn triangles<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
         let n = self.scene.triangle_count();

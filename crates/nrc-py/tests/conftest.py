@@ -1,6 +1,5 @@
 """Shared fixtures of the Python module's tests: the shipped scenes and a trained cache."""
 
-import os
 import pathlib
 
 import numpy as np
@@ -49,6 +48,3 @@ def relative_error(a, b):
     """Per-element |a - b| / max(|b|, 1e-6)."""
     return np.abs(a - b) / np.maximum(np.abs(b), 1e-6)
 
-
-# The benchmark-like tests compare timings: no other test threads disturb them.
-os.environ.setdefault("RAYON_NUM_THREADS", str(os.cpu_count() or 1))

@@ -17,6 +17,11 @@ def test_scene_holds_what_nrc_info_says(cornell):
     # Every vertex lies in the bounds.
     assert (tris >= np.array(lo) - 1e-6).all() and (tris <= np.array(hi) + 1e-6).all()
     assert "triangles" in cornell.summary()
+    lights = cornell.lights()
+    emissive = lights["emissive_triangles"]
+    assert len(emissive) + len(lights["punctual"]) + lights["environment"] == cornell.light_count
+    # The emissive triangles are the ceiling light's: the highest in the box.
+    assert len(emissive) > 0 and (tris[emissive][:, :, 1] > 0.5).all()
     assert abs(cornell.camera["fov_y"] - 39.3077) < 1e-3
 
 

@@ -40,6 +40,8 @@ class Scene:
         """The box query positions are normalised to."""
     @property
     def camera(self) -> Dict[str, Any]: ...
+    def lights(self) -> Dict[str, Any]:
+        """emissive_triangles (indices), punctual (list of dicts), environment (bool)."""
     def triangles(self) -> _F32:
         """Vertices, float32 of shape (T, 3, 3)."""
     def summary(self) -> str: ...
