@@ -57,6 +57,85 @@ struct PixelResult {
     invalid: u64,
 }
 
+/// The per-pixel sample moments of a range of sample indices: how many samples, their mean
+/// and the sum of squared deviations from it (Welford, f64), per pixel and channel. Sample `s`
+/// of pixel `p` depends only on the seed, `p` and `s`, so a render split into ranges of sample
+/// indices and [`Moments::merge`]d gives the mean and variance of the whole render, up to the
+/// order of the floating-point sums.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Moments {
+    pub width: u32,
+    pub height: u32,
+    /// Samples per pixel.
+    pub count: u64,
+    /// Per pixel (row-major), per channel.
+    pub mean: Vec<[f64; 3]>,
+    pub m2: Vec<[f64; 3]>,
+    /// Samples whose estimate was NaN or infinite and counted as zero.
+    pub invalid_samples: u64,
+}
+
+impl Moments {
+    /// Adds the samples of `other` (same image, disjoint samples): Chan, Golub and LeVeque's
+    /// pairwise update of the mean and the sum of squared deviations.
+    pub fn merge(&mut self, other: &Moments) -> Result<(), String> {
+        if (self.width, self.height) != (other.width, other.height) {
+            return Err(format!(
+                "moments of a {}x{} image cannot merge with a {}x{} one",
+                other.width, other.height, self.width, self.height
+            ));
+        }
+        let (na, nb) = (self.count as f64, other.count as f64);
+        let n = na + nb;
+        if nb == 0.0 {
+            return Ok(());
+        }
+        for ((ma, qa), (mb, qb)) in self
+            .mean
+            .iter_mut()
+            .zip(self.m2.iter_mut())
+            .zip(other.mean.iter().zip(&other.m2))
+        {
+            for c in 0..3 {
+                let delta = mb[c] - ma[c];
+                ma[c] += delta * nb / n;
+                qa[c] += qb[c] + delta * delta * na * nb / n;
+            }
+        }
+        self.count += other.count;
+        self.invalid_samples += other.invalid_samples;
+        Ok(())
+    }
+
+    /// The per-pixel mean.
+    pub fn mean_image(&self) -> Image {
+        let data = self
+            .mean
+            .iter()
+            .map(|m| Vec3::new(m[0] as f32, m[1] as f32, m[2] as f32))
+            .collect();
+        Image::from_data(self.width as usize, self.height as usize, data)
+            .expect("one value per pixel")
+    }
+
+    /// The per-pixel unbiased sample variance of one sample (at least 2 samples).
+    pub fn variance_image(&self) -> Option<Image> {
+        if self.count < 2 {
+            return None;
+        }
+        let d = (self.count - 1) as f64;
+        let data = self
+            .m2
+            .iter()
+            .map(|q| Vec3::new((q[0] / d) as f32, (q[1] / d) as f32, (q[2] / d) as f32))
+            .collect();
+        Some(
+            Image::from_data(self.width as usize, self.height as usize, data)
+                .expect("one value per pixel"),
+        )
+    }
+}
+
 /// Renders `scene` from `camera` with `tracer`, on the current rayon pool.
 /// `progress(pixels)` is called as tiles finish, with the number of pixels just done.
 pub fn render(
@@ -66,17 +145,48 @@ pub fn render(
     settings: &RenderSettings,
     progress: &(dyn Fn(u64) + Sync),
 ) -> RenderOutput {
-    let (w, h) = (settings.width, settings.height);
     let spp = settings.spp.max(1);
+    let (moments, stats) = render_moments(
+        scene,
+        camera,
+        tracer,
+        (settings.width, settings.height),
+        settings.seed,
+        0..spp,
+        progress,
+    );
+    RenderOutput {
+        mean: moments.mean_image(),
+        variance: if settings.variance {
+            moments.variance_image()
+        } else {
+            None
+        },
+        stats,
+    }
+}
+
+/// The moments of the samples with indices in `samples` (each pixel's sample `s` as in a
+/// render of more samples), on the current rayon pool; `progress` as for [`render`].
+pub fn render_moments(
+    scene: &Scene,
+    camera: &Camera,
+    tracer: &PathTracer,
+    (w, h): (u32, u32),
+    seed: u64,
+    samples: std::ops::Range<u32>,
+    progress: &(dyn Fn(u64) + Sync),
+) -> (Moments, RenderStats) {
     let start = Instant::now();
+    let first = samples.start;
     let pixels = map_pixels(
         w,
         h,
         |x, y| {
             let mut acc = PixelResult::default();
             let index = y as u64 * w as u64 + x as u64;
-            for s in 0..spp {
-                let mut sampler = PixelSampler::new(settings.seed, index, s as u64);
+            for s in samples.clone() {
+                let mut sampler = PixelSampler::new(seed, index, s as u64);
                 let film = Vec2::new(x as f32, y as f32) + sampler.next_2d();
                 let ray = camera.generate_ray(film, w, h);
                 let mut l = tracer.radiance(scene, ray, &mut sampler, &mut acc.rays);
@@ -84,7 +194,7 @@ pub fn render(
                     acc.invalid += 1;
                     l = Vec3::ZERO;
                 }
-                let n = (s + 1) as f64;
+                let n = (s - first + 1) as f64;
                 for c in 0..3 {
                     let v = l[c] as f64;
                     let delta = v - acc.mean[c];
@@ -96,36 +206,23 @@ pub fn render(
         },
         |n| progress(n as u64),
     );
-    let elapsed = start.elapsed();
-
+    let count = samples.len() as u64;
     let mut stats = RenderStats {
-        samples: w as u64 * h as u64 * spp as u64,
-        elapsed,
+        samples: w as u64 * h as u64 * count,
+        elapsed: start.elapsed(),
         ..Default::default()
     };
-    let mut mean = Vec::with_capacity(pixels.len());
-    let mut var = Vec::with_capacity(if settings.variance { pixels.len() } else { 0 });
     for p in &pixels {
         stats.rays.add(&p.rays);
         stats.invalid_samples += p.invalid;
-        mean.push(Vec3::new(
-            p.mean[0] as f32,
-            p.mean[1] as f32,
-            p.mean[2] as f32,
-        ));
-        if settings.variance && spp >= 2 {
-            let d = (spp - 1) as f64;
-            var.push(Vec3::new(
-                (p.m2[0] / d) as f32,
-                (p.m2[1] / d) as f32,
-                (p.m2[2] / d) as f32,
-            ));
-        }
     }
-    RenderOutput {
-        mean: Image::from_data(w as usize, h as usize, mean).expect("one value per pixel"),
-        variance: (!var.is_empty())
-            .then(|| Image::from_data(w as usize, h as usize, var).expect("one value per pixel")),
-        stats,
-    }
+    let moments = Moments {
+        width: w,
+        height: h,
+        count,
+        mean: pixels.iter().map(|p| p.mean).collect(),
+        m2: pixels.iter().map(|p| p.m2).collect(),
+        invalid_samples: stats.invalid_samples,
+    };
+    (moments, stats)
 }
