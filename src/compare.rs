@@ -153,6 +153,27 @@ pub struct CompareArgs {
     /// Worker threads (default: all cores).
     #[arg(long)]
     pub threads: Option<usize>,
+
+    /// Write the comparison as a plan of independent jobs into this folder instead of running
+    /// it: reference chunks and one job per method and run, run by `nrc job DIR K` (or the Ray
+    /// driver, or a Slurm array: `scripts/ray_study.py`, `scripts/slurm_study.sh`), then
+    /// assembled by `nrc compare --merge DIR`.
+    #[arg(long, value_name = "DIR", conflicts_with_all = ["sweep", "converge", "sequence"])]
+    pub plan: Option<PathBuf>,
+
+    /// With --plan: jobs the reference's samples are split into (merged exactly).
+    #[arg(long, default_value_t = 1, requires = "plan")]
+    pub chunks: u32,
+
+    /// Assemble the report of a planned study from its jobs' results (into the plan's --out),
+    /// as the single process would have written it (timings aside). Given alone.
+    #[arg(long, value_name = "DIR", exclusive = true)]
+    pub merge: Option<PathBuf>,
+
+    /// With --plan: let the merge compare equal-time frames timed on different kinds of
+    /// machine (CPU model or core count), which it otherwise refuses.
+    #[arg(long, requires = "plan")]
+    pub allow_mixed_machines: bool,
 }
 
 impl CompareArgs {
@@ -166,7 +187,7 @@ impl CompareArgs {
 }
 
 /// Checks the arguments before any work.
-fn validate(args: &CompareArgs) -> Result<Budget> {
+pub(crate) fn validate(args: &CompareArgs) -> Result<Budget> {
     ensure!(
         args.width > 0 && args.height > 0,
         "image size {}x{} is empty",
@@ -202,8 +223,15 @@ fn validate(args: &CompareArgs) -> Result<Budget> {
     Budget::from_limits(args.equal_time, args.equal_spp).map_err(anyhow::Error::msg)
 }
 
-/// Runs `nrc compare`.
-pub fn run(args: &CompareArgs) -> Result<()> {
+/// Runs `nrc compare` (`argv`: the whole command line, run files expanded, which a plan
+/// records).
+pub fn run(args: &CompareArgs, argv: &[std::ffi::OsString]) -> Result<()> {
+    if args.merge.is_some() {
+        anyhow::bail!("--merge DIR is given alone: the study's settings are its plan's");
+    }
+    if let Some(dir) = &args.plan {
+        return crate::study::plan(args, argv, dir);
+    }
     let budget = validate(args)?;
     let scene = args.scene.load()?;
     for w in scene.warnings() {
@@ -245,15 +273,7 @@ fn run_comparison(args: &CompareArgs, budget: Budget, scene: &Scene) -> Result<(
         );
         return Ok(());
     }
-    let req = ReferenceRequest {
-        scene_path: &args.scene.scene,
-        scene,
-        width: w,
-        height: h,
-        spp: args.reference_spp,
-        seed: 0,
-        tracer: args.depth.tracer(),
-    };
+    let req = reference_request(args, scene);
     let reference = match &args.reference {
         Some(path) => {
             let r = reference::load_given(path, w, h)?;
@@ -277,6 +297,32 @@ fn run_comparison(args: &CompareArgs, budget: Budget, scene: &Scene) -> Result<(
         Step::Frame => progress.inc(1),
     })?;
     progress.finish();
+    print_report(&report, &markdown, &args.out);
+    Ok(())
+}
+
+/// The reference the arguments ask for.
+pub(crate) fn reference_request<'a>(
+    args: &'a CompareArgs,
+    scene: &'a Scene,
+) -> ReferenceRequest<'a> {
+    ReferenceRequest {
+        scene_path: &args.scene.scene,
+        scene,
+        width: args.width,
+        height: args.height,
+        spp: args.reference_spp,
+        seed: 0,
+        tracer: args.depth.tracer(),
+    }
+}
+
+/// Prints the report and where it went.
+pub(crate) fn print_report(
+    report: &nrc_eval::Report,
+    markdown: &std::path::Path,
+    out: &std::path::Path,
+) {
     for note in &report.notes {
         if note.contains("NaN or infinite") {
             eprintln!("warning: {note}");
@@ -286,13 +332,12 @@ fn run_comparison(args: &CompareArgs, budget: Budget, scene: &Scene) -> Result<(
     eprintln!(
         "wrote {} and the images to {}",
         markdown.display(),
-        args.out.display()
+        out.display()
     );
-    Ok(())
 }
 
 /// The comparison the arguments describe.
-fn comparison(args: &CompareArgs, budget: Budget) -> Result<Comparison> {
+pub(crate) fn comparison(args: &CompareArgs, budget: Budget) -> Result<Comparison> {
     let (w, h) = (args.width, args.height);
     let methods = args.methods();
     let any_cache = methods.iter().any(|m| m.producer.is_some());

@@ -12,6 +12,7 @@ mod export;
 mod info;
 mod reference;
 pub mod render;
+mod study;
 pub mod train;
 
 use std::ffi::OsString;
@@ -46,6 +47,9 @@ enum Command {
     /// Export a neural cache snapshot as portable weights (safetensors) and a
     /// tiny-cuda-nn–style JSON description of the encoding and network (docs/export.md).
     Export(export::ExportArgs),
+    /// Run jobs of a study planned by `nrc compare --plan DIR` (a job whose result exists is
+    /// skipped).
+    Job(study::JobArgs),
 }
 
 /// The command line (program name first) with a run file (`--run FILE`) expanded into flags.
@@ -53,25 +57,45 @@ pub fn expand(args: Vec<OsString>) -> anyhow::Result<Vec<OsString>> {
     nrc_harness::run_file::expand(args, &Cli::command())
 }
 
-/// Runs a parsed command.
-pub fn run(cli: Cli) -> anyhow::Result<()> {
+/// Runs a parsed command; `argv` is the command line it was parsed from (run files expanded),
+/// which a study's plan records.
+pub fn run(cli: Cli, argv: &[OsString]) -> anyhow::Result<()> {
     match cli.command {
         Command::Render(a) => render::run(&a),
         Command::Info(a) => info::run(&a),
         Command::Bench(b) => bench::run(&b),
         Command::Reference(a) => reference::run(&a),
-        Command::Compare(a) => compare::run(&a),
+        Command::Compare(a) => compare::run(&a, argv),
         Command::Train(a) => train::run(&a),
         Command::Export(a) => export::run(&a),
+        Command::Job(a) => study::job(&a),
     }
 }
 
-/// Expands, parses and runs a command line (program name first) as the program would, but
-/// returns every failure, a malformed command line included (with clap's message), instead of
-/// exiting.
-pub fn run_args(args: Vec<OsString>) -> anyhow::Result<()> {
-    let args = expand(args)?;
-    let cli = Cli::try_parse_from(args).map_err(|e| {
+/// The study folder of `nrc compare --merge DIR` (the flag alone: the settings are the plan's,
+/// so clap's required flags of `compare` do not apply), if that is the command line.
+pub fn merge_dir(argv: &[OsString]) -> Option<std::path::PathBuf> {
+    let words: Vec<&str> = argv
+        .iter()
+        .skip(1)
+        .map(|a| a.to_str())
+        .collect::<Option<_>>()?;
+    match words.as_slice() {
+        ["compare", "--merge", dir] => Some(dir.into()),
+        ["compare", flag] => flag.strip_prefix("--merge=").map(Into::into),
+        _ => None,
+    }
+}
+
+/// `nrc compare --merge DIR`.
+pub fn merge(dir: &std::path::Path) -> anyhow::Result<()> {
+    study::merge(dir)
+}
+
+/// Parses a command line (program name first, run files expanded), returning clap's message
+/// as the error's first line instead of exiting.
+fn try_parse(args: &[OsString]) -> anyhow::Result<Cli> {
+    Cli::try_parse_from(args).map_err(|e| {
         let text = e.render().to_string();
         let first = text
             .lines()
@@ -80,8 +104,19 @@ pub fn run_args(args: Vec<OsString>) -> anyhow::Result<()> {
             .unwrap_or("malformed command line")
             .to_string();
         anyhow::anyhow!(first)
-    })?;
-    run(cli)
+    })
+}
+
+/// Expands, parses and runs a command line (program name first) as the program would, but
+/// returns every failure, a malformed command line included (with clap's message), instead of
+/// exiting.
+pub fn run_args(args: Vec<OsString>) -> anyhow::Result<()> {
+    let args = expand(args)?;
+    if let Some(dir) = merge_dir(&args) {
+        return merge(&dir);
+    }
+    let cli = try_parse(&args)?;
+    run(cli, &args)
 }
 
 /// The error and its causes, outermost first, on one line. A cause whose text the message

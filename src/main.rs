@@ -11,12 +11,20 @@ fn main() -> std::process::ExitCode {
             return std::process::ExitCode::FAILURE;
         }
     };
-    let cli = nrc::Cli::parse_from(args);
     // The documented-commands test checks that a command parses, without running it.
-    if std::env::var_os("NRC_PARSE_ONLY").is_some() {
-        return std::process::ExitCode::SUCCESS;
-    }
-    match nrc::run(cli) {
+    let parse_only = std::env::var_os("NRC_PARSE_ONLY").is_some();
+    let result = match nrc::merge_dir(&args) {
+        Some(_) if parse_only => return std::process::ExitCode::SUCCESS,
+        Some(dir) => nrc::merge(&dir),
+        None => {
+            let cli = nrc::Cli::parse_from(&args);
+            if parse_only {
+                return std::process::ExitCode::SUCCESS;
+            }
+            nrc::run(cli, &args)
+        }
+    };
+    match result {
         Ok(()) => std::process::ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("error: {}", nrc::one_line(&e));

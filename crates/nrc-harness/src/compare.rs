@@ -228,6 +228,55 @@ fn mean_metrics(ms: &[ErrorMetrics]) -> ErrorMetrics {
     }
 }
 
+/// A method ready to render its runs: built, prepared for the comparison's image and warmed
+/// up (an untimed pass on a small image: thread pool, caches, so that the first timed frame is
+/// not charged for start-up; not where `prepare` rendered at this size, since a frame of
+/// another size would leave a stateful pass's history cold).
+pub fn ready_method(c: &Comparison, scene: &Scene, spec: &MethodSpec) -> Result<Box<dyn Method>> {
+    let (w, h) = (c.width, c.height);
+    let mut method = spec.build(&c.tracer, &c.cache);
+    method
+        .prepare(scene, &scene.camera, w, h)
+        .map_err(|e| anyhow::anyhow!("{spec}: {e}"))?;
+    if !method.warm_after_prepare() {
+        method.render_estimate(scene, &scene.camera, w.min(16), h.min(16), u64::MAX);
+    }
+    Ok(method)
+}
+
+/// The base seed of a method's frames (its runs' seeds are [`pass_seed`] of it and the run).
+pub fn method_seed(c: &Comparison, name: &str) -> u64 {
+    c.seed ^ name_hash(name)
+}
+
+/// Run `r` of a ready method: restarted (its state reset, untimed warm-up included) and one
+/// frame rendered within the comparison's budget.
+pub fn run_frame(c: &Comparison, scene: &Scene, method: &mut dyn Method, r: u32) -> Result<Frame> {
+    let name = method.name().to_string();
+    let seed = pass_seed(method_seed(c, &name), r);
+    method
+        .restart(scene, &scene.camera, c.width, c.height, r, seed)
+        .map_err(|e| anyhow::anyhow!("{name}: {e}"))?;
+    Ok(render_frame(
+        method,
+        scene,
+        &scene.camera,
+        &FrameRequest {
+            width: c.width,
+            height: c.height,
+            seed,
+            budget: c.budget,
+        },
+    )?)
+}
+
+/// Run frames rendered elsewhere (the jobs of a study, [`crate::study`]): method `i`'s name
+/// and its frame of run `r`, exactly as [`run_frame`] rendered them.
+pub trait StoredRuns {
+    fn name(&self, method: usize) -> Result<String>;
+    fn frame(&self, method: usize, run: u32) -> Result<Frame>;
+}
+
 /// Runs the comparison of `c` on `scene` against `reference` (on the current rayon pool),
 /// writing every file into `c.out`; returns the report and the path of `report.md`.
 pub fn compare(
@@ -236,6 +285,22 @@ pub fn compare(
     reference: &Reference,
     progress: &dyn Fn(Progress<'_>),
 ) -> Result<(Report, PathBuf)> {
+    compare_runs(c, scene, reference, None, progress)
+}
+
+/// [`compare`], with the run frames from `stored` where given (then without sweeps or
+/// frames-to-error measurements, which render from the methods' state).
+pub fn compare_runs(
+    c: &Comparison,
+    scene: &Scene,
+    reference: &Reference,
+    stored: Option<&dyn StoredRuns>,
+    progress: &dyn Fn(Progress<'_>),
+) -> Result<(Report, PathBuf)> {
+    anyhow::ensure!(
+        stored.is_none() || (c.sweep_steps.is_none() && c.converge.is_none()),
+        "a comparison from stored runs has no sweep and no frames-to-error measurement"
+    );
     let (w, h) = (c.width, c.height);
     let budget = c.budget;
     let Reference {
@@ -284,34 +349,21 @@ pub fn compare(
     let mut plot_series = Vec::new();
     let mut target_error: Option<f64> = None;
 
-    for spec in &c.methods {
-        let mut method = spec.build(&c.tracer, &c.cache);
-        method
-            .prepare(scene, &scene.camera, w, h)
-            .map_err(|e| anyhow::anyhow!("{spec}: {e}"))?;
-        let name = method.name().to_string();
+    for (index, spec) in c.methods.iter().enumerate() {
+        let mut method = match stored {
+            None => Some(ready_method(c, scene, spec)?),
+            Some(_) => None,
+        };
+        let name = match (&method, stored) {
+            (Some(m), _) => m.name().to_string(),
+            (None, Some(s)) => s.name(index)?,
+            (None, None) => unreachable!("a method is built where no runs are stored"),
+        };
         progress(Progress::Method(&name));
-        // Untimed warm-up pass on a small image (thread pool, caches), so that the first
-        // timed frame is not charged for start-up; not where `prepare` rendered at this size
-        // (a frame of another size would leave a stateful pass's history cold).
-        if !method.warm_after_prepare() {
-            method.render_estimate(scene, &scene.camera, w.min(16), h.min(16), u64::MAX);
-        }
 
-        // One measured frame: rendered within its budget, the excluded pixels set to the
-        // reference, its errors (and HDR-FLIP map) against the reference.
-        let measure = |method: &mut dyn Method, seed: u64, budget: Budget| {
-            let mut frame = render_frame(
-                method,
-                scene,
-                &scene.camera,
-                &FrameRequest {
-                    width: w,
-                    height: h,
-                    seed,
-                    budget,
-                },
-            )?;
+        // The measure of a frame: the excluded pixels set to the reference, its errors (and
+        // HDR-FLIP map) against the reference.
+        let evaluate = |mut frame: Frame| {
             exclude(
                 &mut frame.image,
                 emitter_mask.map(|m| m.as_slice()),
@@ -325,7 +377,22 @@ pub fn compare(
             )?;
             anyhow::Ok((frame, m, flip_map, spread))
         };
-        let base = c.seed ^ name_hash(&name);
+        // One measured frame, rendered within its budget.
+        let measure = |method: &mut dyn Method, seed: u64, budget: Budget| {
+            let frame = render_frame(
+                method,
+                scene,
+                &scene.camera,
+                &FrameRequest {
+                    width: w,
+                    height: h,
+                    seed,
+                    budget,
+                },
+            )?;
+            evaluate(frame)
+        };
+        let base = method_seed(c, &name);
         let mut acc = BiasVarianceAccumulator::new(w as usize, h as usize);
         let mut metrics = Vec::new();
         let mut spreads = Vec::new();
@@ -333,10 +400,12 @@ pub fn compare(
         let mut first: Option<(Frame, ErrorMetrics)> = None;
         for r in 0..c.runs {
             let seed = pass_seed(base, r);
-            method
-                .restart(scene, &scene.camera, w, h, r, seed)
-                .map_err(|e| anyhow::anyhow!("{name}: {e}"))?;
-            let (frame, m, flip_map, spread) = measure(method.as_mut(), seed, budget)?;
+            let frame = match (&mut method, stored) {
+                (Some(m), _) => run_frame(c, scene, m.as_mut(), r)?,
+                (None, Some(s)) => s.frame(index, r)?,
+                (None, None) => unreachable!("a method is built where no runs are stored"),
+            };
+            let (frame, m, flip_map, spread) = evaluate(frame)?;
             spreads.push(spread);
             if c.runs >= 2 {
                 acc.add(&ImageView::of_scene_image(&name, &frame.image)?)?;
@@ -386,6 +455,9 @@ pub fn compare(
                 samples_per_pixel: first_frame.samples_per_pixel as f64,
                 metrics: first_metrics,
             });
+            let method = method
+                .as_mut()
+                .context("a sweep renders from the method itself, not stored runs")?;
             for step in 1..steps {
                 let seed = Stream::SweepStep(step).seed(base);
                 let b = scaled_budget(budget, step);
@@ -413,6 +485,9 @@ pub fn compare(
         plot_series.push(series);
 
         if let Some(cv) = &c.converge {
+            let method = method
+                .as_mut()
+                .context("frames to error render from the method itself, not stored runs")?;
             let warm = Instant::now();
             method
                 .restart(

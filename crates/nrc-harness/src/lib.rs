@@ -34,6 +34,7 @@ pub mod reference;
 pub mod run;
 pub mod run_file;
 pub mod sequence;
+pub mod study;
 
 pub use budget::{Budget, Estimate, Frame, FrameRequest, Method, render_frame};
 pub use methods::{CacheMethodSettings, MethodList, MethodSpec};

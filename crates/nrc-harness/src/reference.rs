@@ -25,7 +25,7 @@ use std::time::Instant;
 
 use anyhow::{Context, Result, bail, ensure};
 use glam::Vec3;
-use nrc_render::{PathTracer, RenderSettings, render};
+use nrc_render::{Moments, PathTracer, render_moments};
 use nrc_scene::{Camera, Image, Scene};
 use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
@@ -249,6 +249,30 @@ pub fn obtain(
     force: bool,
     progress: &(dyn Fn(u64) + Sync),
 ) -> Result<Reference> {
+    obtain_from(req, cache_dir, force, &|| {
+        let start = Instant::now();
+        let (moments, _) = render_moments(
+            req.scene,
+            &req.scene.camera,
+            &req.tracer,
+            (req.width, req.height),
+            req.seed,
+            0..req.spp,
+            progress,
+        );
+        Ok((moments, start.elapsed().as_secs_f64()))
+    })
+}
+
+/// [`obtain`], with the samples of an entry that must be made from `samples` (the per-pixel
+/// moments of samples `0..spp` and the seconds they took): a render here, or the merged
+/// chunks of a study's jobs ([`crate::study`]).
+pub fn obtain_from(
+    req: &ReferenceRequest<'_>,
+    cache_dir: &Path,
+    force: bool,
+    samples: &dyn Fn() -> Result<(Moments, f64)>,
+) -> Result<Reference> {
     ensure!(
         req.width > 0 && req.height > 0,
         "image size {}x{} is empty",
@@ -307,28 +331,27 @@ pub fn obtain(
         }
         _ => {}
     }
-    let settings = RenderSettings {
-        width: req.width,
-        height: req.height,
-        spp: req.spp,
-        seed: req.seed,
-        variance: true,
-    };
-    let start = Instant::now();
-    let out = render(
-        req.scene,
-        &req.scene.camera,
-        &req.tracer,
-        &settings,
-        progress,
+    let (moments, render_seconds) = samples()?;
+    ensure!(
+        moments.count == u64::from(req.spp)
+            && (moments.width, moments.height) == (req.width, req.height),
+        "the reference's samples are {} per pixel at {}x{}, expected {} at {}x{}",
+        moments.count,
+        moments.width,
+        moments.height,
+        req.spp,
+        req.width,
+        req.height
     );
-    let render_seconds = start.elapsed().as_secs_f64();
-    let mut variance = out.variance.context("the renderer returned no variance")?;
+    let mean = moments.mean_image();
+    let mut variance = moments
+        .variance_image()
+        .context("the renderer returned no variance")?;
     let inv_spp = 1.0 / req.spp as f32;
     for v in &mut variance.data {
         *v *= inv_spp;
     }
-    out.mean.write_exr(&dir.join(MEAN_FILE))?;
+    mean.write_exr(&dir.join(MEAN_FILE))?;
     variance.write_exr(&dir.join(VARIANCE_FILE))?;
     let meta = ReferenceMeta {
         format: FORMAT.into(),
@@ -344,14 +367,14 @@ pub fn obtain(
         environment: req.scene.environment().describe(),
         camera: (&req.scene.camera).into(),
         render_seconds,
-        invalid_samples: out.stats.invalid_samples,
+        invalid_samples: moments.invalid_samples,
         variance: "per-pixel, per-channel variance of the mean (path sample variance / spp)".into(),
         created_by: format!("nrc {}", env!("CARGO_PKG_VERSION")),
     };
     let json = serde_json::to_string_pretty(&meta).expect("metadata serialises");
     nrc_scene::image::write_atomic(&dir.join(META_FILE), json.as_bytes())?;
     Ok(Reference {
-        mean: out.mean,
+        mean,
         variance: Some(variance),
         meta: Some(meta),
         location: dir,
