@@ -14,4 +14,5 @@ fi
 # The same selection as CI's build, so that nothing is rebuilt with other features.
 cargo build --release --locked --workspace --all-targets
 cargo test --release --locked --workspace "$@"
-bash scripts/python-env.sh "$python" -m pytest -q crates/nrc-py/tests
+# No bytecode or pytest cache left in the clone.
+PYTHONDONTWRITEBYTECODE=1 bash scripts/python-env.sh "$python" -m pytest -q -p no:cacheprovider crates/nrc-py/tests

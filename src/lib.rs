@@ -115,6 +115,16 @@ pub fn run_args(args: Vec<OsString>) -> anyhow::Result<()> {
     if let Some(dir) = merge_dir(&args) {
         return merge(&dir);
     }
+    // Help and version are printed, as the program prints them, not errors.
+    if let Err(e) = Cli::try_parse_from(&args)
+        && matches!(
+            e.kind(),
+            clap::error::ErrorKind::DisplayHelp | clap::error::ErrorKind::DisplayVersion
+        )
+    {
+        print!("{}", e.render());
+        return Ok(());
+    }
     let cli = try_parse(&args)?;
     run(cli, &args)
 }

@@ -115,6 +115,7 @@ pub struct TrainArgs {
 /// The online trainer `args` describe, on `scene` (loaded from `args.scene`); `print`: say
 /// which device the cache computes on.
 pub fn trainer(args: &TrainArgs, scene: &Scene, print: bool) -> Result<OnlineTrainer> {
+    check(args)?;
     let mut settings = args.cache.method_settings(0, args.seed, print)?;
     settings.kind = args.cache_kind;
     let tracer = args.tracer.tracer();
@@ -133,8 +134,8 @@ pub fn trainer(args: &TrainArgs, scene: &Scene, print: bool) -> Result<OnlineTra
     Ok(trainer)
 }
 
-/// Runs `nrc train`.
-pub fn run(args: &TrainArgs) -> Result<()> {
+/// Checks the settings that need no scene.
+fn check(args: &TrainArgs) -> Result<()> {
     if args.width == 0 || args.height == 0 {
         bail!("image size {}x{} is empty", args.width, args.height);
     }
@@ -153,6 +154,17 @@ pub fn run(args: &TrainArgs) -> Result<()> {
             args.from_terminations
         );
     }
+    ensure!(
+        args.fps.is_finite() && args.fps > 0.0,
+        "--fps must be positive, got {}",
+        args.fps
+    );
+    Ok(())
+}
+
+/// Runs `nrc train`.
+pub fn run(args: &TrainArgs) -> Result<()> {
+    check(args)?;
     let scene: Scene = args.scene.load()?;
     for w in scene.warnings() {
         eprintln!("warning: {w}");
@@ -181,11 +193,6 @@ pub fn run(args: &TrainArgs) -> Result<()> {
             dir,
             every: args.every,
         });
-    ensure!(
-        args.fps.is_finite() && args.fps > 0.0,
-        "--fps must be positive, got {}",
-        args.fps
-    );
     let animated = args.scene.load_animated()?;
     let pose = |t: f32| args.scene.pose(&animated, t);
     let scenes = if animated.is_animated() {

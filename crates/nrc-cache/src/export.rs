@@ -9,8 +9,8 @@
 //! precision widened to f32.
 //!
 //! `DIR/config.json` and `DIR/weights.safetensors` are each written atomically (temporary file,
-//! synced, renamed); the weights are written first, so a `config.json` always describes the
-//! weights beside it.
+//! synced, renamed), the weights first; the weights' safetensors header holds the same
+//! description, so the weights file alone is complete.
 
 use std::path::{Path, PathBuf};
 
@@ -103,6 +103,11 @@ pub fn describe(cache: &RadianceCache) -> Value {
         crate::config::OutputActivation::ReLU => "ReLU",
     };
     let scene_box = cache.scene_box();
+    // The products inference takes: bfloat16 only on the fused CPU path, with an even input
+    // width (`cpu::mlp::PreparedMlp`); f32 elsewhere (wgpu, the tensor paths).
+    let bf16 = layout.mlp_precision == crate::config::MlpPrecision::Bf16
+        && layout.layers[0].inputs.is_multiple_of(2)
+        && cache.path() == crate::device::ComputePath::Fused;
     json!({
         "format": FORMAT,
         "version": VERSION,
@@ -141,10 +146,7 @@ pub fn describe(cache: &RadianceCache) -> Value {
             "n_output_dims": crate::model::OUTPUTS,
             "biases": false,
             "layers": layers,
-            "mlp_precision": match layout.mlp_precision {
-                crate::config::MlpPrecision::F32 => "f32",
-                crate::config::MlpPrecision::Bf16 => "bf16",
-            },
+            "mlp_precision": if bf16 { "bf16" } else { "f32" },
         },
         "output": "radiance[c] = output_activation(y[c]) * max(diffuse[c] + specular[c], 0)",
         "weights": WEIGHTS_FILE,
@@ -157,6 +159,12 @@ pub fn export(cache: &RadianceCache, dir: &Path) -> Result<Exported, CacheError>
         path: dir.display().to_string(),
         message: e.to_string(),
     };
+    if cfg!(target_endian = "big") {
+        return Err(CacheError::Input(
+            "exports are written on little-endian machines only (safetensors is little-endian)"
+                .into(),
+        ));
+    }
     std::fs::create_dir_all(dir).map_err(io)?;
     let layout = cache.layout();
     let (grid, mlp) = cache.inference_weights_host();

@@ -42,6 +42,51 @@ fn closed(what: &str) -> PyErr {
     PyValueError::new_err(format!("this {what} is closed"))
 }
 
+/// Runs `f` on the object's state, locked (call without the GIL): an error when it was closed,
+/// or when an earlier call failed inside it (a poisoned lock: its state may be half updated).
+fn with_state<T, R>(
+    inner: &Mutex<Option<T>>,
+    what: &str,
+    f: impl FnOnce(&mut T) -> PyResult<R>,
+) -> PyResult<R> {
+    let mut guard = inner.lock().map_err(|_| {
+        NrcError::new_err(format!(
+            "this {what} is unusable: an earlier call failed inside it"
+        ))
+    })?;
+    f(guard.as_mut().ok_or_else(|| closed(what))?)
+}
+
+/// Empties the object's state (`close()`), without the GIL.
+fn close_state<T: Send>(py: Python<'_>, inner: &Mutex<Option<T>>) {
+    py.detach(|| {
+        let mut g = inner
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        *g = None;
+    });
+}
+
+/// The most records, pixels and samples a call may ask for: beyond them an allocation could
+/// fail, which aborts the interpreter instead of raising.
+const MAX_RECORDS: usize = 1 << 24;
+const MAX_PIXEL_SAMPLES: u64 = 1 << 30;
+
+fn check_image(width: u32, height: u32, spp: u32) -> PyResult<()> {
+    if width == 0 || height == 0 || spp == 0 {
+        return Err(NrcError::new_err(format!(
+            "image size {width}x{height} at {spp} spp is empty"
+        )));
+    }
+    let n = u64::from(width) * u64::from(height) * u64::from(spp);
+    if n > MAX_PIXEL_SAMPLES {
+        return Err(PyValueError::new_err(format!(
+            "{width}x{height} at {spp} spp is {n} samples, above this module's limit of {MAX_PIXEL_SAMPLES} a call"
+        )));
+    }
+    Ok(())
+}
+
 /// Keyword arguments as a JSON object (`None`: an empty one).
 fn kwargs_json(py: Python<'_>, kwargs: Option<&Bound<'_, PyDict>>) -> PyResult<serde_json::Value> {
     let Some(kwargs) = kwargs else {
@@ -117,7 +162,9 @@ fn f32_matrix<'py>(
             "{name} must be C-contiguous (use numpy.ascontiguousarray)"
         )));
     }
-    Ok(arr.cast::<PyArray2<f32>>()?.readonly())
+    arr.cast::<PyArray2<f32>>()?
+        .try_readonly()
+        .map_err(|e| PyValueError::new_err(format!("{name} cannot be read: {e}")))
 }
 
 /// The array's data (`f32_matrix` checked its layout).
@@ -496,11 +543,7 @@ impl Cache {
         py: Python<'_>,
         f: impl FnOnce(&mut nrc_cache::Cache) -> PyResult<T> + Send,
     ) -> PyResult<T> {
-        py.detach(|| {
-            let mut guard = self.inner.lock().map_err(|_| closed("cache"))?;
-            let cache = guard.as_mut().ok_or_else(|| closed("cache"))?;
-            f(cache)
-        })
+        py.detach(|| with_state(&self.inner, "cache", f))
     }
 }
 
@@ -590,6 +633,9 @@ impl Cache {
             return Err(PyValueError::new_err("steps must be at least 1"));
         }
         let batch = batch_from(batch)?;
+        if batch.queries.is_empty() {
+            return Err(PyValueError::new_err("batch holds no records"));
+        }
         self.with(py, |c| {
             c.train(&batch, steps).map(|s| s.loss).map_err(cache_error)
         })
@@ -688,10 +734,8 @@ impl Cache {
     }
 
     /// Frees the cache; using it afterwards raises `ValueError`.
-    fn close(&self) {
-        if let Ok(mut g) = self.inner.lock() {
-            *g = None;
-        }
+    fn close(&self, py: Python<'_>) {
+        close_state(py, &self.inner);
     }
 
     fn __enter__(slf: Bound<'_, Self>) -> Bound<'_, Self> {
@@ -699,8 +743,8 @@ impl Cache {
     }
 
     #[pyo3(signature = (*_args))]
-    fn __exit__(&self, _args: &Bound<'_, pyo3::types::PyTuple>) -> bool {
-        self.close();
+    fn __exit__(&self, py: Python<'_>, _args: &Bound<'_, pyo3::types::PyTuple>) -> bool {
+        self.close(py);
         false
     }
 
@@ -790,14 +834,7 @@ fn render_call(
     seed: u64,
     options: Option<&Bound<'_, PyDict>>,
 ) -> PyResult<(RenderCall, RenderOptions)> {
-    if width == 0 || height == 0 {
-        return Err(NrcError::new_err(format!(
-            "image size {width}x{height} is empty"
-        )));
-    }
-    if spp == 0 {
-        return Err(NrcError::new_err("spp must be at least 1"));
-    }
+    check_image(width, height, spp)?;
     let parsed: RenderOptions = parse_options(&kwargs_json(py, options)?, &[], "nrc.render")?;
     let tracer = parsed.tracer.tracer();
     let pass = match pass_ {
@@ -962,11 +999,7 @@ impl Producer {
         height: u32,
         options: Option<&Bound<'_, PyDict>>,
     ) -> PyResult<Self> {
-        if width == 0 || height == 0 {
-            return Err(NrcError::new_err(format!(
-                "image size {width}x{height} is empty"
-            )));
-        }
+        check_image(width, height, 1)?;
         let spec: nrc_train::ProducerSpec = kind
             .parse()
             .map_err(|e: nrc_train::error::TrainError| NrcError::new_err(e.to_string()))?;
@@ -1008,8 +1041,10 @@ impl Producer {
         n: usize,
         cache: Option<&Bound<'py, Cache>>,
     ) -> PyResult<Bound<'py, PyDict>> {
-        if n == 0 {
-            return Err(PyValueError::new_err("n must be at least 1"));
+        if n == 0 || n > MAX_RECORDS {
+            return Err(PyValueError::new_err(format!(
+                "n must be in 1..={MAX_RECORDS}, got {n}"
+            )));
         }
         let scene = self.scene.get();
         let (w, h) = (self.width, self.height);
@@ -1033,21 +1068,17 @@ impl Producer {
             state.frame += 1;
             produced.batch
         };
-        let with_state =
-            |f: &dyn Fn(&mut ProducerState) -> TrainingBatch| -> PyResult<TrainingBatch> {
-                let mut g = self.inner.lock().map_err(|_| closed("producer"))?;
-                let state = g.as_mut().ok_or_else(|| closed("producer"))?;
-                Ok(f(state))
-            };
         let batch = match cache {
-            None => py.detach(|| with_state(&|s| run(s, &ZeroSource)))?,
+            None => {
+                py.detach(|| with_state(&self.inner, "producer", |s| Ok(run(s, &ZeroSource))))?
+            }
             Some(c) => c.get().with(py, |c| {
-                with_state(&|s| {
+                with_state(&self.inner, "producer", |s| {
                     let source = nrc_train::CacheSource {
                         cache: c,
                         queries: s.settings.queries,
                     };
-                    run(s, &source)
+                    Ok(run(s, &source))
                 })
             })?,
         };
@@ -1056,15 +1087,12 @@ impl Producer {
 
     /// Frames produced so far.
     #[getter]
-    fn frame(&self) -> PyResult<u32> {
-        let g = self.inner.lock().map_err(|_| closed("producer"))?;
-        Ok(g.as_ref().ok_or_else(|| closed("producer"))?.frame)
+    fn frame(&self, py: Python<'_>) -> PyResult<u32> {
+        py.detach(|| with_state(&self.inner, "producer", |s| Ok(s.frame)))
     }
 
-    fn close(&self) {
-        if let Ok(mut g) = self.inner.lock() {
-            *g = None;
-        }
+    fn close(&self, py: Python<'_>) {
+        close_state(py, &self.inner);
     }
 }
 
@@ -1112,10 +1140,12 @@ impl OnlineTrainer {
         map.insert("width".into(), width.into());
         map.insert("height".into(), height.into());
         let args = parse_train_args(&value)?;
-        if args.width == 0 || args.height == 0 || args.spp == 0 {
-            return Err(NrcError::new_err(
-                "width, height and spp must be at least 1",
-            ));
+        check_image(args.width, args.height, args.spp)?;
+        if args.cache.records > MAX_RECORDS {
+            return Err(PyValueError::new_err(format!(
+                "records must be at most {MAX_RECORDS}, got {}",
+                args.cache.records
+            )));
         }
         let trainer = py
             .detach(|| nrc::train::trainer(&args, &s.scene, false))
@@ -1140,24 +1170,24 @@ impl OnlineTrainer {
     ) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyAny>)> {
         let s = self.scene.get();
         let (w, h, fps) = (self.width, self.height, self.fps);
-        let (stats, out) = py.detach(|| -> PyResult<_> {
-            let mut g = self.inner.lock().map_err(|_| closed("trainer"))?;
-            let t = g.as_mut().ok_or_else(|| closed("trainer"))?;
-            let posed;
-            let scene = if s.animated.is_animated() {
-                posed = s
-                    .args
-                    .pose(&s.animated, s.time + t.frames() as f32 / fps)
-                    .map_err(nrc_err)?;
-                &posed
-            } else {
-                &*s.scene
-            };
-            let (stats, out) = t
-                .frame(scene, &scene.camera, w, h, render)
-                .map_err(cache_error)?;
-            let json = serde_json::to_string(&stats).expect("stats serialise");
-            Ok((json, out))
+        let (stats, out) = py.detach(|| {
+            with_state(&self.inner, "trainer", |t| {
+                let posed;
+                let scene = if s.animated.is_animated() {
+                    posed = s
+                        .args
+                        .pose(&s.animated, s.time + t.frames() as f32 / fps)
+                        .map_err(nrc_err)?;
+                    &posed
+                } else {
+                    &*s.scene
+                };
+                let (stats, out) = t
+                    .frame(scene, &scene.camera, w, h, render)
+                    .map_err(cache_error)?;
+                let json = serde_json::to_string(&stats).expect("stats serialise");
+                Ok((json, out))
+            })
         })?;
         let stats = py.import("json")?.call_method1("loads", (stats,))?;
         let image = match out {
@@ -1169,9 +1199,8 @@ impl OnlineTrainer {
 
     /// Frames run so far.
     #[getter]
-    fn frames(&self) -> PyResult<u64> {
-        let g = self.inner.lock().map_err(|_| closed("trainer"))?;
-        Ok(g.as_ref().ok_or_else(|| closed("trainer"))?.frames())
+    fn frames(&self, py: Python<'_>) -> PyResult<u64> {
+        py.detach(|| with_state(&self.inner, "trainer", |t| Ok(t.frames())))
     }
 
     /// Writes the cache's snapshot, naming its scene (as `nrc train --snapshot`).
@@ -1180,10 +1209,10 @@ impl OnlineTrainer {
         py.detach(|| -> PyResult<()> {
             let content =
                 nrc_harness::reference::scene_content_hash(&scene_path).map_err(nrc_err)?;
-            let mut g = self.inner.lock().map_err(|_| closed("trainer"))?;
-            let t = g.as_mut().ok_or_else(|| closed("trainer"))?;
-            t.cache.set_scene_content(Some(content));
-            t.cache.save(&path).map_err(cache_error)
+            with_state(&self.inner, "trainer", |t| {
+                t.cache.set_scene_content(Some(content));
+                t.cache.save(&path).map_err(cache_error)
+            })
         })
     }
 
@@ -1195,10 +1224,8 @@ impl OnlineTrainer {
         Cache::load(py, path, "cpu")
     }
 
-    fn close(&self) {
-        if let Ok(mut g) = self.inner.lock() {
-            *g = None;
-        }
+    fn close(&self, py: Python<'_>) {
+        close_state(py, &self.inner);
     }
 }
 

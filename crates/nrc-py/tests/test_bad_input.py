@@ -115,9 +115,32 @@ def test_bad_numbers(cornell):
         nrc.render(cornell, width=0)
     with pytest.raises(ValueError, match="scene_box"):
         nrc.Cache(scene_box=((0, 0, 0), (1, float("nan"), 1)))
-    with pytest.raises(ValueError, match="at least 1"):
+    with pytest.raises(ValueError, match="n must be in 1"):
         nrc.Producer(cornell, "pt").produce(0)
     with pytest.raises(ValueError, match="finite"):
         cornell.at(float("inf"))
     with pytest.raises(OverflowError):
         nrc.render(cornell, spp=-1)
+
+
+def test_sizes_beyond_the_limits(cornell):
+    """Requests whose allocation could fail (which would abort the interpreter) are refused."""
+    with pytest.raises(ValueError, match="limit"):
+        nrc.render(cornell, width=1 << 16, height=1 << 16)
+    with pytest.raises(ValueError, match="n must be in"):
+        nrc.Producer(cornell, "pt").produce(10**12)
+    with pytest.raises(nrc.NrcError, match="--fps must be positive"):
+        nrc.OnlineTrainer(nrc.Scene.load(SCENES / "cornell-box-moving.gltf"), fps=0)
+
+
+def test_empty_and_odd_arrays(trained):
+    assert trained.infer(np.zeros((0, 16), np.float32)).shape == (0, 3)
+    # A misaligned float32 view (offset by one byte) is refused, not read.
+    raw = np.zeros(16 * 4 * 4 + 1, np.uint8)[1:].view(np.float32).reshape(4, 16)
+    with pytest.raises((ValueError, TypeError)):
+        trained.infer(raw)
+
+
+def test_cli_help_prints(capfd):
+    nrc.cli(["--version"])
+    assert "nrc" in capfd.readouterr().out

@@ -1,7 +1,7 @@
 """The Python call's time overhead against the same work timed inside Rust: a cache `infer` of
 2^16 queries and a `render` of a 128² frame. Measured as ratios of the fastest of several
-interleaved repetitions (the machines are shared and noisy: the test fails above +10 %, twice
-the bar; BENCHMARKS.md has the measured figures)."""
+interleaved repetitions (the machines are shared and noisy: the test fails above +15 %, three
+times the bar, and catches a copy too many; BENCHMARKS.md has the measured figures)."""
 
 import time
 
@@ -34,7 +34,7 @@ def test_infer_overhead(trained):
     trained.infer(q)  # warm
     ratio, py, rs = overhead(lambda: trained.infer(q), lambda: trained._time_infer(q, 3))
     print(f"infer of 2^16 queries: Python {py * 1e3:.2f} ms, Rust {rs * 1e3:.2f} ms, overhead {ratio:+.1%}")
-    assert ratio < 0.10
+    assert ratio < 0.15
 
 
 def test_render_overhead(cornell):
@@ -42,4 +42,4 @@ def test_render_overhead(cornell):
     nrc.render(cornell, **args)  # warm
     ratio, py, rs = overhead(lambda: nrc.render(cornell, **args), lambda: _nrc._time_render(cornell, 3, **args))
     print(f"render of 128x128 at 1 spp: Python {py * 1e3:.2f} ms, Rust {rs * 1e3:.2f} ms, overhead {ratio:+.1%}")
-    assert ratio < 0.10
+    assert ratio < 0.15
