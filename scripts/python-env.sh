@@ -12,4 +12,6 @@ rm -rf "$pkg"
 mkdir -p "$pkg"
 cp crates/nrc-py/python/nrc/* "$pkg/"
 cp "$CARGO_TARGET_DIR/release/libnrc_py.so" "$pkg/_nrc.abi3.so"
+# The program too, for the tests of the study drivers (scripts/ray_study.py).
+export NRC_BIN="$CARGO_TARGET_DIR/release/nrc"
 PYTHONPATH="$(dirname "$pkg")${PYTHONPATH:+:$PYTHONPATH}" exec "$@"

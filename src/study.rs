@@ -93,16 +93,12 @@ pub fn plan(args: &CompareArgs, argv: &[OsString], dir: &Path) -> Result<()> {
         .filter(|j| matches!(j.kind, JobKind::ReferenceChunk { .. }))
         .count();
     println!(
-        "planned {} jobs ({chunks} reference chunks, {} methods × {} runs) of {} in {}: run `nrc job {} K` for K in 0..{} (or --all) from {}, then `nrc compare --merge {}`",
+        "planned {} jobs ({chunks} reference chunks, {} methods × {} runs) of {} ({} triangles) in {}: run `nrc job {} K` for K in 0..{} (or --all) from {}, then `nrc compare --merge {}`",
         plan.jobs.len(),
         names.len(),
         args.runs,
-        scene
-            .summary()
-            .to_string()
-            .lines()
-            .next()
-            .unwrap_or_default(),
+        args.scene.scene.display(),
+        scene.triangle_count(),
         dir.join(study::PLAN_FILE).display(),
         dir.display(),
         plan.jobs.len(),

@@ -228,3 +228,161 @@ fn jobs_then_merge_give_the_single_process_errors() {
         &["plan.json"],
     );
 }
+
+/// A fake `sbatch` that records its calls and, with `RUN=1`, runs what they submit: each
+/// array task in `--chdir` with `SLURM_ARRAY_TASK_ID` set, then the dependent merge.
+const FAKE_SBATCH: &str = r#"#!/usr/bin/env bash
+printf '%s\x1f' "$@" >> "$LOG"; printf '\n' >> "$LOG"
+array= wrap= chdir=
+for a in "$@"; do
+  case "$a" in
+    --array=*) array=${a#--array=} ;;
+    --wrap=*) wrap=${a#--wrap=} ;;
+    --chdir=*) chdir=${a#--chdir=} ;;
+  esac
+done
+if [[ -n "${RUN:-}" ]]; then
+  if [[ -n "$array" ]]; then
+    for ((i = ${array%-*}; i <= ${array#*-}; i++)); do
+      (cd "$chdir" && SLURM_ARRAY_TASK_ID=$i bash -c "$wrap") > /dev/null 2>&1 || exit 1
+    done
+  else
+    (cd "$chdir" && bash -c "$wrap") > /dev/null 2>&1 || exit 1
+  fi
+fi
+echo "$((1000 + $(wc -l < "$LOG")));cluster"
+"#;
+
+fn slurm(plan: &Path, bin: &Path, log: &Path, run: bool) -> Output {
+    let path = format!(
+        "{}:{}",
+        bin.display(),
+        std::env::var("PATH").unwrap_or_default()
+    );
+    let mut cmd = Command::new("bash");
+    cmd.args([
+        "scripts/slurm_study.sh",
+        &plan.display().to_string(),
+        "--partition=cpu",
+    ])
+    .current_dir(env!("CARGO_MANIFEST_DIR"))
+    .env("PATH", path)
+    .env("LOG", log)
+    .env("NRC", env!("CARGO_BIN_EXE_nrc"))
+    .env("CPUS", "2");
+    if run {
+        cmd.env("RUN", "1");
+    }
+    cmd.output().unwrap()
+}
+
+/// `scripts/slurm_study.sh` submits the jobs as arrays of at most 1000 tasks running `nrc job`
+/// and the merge after all of them; run by the fake `sbatch`, the study's report appears.
+#[test]
+fn slurm_script_submits_arrays_and_the_merge() {
+    let tmp = tempfile::tempdir().unwrap();
+    let t = tmp.path();
+    let bin = t.join("bin");
+    std::fs::create_dir_all(&bin).unwrap();
+    std::fs::write(bin.join("sbatch"), FAKE_SBATCH).unwrap();
+    {
+        use std::os::unix::fs::PermissionsExt;
+        std::fs::set_permissions(bin.join("sbatch"), std::fs::Permissions::from_mode(0o755))
+            .unwrap();
+    }
+    let calls = |log: &Path| -> Vec<Vec<String>> {
+        std::fs::read_to_string(log)
+            .unwrap()
+            .lines()
+            .map(|l| {
+                l.split('\x1f')
+                    .filter(|a| !a.is_empty())
+                    .map(String::from)
+                    .collect()
+            })
+            .collect()
+    };
+
+    // A small study, run through the fake scheduler.
+    let plan = t.join("plan");
+    let mut args = vec!["compare".to_string()];
+    args.extend(study_flags(&t.join("report"), &t.join("refs")));
+    args.extend([
+        "--plan".into(),
+        plan.display().to_string(),
+        "--chunks".into(),
+        "2".into(),
+    ]);
+    ok(nrc(&args.iter().map(String::as_str).collect::<Vec<_>>()));
+    let log = t.join("log");
+    let out = ok(slurm(&plan, &bin, &log, true));
+    assert!(
+        text(&out.stdout)
+            .contains("submitted 8 jobs as array job(s) 1001 and the merge as job 1002")
+    );
+    let c = calls(&log);
+    assert_eq!(c.len(), 2);
+    let abs = plan.canonicalize().unwrap().display().to_string();
+    for a in [
+        "--parsable",
+        "--partition=cpu",
+        "--cpus-per-task=2",
+        "--array=0-7",
+        &format!("--chdir={}", env!("CARGO_MANIFEST_DIR")),
+    ] {
+        assert!(c[0].iter().any(|x| x == a), "{a} not in {:?}", c[0]);
+    }
+    assert!(
+        c[0].iter().any(|x| x
+            == &format!(
+                "--wrap={} job {abs} $SLURM_ARRAY_TASK_ID --threads 2",
+                env!("CARGO_BIN_EXE_nrc")
+            )),
+        "{:?}",
+        c[0]
+    );
+    assert!(
+        c[1].iter().any(|x| x == "--dependency=afterok:1001"),
+        "{:?}",
+        c[1]
+    );
+    assert!(
+        c[1].iter()
+            .any(|x| x == &format!("--wrap={} compare --merge {abs}", env!("CARGO_BIN_EXE_nrc")))
+    );
+    assert_eq!(
+        report_rows(&t.join("report")).len(),
+        3,
+        "the merge ran and wrote the report"
+    );
+
+    // A study of 1,002 jobs: two arrays, the merge after both.
+    let big = t.join("big");
+    ok(nrc(&[
+        "compare",
+        "--scene",
+        "scenes/cornell-box.gltf",
+        "--methods",
+        "pt-1spp",
+        "--equal-spp",
+        "1",
+        "--runs",
+        "1001",
+        "--plan",
+        &big.display().to_string(),
+    ]));
+    let log = t.join("log-big");
+    let out = ok(slurm(&big, &bin, &log, false));
+    assert!(
+        text(&out.stdout)
+            .contains("submitted 1002 jobs as array job(s) 1001 1002 and the merge as job 1003")
+    );
+    let c = calls(&log);
+    assert!(c[0].iter().any(|x| x == "--array=0-999"));
+    assert!(c[1].iter().any(|x| x == "--array=1000-1001"));
+    assert!(c[2].iter().any(|x| x == "--dependency=afterok:1001:1002"));
+
+    // No plan: one clear error.
+    let out = slurm(&t.join("nowhere"), &bin, &t.join("log-none"), false);
+    assert!(!out.status.success() && text(&out.stderr).starts_with("error: no study plan"));
+}
