@@ -171,8 +171,9 @@ pub struct CompareArgs {
     pub merge: Option<PathBuf>,
 
     /// With --plan: let the merge compare equal-time frames timed on different kinds of
-    /// machine (CPU model or core count), which it otherwise refuses.
-    #[arg(long, requires = "plan")]
+    /// machine (CPU model, cores or threads), which it otherwise refuses (the plan records
+    /// this flag; without --plan it does nothing).
+    #[arg(long)]
     pub allow_mixed_machines: bool,
 }
 

@@ -218,7 +218,7 @@ pub fn merge(dir: &Path) -> Result<()> {
         kinds.dedup();
         ensure!(
             kinds.len() <= 1,
-            "the runs were timed on {} kinds of machine ({}): their equal-time frames are not comparable (plan with --allow-mixed-machines to merge them anyway)",
+            "the runs were timed on {} kinds of machine ({}): their equal-time frames are not comparable (run every job with the same --threads on one kind of machine, or plan with --allow-mixed-machines)",
             kinds.len(),
             kinds.join("; ")
         );

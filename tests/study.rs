@@ -386,3 +386,55 @@ fn slurm_script_submits_arrays_and_the_merge() {
     let out = slurm(&t.join("nowhere"), &bin, &t.join("log-none"), false);
     assert!(!out.status.success() && text(&out.stderr).starts_with("error: no study plan"));
 }
+
+/// Equal-time frames timed on different kinds of machine (here: other thread counts) are not
+/// merged into one comparison, unless the plan allows it.
+#[test]
+fn equal_time_merge_refuses_mixed_machines() {
+    let tmp = tempfile::tempdir().unwrap();
+    let t = tmp.path();
+    let plan_with = |dir: &Path, allow: bool| {
+        let mut args: Vec<String> = [
+            "compare",
+            "--scene",
+            "scenes/cornell-box.gltf",
+            "--methods",
+            "pt-1spp",
+            "--equal-time",
+            "20",
+            "--width",
+            "16",
+            "--height",
+            "16",
+            "--runs",
+            "2",
+            "--reference-spp",
+            "8",
+        ]
+        .iter()
+        .map(|s| s.to_string())
+        .collect();
+        args.extend([
+            "--out".into(),
+            t.join("out").display().to_string(),
+            "--cache-dir".into(),
+            t.join("refs").display().to_string(),
+            "--plan".into(),
+            dir.display().to_string(),
+        ]);
+        if allow {
+            args.push("--allow-mixed-machines".into());
+        }
+        ok(nrc(&args.iter().map(String::as_str).collect::<Vec<_>>()));
+        let d = dir.display().to_string();
+        ok(nrc(&["job", &d, "0", "--threads", "1"]));
+        ok(nrc(&["job", &d, "1", "--threads", "1"]));
+        ok(nrc(&["job", &d, "2", "--threads", "2"]));
+        nrc(&["compare", "--merge", &d])
+    };
+    clean_error(
+        &plan_with(&t.join("strict"), false),
+        &["2 kinds of machine", "1 thread(s)", "2 thread(s)"],
+    );
+    ok(plan_with(&t.join("allowed"), true));
+}

@@ -3,7 +3,8 @@
 //! the report the single process would have written (`nrc compare --merge`).
 //!
 //! **Plan** (`DIR/plan.json`): the comparison's command line (run files expanded), the working
-//! directory it was planned in (its relative paths are relative to it), the machine, a content
+//! directory it was planned in (its relative paths are relative to it), the machine (CPU model,
+//! cores, threads: equal-time frames are comparable only within one kind), a content
 //! key (SHA-256 over the format, the command line and the scene's content), and the jobs:
 //! - *reference chunks*: samples `first..end` of every pixel of the reference. A pixel's
 //!   sample `s` depends only on the seed, the pixel and `s` ([`nrc_render::render_moments`]),
@@ -46,6 +47,8 @@ pub struct Machine {
     pub cpu: String,
     /// Logical cores available to the process.
     pub cores: usize,
+    /// Worker threads the job rendered with (its rayon pool's; a plan records the planner's).
+    pub threads: usize,
 }
 
 impl Machine {
@@ -61,12 +64,20 @@ impl Machine {
             })
             .unwrap_or_else(|| std::env::consts::ARCH.to_string());
         let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
-        Self { cpu, cores }
+        Self {
+            cpu,
+            cores,
+            threads: rayon::current_num_threads(),
+        }
     }
 
-    /// The kind of machine times are comparable on: the CPU model and core count.
+    /// The kind of machine times are comparable on: the CPU model, core count and threads
+    /// (an equal-time frame on one thread holds half the passes of one on two).
     pub fn describe(&self) -> String {
-        format!("{} × {} cores", self.cpu, self.cores)
+        format!(
+            "{} × {} cores, {} thread(s)",
+            self.cpu, self.cores, self.threads
+        )
     }
 }
 
