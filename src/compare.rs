@@ -224,14 +224,10 @@ pub(crate) fn validate(args: &CompareArgs) -> Result<Budget> {
     Budget::from_limits(args.equal_time, args.equal_spp).map_err(anyhow::Error::msg)
 }
 
-/// Runs `nrc compare` (`argv`: the whole command line, run files expanded, which a plan
-/// records).
-pub fn run(args: &CompareArgs, argv: &[std::ffi::OsString]) -> Result<()> {
+/// Runs `nrc compare` (with `--plan`, `crate::study` writes the plan instead).
+pub fn run(args: &CompareArgs) -> Result<()> {
     if args.merge.is_some() {
         anyhow::bail!("--merge DIR is given alone: the study's settings are its plan's");
-    }
-    if let Some(dir) = &args.plan {
-        return crate::study::plan(args, argv, dir);
     }
     let budget = validate(args)?;
     let scene = args.scene.load()?;

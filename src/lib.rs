@@ -65,7 +65,10 @@ pub fn run(cli: Cli, argv: &[OsString]) -> anyhow::Result<()> {
         Command::Info(a) => info::run(&a),
         Command::Bench(b) => bench::run(&b),
         Command::Reference(a) => reference::run(&a),
-        Command::Compare(a) => compare::run(&a, argv),
+        Command::Compare(a) => match &a.plan {
+            Some(dir) => study::plan(&a, argv, dir),
+            None => compare::run(&a),
+        },
         Command::Train(a) => train::run(&a),
         Command::Export(a) => export::run(&a),
         Command::Job(a) => study::job(&a),
