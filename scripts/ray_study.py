@@ -57,11 +57,28 @@ def main(argv=None):
     import ray
 
     study = os.path.abspath(args.dir)
-    with open(os.path.join(study, "plan.json")) as f:
+    plan_path = os.path.join(study, "plan.json")
+    if not os.path.exists(plan_path):
+        print(f"error: no study plan {plan_path} (write one with nrc compare --plan DIR)", file=sys.stderr)
+        return 1
+    with open(plan_path) as f:
         plan = json.load(f)
+    if not args.no_merge and not os.path.isdir(plan["cwd"]):
+        print(f"error: the merge runs in the plan's folder {plan['cwd']}, which this machine lacks", file=sys.stderr)
+        return 1
     if args.ship:
-        ray.init(address=args.address, runtime_env={"working_dir": args.ship})
-        cwd, study_on_worker = None, os.path.relpath(study, os.path.abspath(args.ship))
+        ship = os.path.abspath(args.ship)
+        study_on_worker = os.path.relpath(study, ship)
+        if study_on_worker.startswith(".."):
+            print(f"error: the study folder {study} is not inside the shipped folder {ship}", file=sys.stderr)
+            return 1
+        if os.path.abspath(plan["cwd"]) != ship:
+            print(f"error: --ship must be the folder the study was planned in ({plan['cwd']}): its paths are relative to it", file=sys.stderr)
+            return 1
+        # Ray's upload leaves out what .gitignore names (target/, out/): ship a folder holding
+        # the program, the scenes and the study outside ignored paths.
+        ray.init(address=args.address, runtime_env={"working_dir": ship})
+        cwd = None
     else:
         ray.init(address=args.address, num_cpus=args.num_cpus if args.address is None else None)
         cwd, study_on_worker = plan["cwd"], study

@@ -242,7 +242,7 @@ pub fn run(args: &CompareArgs) -> Result<()> {
 
 fn run_comparison(args: &CompareArgs, budget: Budget, scene: &Scene) -> Result<()> {
     let (w, h) = (args.width, args.height);
-    let c = comparison(args, budget)?;
+    let c = comparison(args, budget, scene, true)?;
     if let Some(frames) = args.sequence {
         let seq = nrc_harness::sequence::Sequence {
             frames,
@@ -333,15 +333,27 @@ pub(crate) fn print_report(
     );
 }
 
-/// The comparison the arguments describe.
-pub(crate) fn comparison(args: &CompareArgs, budget: Budget) -> Result<Comparison> {
+/// The comparison the arguments describe, on `scene` (`--resolution auto` is chosen from its
+/// camera; `print`: say so, and which device caches compute on).
+pub(crate) fn comparison(
+    args: &CompareArgs,
+    budget: Budget,
+    scene: &Scene,
+    print: bool,
+) -> Result<Comparison> {
     let (w, h) = (args.width, args.height);
     let methods = args.methods();
     let any_cache = methods.iter().any(|m| m.producer.is_some());
-    let mut cache_settings = args
-        .model
-        .method_settings(args.train_frames, args.seed, any_cache)?;
+    let mut cache_settings =
+        args.model
+            .method_settings(args.train_frames, args.seed, print && any_cache)?;
     cache_settings.online = !args.frozen;
+    if let Some(why) = cache_settings.resolve_resolution(scene, w, h)?
+        && print
+        && any_cache
+    {
+        eprintln!("{why}");
+    }
     Ok(Comparison {
         methods: methods.clone(),
         budget,

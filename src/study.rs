@@ -108,17 +108,27 @@ pub fn plan(args: &CompareArgs, argv: &[OsString], dir: &Path) -> Result<()> {
     Ok(())
 }
 
-/// The comparison a plan records, parsed as `nrc compare` parses it.
+/// The comparison a plan records, parsed as `nrc compare` parses it, and the plan checked
+/// against it and the scene as it is now ([`Plan::check`]).
 fn planned_args(plan: &Plan) -> Result<CompareArgs> {
     let mut argv: Vec<OsString> = vec!["nrc".into(), "compare".into()];
     argv.extend(plan.args.iter().map(OsString::from));
-    match crate::try_parse(&argv)
+    let args = match crate::try_parse(&argv)
         .context("the plan's command line does not parse with this program")?
         .command
     {
-        crate::Command::Compare(a) => Ok(*a),
+        crate::Command::Compare(a) => *a,
         _ => bail!("the plan's command line is not a comparison"),
-    }
+    };
+    let content = reference::scene_content_hash(&args.scene.scene).with_context(|| {
+        format!(
+            "the study's scene (run jobs and the merge from the folder it was planned in, {}, or a copy of it)",
+            plan.cwd.display()
+        )
+    })?;
+    let names: Vec<String> = args.methods().iter().map(|m| m.to_string()).collect();
+    plan.check(&content, &names, args.runs)?;
+    Ok(args)
 }
 
 /// The plan's scene, loaded (relative paths are the plan's working directory's).
@@ -187,7 +197,7 @@ fn run_job(
             Ok(JobOutput::Chunk(moments))
         }
         JobKind::Run { method, run, .. } => {
-            let c = comparison(args, budget)?;
+            let c = comparison(args, budget, scene, false)?;
             let spec = c
                 .methods
                 .get(*method)
@@ -224,7 +234,7 @@ pub fn merge(dir: &Path) -> Result<()> {
         );
     }
     let scene = planned_scene(&args, &plan)?;
-    let c = comparison(&args, budget)?;
+    let c = comparison(&args, budget, &scene, false)?;
     std::fs::create_dir_all(&c.out)
         .with_context(|| format!("cannot create output folder {}", c.out.display()))?;
     let req = reference_request(&args, &scene);

@@ -118,6 +118,11 @@ pub fn trainer(args: &TrainArgs, scene: &Scene, print: bool) -> Result<OnlineTra
     check(args)?;
     let mut settings = args.cache.method_settings(0, args.seed, print)?;
     settings.kind = args.cache_kind;
+    if let Some(why) = settings.resolve_resolution(scene, args.width, args.height)?
+        && print
+    {
+        eprintln!("{why}");
+    }
     let tracer = args.tracer.tracer();
     let pass = args.pass.clone().unwrap_or_else(|| {
         CacheTerminatedSettings {

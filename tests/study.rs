@@ -142,7 +142,7 @@ fn jobs_then_merge_give_the_single_process_errors() {
     );
     assert!(!t.join("merged/report.json").exists());
     // A job killed mid-write leaves only its temporary file, which is not a result.
-    std::fs::write(plan.join("jobs/.0001.safetensors.tmp123"), b"half a result").unwrap();
+    std::fs::write(plan.join("jobs/.nrc-a1b2c3.tmp"), b"half a result").unwrap();
     clean_error(&nrc(&["compare", "--merge", &p]), &["jobs 1-3, 5-8"]);
 
     let out = ok(nrc(&["job", &p, "--all"]));
@@ -156,6 +156,7 @@ fn jobs_then_merge_give_the_single_process_errors() {
         report_rows(&t.join("merged")),
     );
     assert_eq!(a.len(), 3);
+    assert_eq!(b.len(), 3);
     for (x, y) in a.iter().zip(&b) {
         assert_eq!(x["method"], y["method"]);
         assert!(
@@ -165,22 +166,28 @@ fn jobs_then_merge_give_the_single_process_errors() {
         same_errors(x, y, 1e-4, x["method"].as_str().unwrap()).unwrap();
     }
     // The merged reference is the single render's, within float rounding.
-    let reference = |dir: &str| {
-        let d = std::fs::read_dir(t.join(dir))
+    let reference = |dir: &str, file: &str| {
+        let entries: Vec<_> = std::fs::read_dir(t.join(dir))
             .unwrap()
-            .next()
-            .unwrap()
-            .unwrap()
-            .path();
-        nrc_scene::Image::read_exr(&d.join("variance.exr")).unwrap()
+            .map(|e| e.unwrap().path())
+            .collect();
+        assert_eq!(entries.len(), 1, "one reference in {dir}");
+        nrc_scene::Image::read_exr(&entries[0].join(file)).unwrap()
     };
-    let (ra, rb) = (reference("refs-single"), reference("refs-merged"));
-    assert!(
-        ra.data
-            .iter()
-            .zip(&rb.data)
-            .all(|(x, y)| (*x - *y).abs().max_element() <= 1e-5 * x.abs().max_element() + 1e-9)
-    );
+    for file in ["mean.exr", "variance.exr"] {
+        let (ra, rb) = (
+            reference("refs-single", file),
+            reference("refs-merged", file),
+        );
+        assert_eq!(ra.data.len(), 32 * 32);
+        assert_eq!(ra.data.len(), rb.data.len());
+        assert!(
+            ra.data.iter().zip(&rb.data).all(|(x, y)| {
+                (*x - *y).abs().max_element() <= 1e-5 * x.abs().max_element() + 1e-9
+            }),
+            "{file}"
+        );
+    }
 
     // Negative control: another method list gives other errors (the comparison above could
     // not pass by accident).
@@ -217,6 +224,30 @@ fn jobs_then_merge_give_the_single_process_errors() {
     std::fs::write(&job3, &good).unwrap();
     ok(nrc(&["compare", "--merge", &p]));
 
+    // An edited plan: a job writing outside its folder, changed settings; each refused.
+    let plan_json = std::fs::read_to_string(plan.join("plan.json")).unwrap();
+    std::fs::write(
+        plan.join("plan.json"),
+        plan_json.replace("jobs/0005.safetensors", "../0005.safetensors"),
+    )
+    .unwrap();
+    clean_error(
+        &nrc(&["job", &p, "5"]),
+        &["job list is not the one its settings give"],
+    );
+    assert!(plan_json.contains("\"32\""));
+    std::fs::write(
+        plan.join("plan.json"),
+        plan_json.replacen("\"32\"", "\"33\"", 1),
+    )
+    .unwrap();
+    clean_error(
+        &nrc(&["compare", "--merge", &p]),
+        &["changed since it was planned"],
+    );
+    std::fs::write(plan.join("plan.json"), &plan_json).unwrap();
+    ok(nrc(&["compare", "--merge", &p]));
+
     // Bad requests.
     clean_error(&nrc(&["job", &p, "99"]), &["no job 99", "0 to 8"]);
     clean_error(
@@ -233,18 +264,19 @@ fn jobs_then_merge_give_the_single_process_errors() {
 /// array task in `--chdir` with `SLURM_ARRAY_TASK_ID` set, then the dependent merge.
 const FAKE_SBATCH: &str = r#"#!/usr/bin/env bash
 printf '%s\x1f' "$@" >> "$LOG"; printf '\n' >> "$LOG"
-array= wrap= chdir=
+array= wrap= chdir= offset=
 for a in "$@"; do
   case "$a" in
     --array=*) array=${a#--array=} ;;
     --wrap=*) wrap=${a#--wrap=} ;;
     --chdir=*) chdir=${a#--chdir=} ;;
+    --export=ALL,NRC_OFFSET=*) offset=${a#--export=ALL,NRC_OFFSET=} ;;
   esac
 done
 if [[ -n "${RUN:-}" ]]; then
   if [[ -n "$array" ]]; then
     for ((i = ${array%-*}; i <= ${array#*-}; i++)); do
-      (cd "$chdir" && SLURM_ARRAY_TASK_ID=$i bash -c "$wrap") > /dev/null 2>&1 || exit 1
+      (cd "$chdir" && NRC_OFFSET=$offset SLURM_ARRAY_TASK_ID=$i bash -c "$wrap") > /dev/null 2>&1 || exit 1
     done
   else
     (cd "$chdir" && bash -c "$wrap") > /dev/null 2>&1 || exit 1
@@ -328,6 +360,7 @@ fn slurm_script_submits_arrays_and_the_merge() {
         "--partition=cpu",
         "--cpus-per-task=2",
         "--array=0-7",
+        "--export=ALL,NRC_OFFSET=0",
         &format!("--chdir={}", env!("CARGO_MANIFEST_DIR")),
     ] {
         assert!(c[0].iter().any(|x| x == a), "{a} not in {:?}", c[0]);
@@ -335,7 +368,7 @@ fn slurm_script_submits_arrays_and_the_merge() {
     assert!(
         c[0].iter().any(|x| x
             == &format!(
-                "--wrap={} job {abs} $SLURM_ARRAY_TASK_ID --threads 2",
+                "--wrap={} job {abs} $((NRC_OFFSET + SLURM_ARRAY_TASK_ID)) --threads 2",
                 env!("CARGO_BIN_EXE_nrc")
             )),
         "{:?}",
@@ -346,6 +379,7 @@ fn slurm_script_submits_arrays_and_the_merge() {
         "{:?}",
         c[1]
     );
+    assert!(c[1].iter().any(|x| x == "--kill-on-invalid-dep=yes"));
     assert!(
         c[1].iter()
             .any(|x| x == &format!("--wrap={} compare --merge {abs}", env!("CARGO_BIN_EXE_nrc")))
@@ -379,7 +413,9 @@ fn slurm_script_submits_arrays_and_the_merge() {
     );
     let c = calls(&log);
     assert!(c[0].iter().any(|x| x == "--array=0-999"));
-    assert!(c[1].iter().any(|x| x == "--array=1000-1001"));
+    assert!(c[0].iter().any(|x| x == "--export=ALL,NRC_OFFSET=0"));
+    assert!(c[1].iter().any(|x| x == "--array=0-1"));
+    assert!(c[1].iter().any(|x| x == "--export=ALL,NRC_OFFSET=1000"));
     assert!(c[2].iter().any(|x| x == "--dependency=afterok:1001:1002"));
 
     // No plan: one clear error.

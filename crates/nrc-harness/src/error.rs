@@ -33,6 +33,9 @@ pub enum HarnessError {
     /// Text that should be a finite number.
     #[error("`{text}` is not a finite number{context}")]
     NotANumber { text: String, context: String },
+    /// A setting that cannot be set up for this scene or call (the message says why).
+    #[error("{0}")]
+    Setup(String),
 }
 
 impl HarnessError {

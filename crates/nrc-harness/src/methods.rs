@@ -305,13 +305,34 @@ pub struct CacheMethodSettings {
     /// The kind of cache trained, and the hash cache's settings.
     pub kind: CacheKind,
     pub hash: HashCacheConfig,
+    /// `--resolution auto`: the resolution is to be chosen from the camera's pixel footprint
+    /// ([`CacheMethodSettings::resolve_resolution`]) before a cache is made.
+    pub resolution_auto: bool,
 }
 
 impl CacheMethodSettings {
+    /// Resolves `--resolution auto` for renders of `scene` from its camera at
+    /// `width × height` ([`footprint_resolution`]); returns the choice and why, to print.
+    pub fn resolve_resolution(
+        &mut self,
+        scene: &Scene,
+        width: u32,
+        height: u32,
+    ) -> Result<Option<String>, HarnessError> {
+        if !self.resolution_auto {
+            return Ok(None);
+        }
+        let (cells, why) = footprint_resolution(scene, &scene.camera, width, height)?;
+        self.resolution = cells;
+        self.resolution_auto = false;
+        Ok(Some(why))
+    }
+
     pub fn new(config: CacheConfig, device: CacheDevice) -> Self {
         Self {
             config,
             device,
+            resolution_auto: false,
             resolution: 512,
             train_frames: 64,
             records_per_frame: nrc_train::online::DEFAULT_RECORDS_PER_FRAME,
@@ -448,6 +469,63 @@ struct CacheMethod {
     trainer: Option<OnlineTrainer>,
 }
 
+/// Pixels a cell of the finest level spans at the camera's typical distance: two, the
+/// sampling theorem's bound (a finer grid holds detail no pixel of the render can show, and
+/// its entries see fewer training records each).
+pub const PIXELS_PER_CELL: f32 = 2.0;
+
+/// The finest resolution (cells along the scene box's longest axis) at which a cell spans
+/// [`PIXELS_PER_CELL`] pixels of a `width × height` render from `camera` at the median
+/// distance of the surfaces it sees (a 32 × 32 grid of primary rays): the pixel footprint at
+/// distance `d` is `2 d tan(fov/2) / height`. Returns the cells and a line saying why; an error
+/// when no ray hits the scene or the box is degenerate.
+pub fn footprint_resolution(
+    scene: &Scene,
+    camera: &Camera,
+    width: u32,
+    height: u32,
+) -> Result<(u32, String), HarnessError> {
+    const GRID: u32 = 32;
+    if width == 0 || height == 0 {
+        return Err(HarnessError::bounds("the image size", "be at least 1×1", 0));
+    }
+    let mut distances: Vec<f32> = (0..GRID * GRID)
+        .filter_map(|i| {
+            let film = glam::Vec2::new(
+                ((i % GRID) as f32 + 0.5) / GRID as f32 * width as f32,
+                ((i / GRID) as f32 + 0.5) / GRID as f32 * height as f32,
+            );
+            let ray = camera.generate_ray(film, width, height);
+            let hit = scene.intersect(&ray)?;
+            let d = hit.t * ray.d.length();
+            (d.is_finite() && d > 0.0).then_some(d)
+        })
+        .collect();
+    if distances.is_empty() {
+        return Err(HarnessError::Setup(
+            "--resolution auto: no camera ray hits the scene, so it has no distance to size the cache for; give --resolution N".into(),
+        ));
+    }
+    distances.sort_by(f32::total_cmp);
+    let d = distances[distances.len() / 2];
+    let footprint = 2.0 * d * (0.5 * camera.fov_y).tan() / height as f32;
+    let cell = PIXELS_PER_CELL * footprint;
+    let ext = QueryMaker::new(&scene.bounds()).scene_box.extent();
+    let longest = ext.iter().copied().fold(0.0f32, f32::max);
+    if !(longest.is_finite() && longest > 0.0) {
+        return Err(HarnessError::Setup(format!(
+            "--resolution auto: the scene box is degenerate (extent {ext:?})"
+        )));
+    }
+    let cells = (longest / cell).ceil().clamp(16.0, 65_536.0) as u32;
+    let why = format!(
+        "cache resolution {cells} (auto): {}/{} camera rays hit the scene at a median distance of {d:.3}; a pixel there spans {footprint:.4} at {width}x{height}, a finest cell {PIXELS_PER_CELL} pixels ({cell:.4}), the longest axis {longest:.3}",
+        distances.len(),
+        GRID * GRID
+    );
+    Ok((cells, why))
+}
+
 /// A new cache of `settings.kind` over `scene_box`: the neural one sized to it (its finest
 /// resolution `settings.resolution` cells along the longest axis), or the hash cache.
 pub fn scene_cache(
@@ -455,6 +533,11 @@ pub fn scene_cache(
     settings: &CacheMethodSettings,
 ) -> Result<Cache, HarnessError> {
     let longest = scene_box.extent().iter().copied().fold(0.0f32, f32::max);
+    if settings.resolution_auto {
+        return Err(HarnessError::Setup(
+            "--resolution auto is chosen from a camera and an image size, which this cache was not given; give --resolution N".into(),
+        ));
+    }
     if settings.resolution == 0 {
         return Err(HarnessError::bounds(
             "the cache resolution",

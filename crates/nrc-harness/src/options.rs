@@ -256,6 +256,38 @@ impl DeviceArg {
     }
 }
 
+/// `--resolution`: cells along the scene's longest axis, or `auto` (from the camera).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ResolutionArg {
+    Auto,
+    Cells(u32),
+}
+
+impl std::str::FromStr for ResolutionArg {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, String> {
+        if s == "auto" {
+            return Ok(Self::Auto);
+        }
+        match s.parse::<u32>() {
+            Ok(n) if (1..=1 << 16).contains(&n) => Ok(Self::Cells(n)),
+            _ => Err(format!(
+                "expected `auto` or a number of cells in 1..=65536, got `{s}`"
+            )),
+        }
+    }
+}
+
+impl std::fmt::Display for ResolutionArg {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::Auto => f.write_str("auto"),
+            Self::Cells(n) => write!(f, "{n}"),
+        }
+    }
+}
+
 /// The cache model and how it is trained.
 #[derive(clap::Args, Debug, Clone)]
 pub struct RadianceCacheArgs {
@@ -269,9 +301,11 @@ pub struct RadianceCacheArgs {
     pub device: DeviceArg,
 
     /// Finest resolution of the encoding along the scene's longest axis (the grid is sized
-    /// from it: the smallest resolved feature is the longest extent divided by it).
-    #[arg(long, default_value_t = 512)]
-    pub resolution: u32,
+    /// from it: the smallest resolved feature is the longest extent divided by it), or `auto`:
+    /// chosen from the camera, a finest cell spanning 2 pixels of the render at the median
+    /// distance of the surfaces the camera sees (printed with why).
+    #[arg(long, default_value = "512")]
+    pub resolution: ResolutionArg,
 
     /// Training records produced per frame (the default is chosen by measurement:
     /// scripts/records-budget.sh, RESULTS.md).
@@ -393,9 +427,6 @@ impl RadianceCacheArgs {
         seed: u64,
         print: bool,
     ) -> Result<CacheMethodSettings> {
-        if self.resolution == 0 || self.resolution > 1 << 16 {
-            bail!("--resolution must be in 1..=65536, got {}", self.resolution);
-        }
         if self.records == 0 || self.batch == 0 {
             bail!("--records and --batch must be at least 1");
         }
@@ -405,7 +436,10 @@ impl RadianceCacheArgs {
             self.device.resolve().0
         };
         let mut s = CacheMethodSettings::new(self.config()?, device);
-        s.resolution = self.resolution;
+        match self.resolution {
+            ResolutionArg::Cells(n) => s.resolution = n,
+            ResolutionArg::Auto => s.resolution_auto = true,
+        }
         s.records_per_frame = self.records;
         s.batch_size = self.batch;
         s.recover = !self.no_recover;

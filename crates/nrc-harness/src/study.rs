@@ -155,7 +155,59 @@ pub fn chunk_ranges(spp: u32, chunks: u32) -> Vec<(u32, u32)> {
         .collect()
 }
 
+/// The jobs of a plan: the `reference` chunks (if any), then one job per method and run.
+pub fn jobs_for(reference: Option<&ReferencePlan>, methods: &[String], runs: u32) -> Vec<Job> {
+    let mut jobs = Vec::new();
+    let mut push = |kind: JobKind| {
+        let id = jobs.len();
+        jobs.push(Job {
+            id,
+            kind,
+            output: format!("jobs/{id:04}.safetensors"),
+        });
+    };
+    if let Some(r) = reference {
+        for (first, end) in chunk_ranges(r.spp, r.chunks) {
+            push(JobKind::ReferenceChunk { first, end });
+        }
+    }
+    for (method, name) in methods.iter().enumerate() {
+        for run in 0..runs {
+            push(JobKind::Run {
+                method,
+                name: name.clone(),
+                run,
+            });
+        }
+    }
+    jobs
+}
+
 impl Plan {
+    /// Checks the plan against what its command line plans (`methods`, `runs`) and the scene
+    /// it names now (`scene_content`): the key, and the job list (so that no edited job can
+    /// write outside `jobs/` or make a wrong reference).
+    pub fn check(&self, scene_content: &str, methods: &[String], runs: u32) -> Result<()> {
+        ensure!(
+            plan_key(&self.args, scene_content) == self.key,
+            "the study's scene or settings changed since it was planned (its key no longer matches): run jobs and the merge from {} with the files it was planned with",
+            self.cwd.display()
+        );
+        if let Some(r) = &self.reference {
+            ensure!(
+                r.chunks >= 1 && r.chunks <= r.spp.max(1),
+                "the plan's reference has {} chunks for {} samples",
+                r.chunks,
+                r.spp
+            );
+        }
+        ensure!(
+            self.jobs == jobs_for(self.reference.as_ref(), methods, runs),
+            "the plan's job list is not the one its settings give (edited?): plan the study again"
+        );
+        Ok(())
+    }
+
     /// A plan of `reference` chunks (if any) and one run job per method and run.
     pub fn new(
         args: Vec<String>,
@@ -165,29 +217,7 @@ impl Plan {
         runs: u32,
     ) -> Result<Self> {
         let key = plan_key(&args, scene_content);
-        let mut jobs = Vec::new();
-        let mut push = |kind: JobKind| {
-            let id = jobs.len();
-            jobs.push(Job {
-                id,
-                kind,
-                output: format!("jobs/{id:04}.safetensors"),
-            });
-        };
-        if let Some(r) = &reference {
-            for (first, end) in chunk_ranges(r.spp, r.chunks) {
-                push(JobKind::ReferenceChunk { first, end });
-            }
-        }
-        for (method, name) in methods.iter().enumerate() {
-            for run in 0..runs {
-                push(JobKind::Run {
-                    method,
-                    name: name.clone(),
-                    run,
-                });
-            }
-        }
+        let jobs = jobs_for(reference.as_ref(), methods, runs);
         Ok(Self {
             format: FORMAT.into(),
             key,
@@ -372,10 +402,11 @@ pub fn read_result(dir: &Path, plan: &Plan, job: &Job) -> Result<Option<(ResultM
     let meta: ResultMeta =
         serde_json::from_str(text).map_err(|e| bad(format!("has bad metadata: {e}")))?;
     if meta.plan_key != plan.key {
+        let short = |k: &str| k.chars().take(12).collect::<String>();
         return Err(bad(format!(
             "belongs to another plan (key {}…, this plan {}…)",
-            &meta.plan_key[..meta.plan_key.len().min(12)],
-            &plan.key[..12]
+            short(&meta.plan_key),
+            short(&plan.key)
         )));
     }
     if meta.job != job.id || meta.kind != job.kind {
@@ -410,10 +441,16 @@ pub fn read_result(dir: &Path, plan: &Plan, job: &Job) -> Result<Option<(ResultM
                     .collect()
             };
             let count = meta.samples.unwrap_or(0);
+            let want = u64::from(end.saturating_sub(*first));
             ensure!(
-                count == u64::from(end - first),
+                count == want,
                 "{}",
-                bad(format!("holds {count} samples, the job {}", end - first))
+                bad(format!("holds {count} samples, the job {want}"))
+            );
+            ensure!(
+                shape[0] * shape[1] * 24 == mean.len(),
+                "{}",
+                bad("has tensors of the wrong size".into())
             );
             JobOutput::Chunk(Moments {
                 width: shape[1] as u32,
@@ -426,6 +463,11 @@ pub fn read_result(dir: &Path, plan: &Plan, job: &Job) -> Result<Option<(ResultM
         }
         JobKind::Run { .. } => {
             let (data, shape) = read("image", Dtype::F32)?;
+            ensure!(
+                shape[0] * shape[1] * 12 == data.len(),
+                "{}",
+                bad("has an image of the wrong size".into())
+            );
             let f = meta
                 .frame
                 .clone()
