@@ -95,19 +95,21 @@ pub fn merge(dir: &std::path::Path) -> anyhow::Result<()> {
     study::merge(dir)
 }
 
+/// The first line of clap's message for a malformed command line, without its `error: `
+/// (the program's one error line, and the Python module's exception text).
+pub fn clap_message(e: &clap::Error) -> String {
+    let text = e.render().to_string();
+    text.lines()
+        .map(|l| l.trim_start_matches("error: ").trim())
+        .find(|l| !l.is_empty())
+        .unwrap_or("malformed command line")
+        .to_string()
+}
+
 /// Parses a command line (program name first, run files expanded), returning clap's message
 /// as the error's first line instead of exiting.
 fn try_parse(args: &[OsString]) -> anyhow::Result<Cli> {
-    Cli::try_parse_from(args).map_err(|e| {
-        let text = e.render().to_string();
-        let first = text
-            .lines()
-            .map(|l| l.trim_start_matches("error: ").trim())
-            .find(|l| !l.is_empty())
-            .unwrap_or("malformed command line")
-            .to_string();
-        anyhow::anyhow!(first)
-    })
+    Cli::try_parse_from(args).map_err(|e| anyhow::anyhow!(clap_message(&e)))
 }
 
 /// Expands, parses and runs a command line (program name first) as the program would, but

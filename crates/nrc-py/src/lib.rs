@@ -113,16 +113,8 @@ fn parse_options<T: Parser>(
     let mut argv: Vec<std::ffi::OsString> = vec!["nrc".into()];
     argv.extend(leading.iter().map(Into::into));
     argv.extend(flags);
-    T::try_parse_from(argv).map_err(|e| {
-        let text = e.render().to_string();
-        let first = text
-            .lines()
-            .map(|l| l.trim_start_matches("error: ").trim())
-            .find(|l| !l.is_empty())
-            .unwrap_or("malformed options")
-            .to_string();
-        PyValueError::new_err(format!("{what}: {first}"))
-    })
+    T::try_parse_from(argv)
+        .map_err(|e| PyValueError::new_err(format!("{what}: {}", nrc::clap_message(&e))))
 }
 
 // ---------------------------------------------------------------------------------------------

@@ -40,7 +40,7 @@ def test_ray_driver_matches_one_process(tmp_path):
                 f.write(f"python test_ray_driver_matches_one_process: no ray: {e}\n")
         pytest.skip(f"ray is not installed: {e}")
     program = os.environ.get("NRC_BIN")
-    assert program and os.path.exists(program), "scripts/python-env.sh sets NRC_BIN"
+    assert program and os.path.exists(program), "tests/python.rs sets NRC_BIN"
     cwd = os.getcwd()
     os.chdir(ROOT)
     try:
