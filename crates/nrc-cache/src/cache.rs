@@ -127,13 +127,11 @@ impl RadianceCache {
         host: HostState,
         step: u32,
     ) -> Result<Self, CacheError> {
-        if path == ComputePath::Fused && device != CacheDevice::Cpu {
-            return Err(CacheError::Device("the fused training step exists on the CPU (Flex) only; use the custom-ops path on wgpu".into()));
-        }
         let layout = Arc::new(ModelLayout::new(&config));
         let burn_device = device.burn_device()?;
         let (adam, ema) = config.optimizer.resolve();
-        let packed = (path == ComputePath::Fused)
+        // The fused CPU step keeps the table as per-entry records; the GPU's as four arrays.
+        let packed = (path == ComputePath::Fused && device == CacheDevice::Cpu)
             .then(|| layout.encoding.grid().map(|(g, _)| g.features()))
             .flatten();
         let state = TensorState::from_host(host, packed, &burn_device);
@@ -274,6 +272,12 @@ impl RadianceCache {
             "device: {} ({} path), step {}",
             self.device, self.path, self.step
         ));
+        if self.device == CacheDevice::Wgpu && self.path == ComputePath::Fused {
+            s.push_str(&format!(
+                "; {}",
+                crate::gpu::fused::describe(&self.burn_device, &self.layout)
+            ));
+        }
         s
     }
 
@@ -310,21 +314,7 @@ impl RadianceCache {
         let state_packed = state.packed;
         let losses: Vec<f64> = match self.path {
             ComputePath::Fused => {
-                let ema_base = self.ema_base.unwrap_or(self.step);
-                let spec = StepSpec {
-                    layout: self.layout.clone(),
-                    adam: self.adam,
-                    ema: self.ema,
-                    loss: LossSettings {
-                        activation: self.layout.output_activation,
-                        epsilon: self.config.loss.epsilon,
-                        max_relative_error: self.config.loss.max_relative_error,
-                    },
-                    first_step: self.step,
-                    ema_base,
-                    steps,
-                    clock: clock.clone(),
-                };
+                let spec = self.step_spec(steps, clock.clone());
                 let out = <Dispatch as NrcFusedOps>::fused_train_steps(
                     state.into_dispatch(),
                     rows.into_dispatch(),
@@ -367,6 +357,55 @@ impl RadianceCache {
         stats.loss = losses.last().copied().unwrap_or(0.0) as f32;
         stats.profile = clock.profile();
         Ok(stats)
+    }
+
+    /// The constants of `steps` fused steps from the current one.
+    fn step_spec(&self, steps: u32, clock: Arc<TrainClock>) -> StepSpec {
+        StepSpec {
+            layout: self.layout.clone(),
+            adam: self.adam,
+            ema: self.ema,
+            loss: LossSettings {
+                activation: self.layout.output_activation,
+                epsilon: self.config.loss.epsilon,
+                max_relative_error: self.config.loss.max_relative_error,
+            },
+            first_step: self.step,
+            ema_base: self.ema_base.unwrap_or(self.step),
+            steps,
+            clock,
+        }
+    }
+
+    /// The mean loss and the gradients (the table's dense, the MLP's) that one training step on
+    /// `batch` would feed to Adam, without updating anything: how the fused kernels of the CPU
+    /// and of the GPU are checked against each other. Fused path only; bad samples are dropped
+    /// as [`Self::train`] drops them.
+    pub fn gradients(
+        &mut self,
+        batch: &TrainingBatch,
+    ) -> Result<(f64, Vec<f32>, Vec<f32>), CacheError> {
+        if self.path != ComputePath::Fused {
+            return Err(CacheError::Device(format!(
+                "gradients are read on the fused path only, not the {} path",
+                self.path
+            )));
+        }
+        let packed = pack_training(batch, self.config.loss.max_target)?;
+        let rows = Tensor::<2>::from_data(
+            TensorData::new(packed.rows, [packed.len, TRAIN_ROW]),
+            &self.burn_device,
+        );
+        let spec = self.step_spec(1, Arc::new(TrainClock::default()));
+        let state = self.state.take().expect("state present between calls");
+        let state_packed = state.packed;
+        let out = <Dispatch as NrcFusedOps>::fused_gradients(
+            state.into_dispatch(),
+            rows.into_dispatch(),
+            spec,
+        );
+        self.state = Some(TensorState::from_dispatch(out.state, state_packed));
+        Ok((out.loss, out.grid, out.mlp))
     }
 
     /// Outgoing radiance (emission excluded) at each query, from the EMA weights.

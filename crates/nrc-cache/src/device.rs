@@ -75,20 +75,19 @@ impl CacheDevice {
         }
     }
 
-    /// The default computation on this device: the fused CPU step on Flex, custom ops on wgpu.
+    /// The default computation on this device: the fused step (rayon kernels on Flex, CubeCL
+    /// kernels on wgpu).
     pub fn default_path(self) -> ComputePath {
-        match self {
-            Self::Cpu => ComputePath::Fused,
-            Self::Wgpu => ComputePath::CustomOps,
-        }
+        ComputePath::Fused
     }
 }
 
 /// How a training step and inference are computed.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum ComputePath {
-    /// One fused custom op per step (CPU/Flex only): tile-fused encode + MLP + loss, sparse
-    /// Adam and lazy EMA for the hash table.
+    /// The fused step: tile-fused encode + MLP + loss + backward, sparse Adam and lazy EMA for
+    /// the hash table (rayon kernels on Flex; on wgpu four CubeCL dispatches a step, the
+    /// `nrc-gpu` crate).
     Fused,
     /// burn autodiff over custom ops: the hash-grid op (WGSL on wgpu, rayon on Flex) and the
     /// fused MLP op where the backend has one (Flex), otherwise matmuls; tensor-op Adam/EMA.

@@ -7,9 +7,9 @@
 //! * [`NrcFusedOps`] — the whole CPU training step (encode, MLP forward/backward, loss, sparse
 //!   Adam + EMA) and fused inference, on tensors that live on the device.
 //!
-//! Both are implemented for Flex (rayon kernels in [`crate::cpu`]); [`MlpOps`] also for wgpu
-//! (`CubeBackend`, WGSL kernels in [`crate::gpu::mlp`]). The fused step exists on Flex only; on
-//! wgpu the cache trains along the tensor path with the hash-grid op's WGSL kernels.
+//! Both are implemented for Flex (rayon kernels in [`crate::cpu`]) and for wgpu (`CubeBackend`):
+//! [`MlpOps`] by WGSL kernels in [`crate::gpu::mlp`] (the custom-ops path, kept as the measured
+//! baseline), [`NrcFusedOps`] by the `nrc-gpu` crate's CubeCL kernels ([`crate::gpu::fused`]).
 
 use std::borrow::Cow;
 use std::sync::Arc;
@@ -70,9 +70,9 @@ pub trait MlpOps: burn::backend::Backend {
 }
 
 /// The complete training state on the device: the two parameter groups with their Adam
-/// moments and EMA. The fused ops keep the table as per-entry records `[w | m | v | q]` in
-/// `grid` (`q`: the EMA gap, see [`crate::cpu::optim`]), with `grid_m`, `grid_v`, `grid_ema`
-/// empty.
+/// moments and EMA. The fused ops on Flex keep the table as per-entry records `[w | m | v | q]`
+/// in `grid` (`q`: the EMA gap, see [`crate::cpu::optim`]), with `grid_m`, `grid_v`, `grid_ema`
+/// empty; on the Cube backend as four arrays (`grid_ema` holding the gap).
 #[derive(ExtensionType)]
 pub struct TrainState<B: Backend> {
     /// Hash table records `[entries·4F]` (empty without a hash grid).
@@ -107,6 +107,20 @@ pub struct TrainOutcome<B: Backend> {
     pub losses: Vec<f64>,
     /// The base step of the table's EMA gap after the steps (see [`crate::cpu::optim`]).
     pub ema_base: u32,
+}
+
+/// Result of [`NrcFusedOps::fused_gradients`].
+#[derive(ExtensionType)]
+pub struct GradientOutcome<B: Backend> {
+    /// The state, unchanged.
+    #[extension_type]
+    pub state: TrainState<B>,
+    /// Mean loss over samples and channels.
+    pub loss: f64,
+    /// ∂L/∂table, dense (`[entries · F]`; empty without a hash grid).
+    pub grid: Vec<f32>,
+    /// ∂L/∂(MLP weights).
+    pub mlp: Vec<f32>,
 }
 
 /// Constants of a run of training steps.
@@ -159,8 +173,10 @@ pub enum EmaConversion {
     },
 }
 
-/// Fused, non-differentiable custom ops of the training loop.
-#[backend_extension(Flex)]
+/// Fused, non-differentiable custom ops of the training loop: rayon kernels on Flex
+/// ([`crate::cpu`]), CubeCL kernels on the Cube backend ([`crate::gpu::fused`], the `nrc-gpu`
+/// crate).
+#[backend_extension(Cube, Flex)]
 pub trait NrcFusedOps: burn::backend::Backend {
     /// Runs `spec.steps` fused training steps on the packed rows `batch` `[N, 21]`.
     fn fused_train_steps(
@@ -168,6 +184,14 @@ pub trait NrcFusedOps: burn::backend::Backend {
         batch: FloatTensor<Self>,
         spec: StepSpec,
     ) -> TrainOutcome<Self>;
+
+    /// The loss and gradients one step of [`NrcFusedOps::fused_train_steps`] would feed to
+    /// Adam (no update): how the backends' kernels are checked against each other.
+    fn fused_gradients(
+        #[extension_type] state: TrainState<Self>,
+        batch: FloatTensor<Self>,
+        spec: StepSpec,
+    ) -> GradientOutcome<Self>;
 
     /// The inference weights at step `step`: bias-corrected EMA (the table's from its EMA gap
     /// based at `ema_base`, or from the raw EMA where that is `None`) or, with `ema = None`, the
@@ -473,6 +497,35 @@ impl NrcFusedOps for Flex {
             state,
             losses,
             ema_base,
+        }
+    }
+
+    fn fused_gradients(
+        state: TrainState<Self>,
+        batch: FlexTensor,
+        spec: StepSpec,
+    ) -> GradientOutcome<Self> {
+        let rows = flex_f32(&batch);
+        let records = flex_f32(&state.grid);
+        let grid_w = match spec.layout.encoding.grid() {
+            Some((hg, _)) => {
+                let [w, ..] = cpu::optim::unpack_records(hg.features(), &records);
+                w
+            }
+            None => Vec::new(),
+        };
+        let (loss, grid, mlp) = cpu::train::gradients(
+            &spec.layout,
+            &grid_w,
+            &flex_f32(&state.mlp),
+            &rows,
+            spec.loss,
+        );
+        GradientOutcome {
+            state,
+            loss,
+            grid,
+            mlp,
         }
     }
 

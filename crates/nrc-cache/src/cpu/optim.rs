@@ -37,11 +37,11 @@ pub struct StepConstants {
     /// `1 − β2^t`.
     pub bc2: f32,
     /// `learning rate / (1 − β1^t)`.
-    step_size: f32,
+    pub step_size: f32,
     /// `1 / (1 − β2^t)`.
-    inv_bc2: f32,
+    pub inv_bc2: f32,
     /// `α^(1 − (step − base))`: the factor of a weight change in the table's EMA gap.
-    gap_growth: f32,
+    pub gap_growth: f32,
 }
 
 impl StepConstants {

@@ -52,6 +52,7 @@
 //! when no adapter exists; [`wgpu_device`] wraps that once per process, and
 //! [`adapters`] tells a hardware GPU from a software rasteriser (lavapipe, llvmpipe).
 
+pub mod fused;
 pub mod hashgrid;
 pub mod mlp;
 

@@ -1,0 +1,413 @@
+//! The fused step's CubeCL kernels (the `nrc-gpu` crate, on wgpu: lavapipe in CI) against the
+//! fused CPU path, from the same initialisation: the gradients of the tile pass and the scatter
+//! (both atomic paths, batches of 1, 63, 65 and 4097 rows, both presets, 1 and 5 hidden
+//! layers, a batch whose every sample hits the same table entries, every scratch buffer
+//! poisoned with NaN), 50 training steps loss by loss, inference, the sparse update (untouched
+//! entries keep their bits; the lazy EMA equals a dense one) and the dispatches per step.
+//! Skipped with a message where no adapter exists (CI refuses the skip).
+//!
+//! Tolerances: the GPU sums in f32 in another order than the CPU (whose loss is f64), so
+//! gradients agree to a relative L2 error of 1e-4 (measured: below 1e-6 on lavapipe) and
+//! losses over 50 Adam steps to 2 % (Adam divides by √v, which amplifies rounding where a
+//! gradient is near zero).
+
+use nrc_cache::config::{MlpPrecision, NestedEncoding};
+use nrc_cache::encoding::hash_grid::TablePrecision;
+use nrc_cache::gpu::fused::force_atomics;
+use nrc_cache::{
+    CacheConfig, CacheDevice, CacheQuery, ComputePath, RadianceCache, SceneBox, TrainingBatch,
+};
+use nrc_gpu::Atomics;
+use rand::{Rng, SeedableRng};
+use rand_pcg::Pcg64Mcg;
+use std::sync::Mutex;
+
+/// The tests share process-wide switches (forced atomics, poison): one at a time.
+static SERIAL: Mutex<()> = Mutex::new(());
+
+fn wgpu_or_skip(test: &str) -> bool {
+    match nrc_cache::gpu::wgpu_device() {
+        Ok(_) => true,
+        Err(e) => {
+            nrc_scene::testing::skipped(test, &e.to_string());
+            false
+        }
+    }
+}
+
+/// A preset with f32 tables and products (the precisions both paths share), `hidden` hidden
+/// layers and a 2^14-entry table.
+fn f32_config(mut c: CacheConfig, hidden: u32) -> CacheConfig {
+    for n in &mut c.encoding.nested {
+        if let NestedEncoding::HashGrid {
+            log2_hashmap_size,
+            inference_precision,
+            training_precision,
+            ..
+        } = n
+        {
+            *log2_hashmap_size = 14;
+            *inference_precision = TablePrecision::F32;
+            *training_precision = TablePrecision::F32;
+        }
+    }
+    c.network.precision = MlpPrecision::F32;
+    c.network.n_hidden_layers = hidden;
+    c
+}
+
+fn presets(hidden: u32) -> [(&'static str, CacheConfig); 2] {
+    [
+        (
+            "hashgrid",
+            f32_config(CacheConfig::hash_grid_preset(), hidden),
+        ),
+        (
+            "trianglewave",
+            f32_config(CacheConfig::triangle_wave_preset(), hidden),
+        ),
+    ]
+}
+
+fn unit(r: &mut Pcg64Mcg) -> [f32; 3] {
+    loop {
+        let v: [f32; 3] = [
+            r.random_range(-1.0..1.0),
+            r.random_range(-1.0..1.0),
+            r.random_range(-1.0..1.0),
+        ];
+        let l = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+        if l > 0.1 && l <= 1.0 {
+            return v.map(|x| x / l);
+        }
+    }
+}
+
+/// `n` random records (a fresh seed per call); with `one_point`, every sample at the same
+/// position (so each level's eight entries receive every sample's gradient).
+fn batch(n: usize, seed: u64, one_point: bool) -> TrainingBatch {
+    let mut r = Pcg64Mcg::seed_from_u64(seed);
+    let fixed: [f32; 3] = [r.random(), r.random(), r.random()];
+    let queries: Vec<CacheQuery> = (0..n)
+        .map(|_| CacheQuery {
+            position: if one_point {
+                fixed
+            } else {
+                [r.random(), r.random(), r.random()]
+            },
+            direction: unit(&mut r),
+            normal: unit(&mut r),
+            roughness: r.random_range(0.05..1.0),
+            diffuse: [r.random(), r.random(), r.random()],
+            specular: [r.random_range(0.0..0.2); 3],
+        })
+        .collect();
+    let targets = queries
+        .iter()
+        .map(|_| {
+            let base: f32 = r.random_range(-3.0f32..1.5).exp();
+            [
+                base * r.random_range(0.5..1.5),
+                base,
+                base * r.random_range(0.5..1.5),
+            ]
+        })
+        .collect();
+    let weights = Some((0..n).map(|_| r.random_range(0.25..2.0)).collect());
+    TrainingBatch {
+        queries,
+        targets,
+        weights,
+    }
+}
+
+fn cache(config: &CacheConfig, device: CacheDevice) -> RadianceCache {
+    RadianceCache::with_path(
+        config.clone(),
+        SceneBox::default(),
+        device,
+        ComputePath::Fused,
+    )
+    .unwrap()
+}
+
+/// ‖a − b‖ / ‖b‖ (0 when both are zero).
+fn relative_l2(a: &[f32], b: &[f32]) -> f64 {
+    assert_eq!(a.len(), b.len());
+    let (mut d, mut n) = (0f64, 0f64);
+    for (x, y) in a.iter().zip(b) {
+        d += (f64::from(*x) - f64::from(*y)).powi(2);
+        n += f64::from(*y).powi(2);
+    }
+    if n == 0.0 { d.sqrt() } else { (d / n).sqrt() }
+}
+
+fn atomics_to_test() -> Vec<Atomics> {
+    let device = nrc_cache::gpu::wgpu_device().expect("checked");
+    let client = nrc_cache::gpu::fused::client(&device).expect("a CubeCL device");
+    match Atomics::best(&client) {
+        Atomics::Native => vec![Atomics::CompareSwap, Atomics::Native],
+        Atomics::CompareSwap => {
+            println!("this adapter has no native f32 atomics: the compare-and-swap path only");
+            vec![Atomics::CompareSwap]
+        }
+    }
+}
+
+#[test]
+fn fused_gpu_gradients_equal_the_cpu_kernels() {
+    let _serial = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    if !wgpu_or_skip("fused_gpu_gradients_equal_the_cpu_kernels") {
+        return;
+    }
+    nrc_gpu::set_poison(true);
+    let mut seed = 1000u64;
+    let mut worst = 0f64;
+    for atomics in atomics_to_test() {
+        force_atomics(Some(atomics));
+        for hidden in [1, 5] {
+            for (name, config) in presets(hidden) {
+                let mut gpu = cache(&config, CacheDevice::Wgpu);
+                let mut cpu = cache(&config, CacheDevice::Cpu);
+                for (n, one_point) in [
+                    (1, false),
+                    (63, false),
+                    (65, false),
+                    (4097, false),
+                    (300, true),
+                ] {
+                    seed += 1;
+                    let b = batch(n, seed, one_point);
+                    let what = format!(
+                        "{name}, {hidden} hidden, {n} rows{}, {atomics:?}",
+                        if one_point { " at one point" } else { "" }
+                    );
+                    let (lg, gg, mg) = gpu.gradients(&b).unwrap();
+                    let (lc, gc, mc) = cpu.gradients(&b).unwrap();
+                    assert!(
+                        (lg - lc).abs() <= 1e-5 * lc.abs(),
+                        "{what}: loss {lg} vs {lc}"
+                    );
+                    let em = relative_l2(&mg, &mc);
+                    assert!(em <= 1e-4, "{what}: MLP gradient off by {em:e}");
+                    let eg = relative_l2(&gg, &gc);
+                    assert!(eg <= 1e-4, "{what}: table gradient off by {eg:e}");
+                    assert!(
+                        gg.iter().chain(&mg).all(|v| v.is_finite()),
+                        "{what}: a gradient is not finite (an unwritten value?)"
+                    );
+                    if !gc.is_empty() {
+                        assert!(
+                            gc.iter().any(|v| *v != 0.0),
+                            "{what}: the CPU's table gradient is zero: the test checks nothing"
+                        );
+                    }
+                    worst = worst.max(em).max(eg);
+                }
+            }
+        }
+    }
+    force_atomics(None);
+    nrc_gpu::set_poison(false);
+    println!("largest relative L2 gradient error: {worst:e}");
+}
+
+#[test]
+fn fifty_fused_gpu_steps_follow_the_cpu_and_infer_alike() {
+    let _serial = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    if !wgpu_or_skip("fifty_fused_gpu_steps_follow_the_cpu_and_infer_alike") {
+        return;
+    }
+    nrc_gpu::set_poison(true);
+    for (name, config) in presets(3) {
+        let mut gpu = cache(&config, CacheDevice::Wgpu);
+        let mut cpu = cache(&config, CacheDevice::Cpu);
+        assert!(
+            gpu.describe().contains("fused CubeCL kernels"),
+            "{name}: {}",
+            gpu.describe()
+        );
+        let probe = batch(500, 77, false).queries;
+        let (a, b) = (gpu.infer(&probe), cpu.infer(&probe));
+        for (x, y) in a.iter().zip(&b) {
+            for c in 0..3 {
+                assert!(
+                    (x[c] - y[c]).abs() <= 1e-4 * (1e-3 + y[c].abs()),
+                    "{name}: initial answers {x:?} vs {y:?}"
+                );
+            }
+        }
+        let mut losses = Vec::new();
+        for step in 0..50 {
+            let b = batch(1024, 5000 + step, false);
+            // Two calls of 2 and 3 steps now and then: runs of steps, and the EMA gap's
+            // conversions between them.
+            let (lg, lc) = if step % 10 == 9 {
+                let (g, c) = (gpu.train(&b, 2).unwrap(), cpu.train(&b, 2).unwrap());
+                (g.first_loss, c.first_loss)
+            } else {
+                let (g, c) = (gpu.train(&b, 1).unwrap(), cpu.train(&b, 1).unwrap());
+                (g.loss, c.loss)
+            };
+            assert!(
+                (lg - lc).abs() <= 0.02 * lc.abs(),
+                "{name}: step {step}: loss {lg} on the GPU, {lc} on the CPU"
+            );
+            losses.push(lg);
+        }
+        assert!(
+            losses[45..].iter().sum::<f32>() < 0.8 * losses[..5].iter().sum::<f32>(),
+            "{name}: the GPU's training does not lower the loss: {losses:?}"
+        );
+        // Inference from the GPU's weights equals the CPU's from the same weights.
+        let (grid, mlp) = gpu.inference_weights_host();
+        let mut same = cache(&config, CacheDevice::Cpu);
+        same.set_weights(grid, mlp).unwrap();
+        let (a, b) = (gpu.infer(&probe), same.infer(&probe));
+        let mut worst = 0f32;
+        for (x, y) in a.iter().zip(&b) {
+            for c in 0..3 {
+                let e = (x[c] - y[c]).abs() / (1e-3 + y[c].abs());
+                worst = worst.max(e);
+            }
+        }
+        assert!(
+            worst <= 1e-4,
+            "{name}: inference differs by {worst:e} (relative)"
+        );
+        // And the two caches' answers after 50 steps each stay close.
+        let c = cpu.infer(&probe);
+        let rel: f32 = a
+            .iter()
+            .zip(&c)
+            .map(|(x, y)| {
+                (0..3)
+                    .map(|k| (x[k] - y[k]).abs() / (1e-2 + y[k].abs()))
+                    .sum::<f32>()
+            })
+            .sum::<f32>()
+            / (3 * a.len()) as f32;
+        assert!(
+            rel <= 0.05,
+            "{name}: the caches trained on the GPU and the CPU answer {rel} apart"
+        );
+        println!(
+            "{name}: losses {:?} … {:?}; GPU vs CPU answers {rel:.2e} apart",
+            &losses[..3],
+            &losses[47..]
+        );
+    }
+    nrc_gpu::set_poison(false);
+}
+
+#[test]
+fn fused_gpu_sparse_update_keeps_untouched_entries_and_a_dense_ema() {
+    let _serial = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    if !wgpu_or_skip("fused_gpu_sparse_update_keeps_untouched_entries_and_a_dense_ema") {
+        return;
+    }
+    let config = presets(2)[0].1.clone();
+    let mut gpu = cache(&config, CacheDevice::Wgpu);
+    let alpha = config.optimizer.resolve().1.expect("the preset has an EMA");
+    let before = gpu.host_state();
+    // Every sample in a small corner of the box: most entries of the fine levels untouched.
+    let mut b = batch(200, 31, false);
+    for q in &mut b.queries {
+        q.position = q.position.map(|p| 0.1 * p);
+    }
+    let (grid_dims, touched) = {
+        let layout = gpu.layout();
+        let (hg, _) = layout.encoding.grid().expect("a hash grid");
+        let mut touched = vec![false; hg.total_entries];
+        for q in &b.queries {
+            for level in &hg.levels {
+                for e in hg.corners(level, q.position).index {
+                    touched[e as usize] = true;
+                }
+            }
+        }
+        (hg.features(), touched)
+    };
+    let f = grid_dims;
+    let mut dense_ema = before.grid_ema.clone();
+    let steps = 30;
+    for _ in 0..steps {
+        gpu.train(&b, 1).unwrap();
+        let (w, _) = gpu.weights();
+        for (e, w) in dense_ema.iter_mut().zip(&w) {
+            *e = alpha * *e + (1.0 - alpha) * w;
+        }
+    }
+    let after = gpu.host_state();
+    let mut untouched = 0;
+    for (e, t) in touched.iter().enumerate() {
+        let r = e * f..(e + 1) * f;
+        if *t {
+            continue;
+        }
+        untouched += 1;
+        for (name, x, y) in [
+            ("weight", &before.grid, &after.grid),
+            ("first moment", &before.grid_m, &after.grid_m),
+            ("second moment", &before.grid_v, &after.grid_v),
+        ] {
+            for (a, b) in x[r.clone()].iter().zip(&y[r.clone()]) {
+                assert_eq!(
+                    a.to_bits(),
+                    b.to_bits(),
+                    "untouched entry {e}: its {name} moved"
+                );
+            }
+        }
+    }
+    assert!(
+        untouched > touched.len() / 2,
+        "only {untouched} of {} entries untouched",
+        touched.len()
+    );
+    assert!(
+        touched
+            .iter()
+            .enumerate()
+            .any(|(e, t)| *t && before.grid[e * f] != after.grid[e * f]),
+        "no touched entry moved: the test checks nothing"
+    );
+    let err = relative_l2(&after.grid_ema, &dense_ema);
+    assert!(
+        err <= 1e-5,
+        "the lazy EMA differs from a dense one by {err:e}"
+    );
+}
+
+#[test]
+fn fused_gpu_step_takes_four_dispatches() {
+    let _serial = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    if !wgpu_or_skip("fused_gpu_step_takes_four_dispatches") {
+        return;
+    }
+    for (name, config) in presets(3) {
+        let per_step = if name == "hashgrid" { 4 } else { 2 };
+        let mut gpu = cache(&config, CacheDevice::Wgpu);
+        let b = batch(256, 3, false);
+        gpu.train(&b, 1).unwrap();
+        let mut counts = Vec::new();
+        for steps in [1u32, 6] {
+            let start = nrc_gpu::dispatches();
+            gpu.train(&b, steps).unwrap();
+            counts.push(nrc_gpu::dispatches() - start);
+        }
+        assert_eq!(
+            (counts[1] - counts[0]) / 5,
+            per_step,
+            "{name}: dispatches per step (1 step: {}, 6 steps: {})",
+            counts[0],
+            counts[1]
+        );
+        assert!(
+            counts[0] <= per_step,
+            "{name}: a one-step call took {} dispatches",
+            counts[0]
+        );
+        assert!(per_step <= 8, "the issue's bound");
+    }
+}

@@ -1,0 +1,835 @@
+//! The radiance cache's fused training step and inference on the GPU, as CubeCL kernels run by
+//! burn's Cube backend (wgpu here; the same kernels compile for CUDA and SPIR-V).
+//!
+//! This crate knows nothing of caches: it takes the model as a [`Layout`] (plain numbers), the
+//! packed rows and the training state as burn `CubeTensor`s, and launches [`kernels`]. One
+//! training step is four dispatches ([`STEP_DISPATCHES`]; two without a hash grid): the tile
+//! pass (encode → MLP forward → loss → MLP backward, per tile of rows in workgroup memory), the
+//! MLP's reduction + Adam + EMA, the hash-grid gradient scatter, and the table's sparse Adam +
+//! EMA gap. Inference is one dispatch. `nrc_cache` implements its fused-ops interface with it.
+
+pub mod kernels;
+
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+
+use burn::backend::wgpu::CubeTensor;
+use burn::cubecl::features::AtomicUsage;
+use burn::cubecl::ir::{ElemType, FloatKind};
+use burn::cubecl::prelude::*;
+use burn::tensor::{DType, Shape};
+
+use kernels::{LEVEL_WORDS, PART_WORDS, WIDTH};
+
+/// Dispatches of one training step with a hash grid (tile pass, MLP update, scatter, table
+/// update); without a grid the last two are skipped.
+pub const STEP_DISPATCHES: u64 = 4;
+
+/// Cubes of the tile passes at most: each keeps a weight-gradient partial, so more cubes cost
+/// memory and reduction time; this many fill a large GPU.
+const MAX_TILE_CUBES: usize = 1024;
+/// Units per cube of the element-wise kernels.
+const ELEMENTWISE: u32 = 256;
+
+static DISPATCHES: AtomicU64 = AtomicU64::new(0);
+
+/// Kernel launches by this crate since the process started (for dispatch-count guards).
+pub fn dispatches() -> u64 {
+    DISPATCHES.load(Ordering::Relaxed)
+}
+
+fn counted() {
+    DISPATCHES.fetch_add(1, Ordering::Relaxed);
+}
+
+/// One level of the hash grid.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Level {
+    /// `s_l`, the very f32 the CPU uses.
+    pub scale: f32,
+    /// Vertices per axis.
+    pub resolution: u32,
+    /// Table entries.
+    pub entries: u32,
+    /// First entry of the level in the table.
+    pub offset: u32,
+    /// Indexed densely (else hashed).
+    pub dense: bool,
+}
+
+/// The hash grid of the encoding.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Grid {
+    /// Features per entry (1, 2, 4 or 8).
+    pub features: usize,
+    /// The levels, coarse to fine.
+    pub levels: Vec<Level>,
+    /// Raw input column of the position's x.
+    pub in_offset: usize,
+    /// First network-input column of the grid's features.
+    pub out_offset: usize,
+}
+
+impl Grid {
+    /// Table entries over all levels.
+    pub fn entries(&self) -> usize {
+        self.levels.iter().map(|l| l.entries as usize).sum()
+    }
+}
+
+/// A non-grid part of the composite encoding.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum PartKind {
+    /// One-blob with this many bins, periodic or not.
+    OneBlob {
+        /// Bins per dimension.
+        bins: u32,
+        /// Periodic.
+        wrap: bool,
+    },
+    /// Triangle waves of this many octaves.
+    TriangleWave {
+        /// Octaves per dimension.
+        frequencies: u32,
+    },
+    /// `x·scale + offset`.
+    Identity {
+        /// Multiplier.
+        scale: f32,
+        /// Offset.
+        offset: f32,
+    },
+}
+
+/// A non-grid encoding part and where it reads and writes.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Part {
+    /// What it computes.
+    pub kind: PartKind,
+    /// First raw input read.
+    pub in_offset: usize,
+    /// Raw inputs read.
+    pub in_dims: usize,
+    /// First network-input column written.
+    pub out_offset: usize,
+}
+
+/// The output activation.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Activation {
+    /// `exp(clamp(o, ±40))`.
+    Exponential,
+    /// `ln(1 + e^o)`.
+    Softplus,
+    /// `max(o, 0)`.
+    ReLU,
+}
+
+/// The model as the kernels need it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Layout {
+    /// Network inputs after padding with ones.
+    pub inputs: usize,
+    /// Network inputs before padding.
+    pub unpadded: usize,
+    /// Hidden layers of [`WIDTH`] neurons (at least 1).
+    pub hidden: usize,
+    /// Output activation.
+    pub activation: Activation,
+    /// The hash grid, if any.
+    pub grid: Option<Grid>,
+    /// The other parts of the encoding.
+    pub parts: Vec<Part>,
+    /// Raw inputs per row (the reflectance factor follows them; in a training row the target
+    /// and the weight follow that).
+    pub raw_dims: usize,
+}
+
+impl Layout {
+    /// MLP weights: `inputs × 64`, `(hidden − 1) × 64 × 64`, `64 × 3`.
+    pub fn mlp_len(&self) -> usize {
+        self.inputs * WIDTH + (self.hidden - 1) * WIDTH * WIDTH + WIDTH * 3
+    }
+
+    /// Floats of a training row.
+    pub fn train_row(&self) -> usize {
+        self.raw_dims + 7
+    }
+
+    /// Floats of a query row.
+    pub fn query_row(&self) -> usize {
+        self.raw_dims + 3
+    }
+
+    fn levels(&self) -> usize {
+        self.grid.as_ref().map_or(0, |g| g.levels.len())
+    }
+
+    fn features(&self) -> usize {
+        self.grid.as_ref().map_or(1, |g| g.features)
+    }
+
+    fn grid_dims(&self) -> usize {
+        self.levels() * self.features()
+    }
+
+    /// The info words the kernels read: the levels, then the parts.
+    fn info(&self) -> Vec<u32> {
+        let mut info =
+            Vec::with_capacity(self.levels() * LEVEL_WORDS + self.parts.len() * PART_WORDS);
+        for l in self.grid.iter().flat_map(|g| &g.levels) {
+            info.extend([
+                l.scale.to_bits(),
+                l.resolution,
+                l.entries,
+                l.offset,
+                u32::from(l.dense),
+            ]);
+        }
+        for p in &self.parts {
+            let (kind, count, wrap, scale, offset) = match p.kind {
+                PartKind::OneBlob { bins, wrap } => (1, bins, u32::from(wrap), 1.0f32, 0.0f32),
+                PartKind::TriangleWave { frequencies } => (2, frequencies, 0, 1.0, 0.0),
+                PartKind::Identity { scale, offset } => (3, 1, 0, scale, offset),
+            };
+            info.extend([
+                kind,
+                p.in_offset as u32,
+                p.in_dims as u32,
+                p.out_offset as u32,
+                count,
+                wrap,
+                scale.to_bits(),
+                offset.to_bits(),
+            ]);
+        }
+        // A buffer is never empty (a zero-sized binding is refused).
+        info.push(0);
+        info
+    }
+
+    /// Checks what the kernels assume.
+    pub fn check(&self) -> Result<(), String> {
+        if self.hidden == 0 {
+            return Err("the fused GPU path needs at least one hidden layer".into());
+        }
+        if let Some(g) = &self.grid
+            && !matches!(g.features, 1 | 2 | 4 | 8)
+        {
+            return Err(format!(
+                "the fused GPU path takes 1, 2, 4 or 8 features per level, not {}",
+                g.features
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// How the gradient scatter adds floats.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Atomics {
+    /// The adapter's float atomic add (`SHADER_FLOAT32_ATOMIC` on wgpu).
+    Native,
+    /// A compare-and-swap loop on the float's bits (any adapter).
+    CompareSwap,
+}
+
+impl Atomics {
+    /// What `client` offers: native float adds where it has them.
+    pub fn best(client: &Client) -> Self {
+        let native = client
+            .properties()
+            .atomic_type_usage(Type::atomic(ElemType::Float(FloatKind::F32)))
+            .contains(AtomicUsage::Add);
+        if native {
+            Self::Native
+        } else {
+            Self::CompareSwap
+        }
+    }
+
+    /// Its name in descriptions.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Native => "native f32 atomics",
+            Self::CompareSwap => "compare-and-swap f32 adds",
+        }
+    }
+}
+
+/// Rows per tile for `layout` within the device's workgroup memory, and the floats of the
+/// activation buffer at that size: the largest of 32, 16, 8, 4, 2, 1 that fits.
+pub fn tile_rows(client: &Client, layout: &Layout) -> Result<(usize, usize), String> {
+    let limit = client.properties().hardware.max_shared_memory_size;
+    for r in [32usize, 16, 8, 4, 2, 1] {
+        let act = r * layout.inputs + layout.hidden * r * WIDTH;
+        // act + small (7 per row) + delta (2 × 64 per row), f32.
+        let bytes = 4 * (act + 7 * r + 2 * r * WIDTH);
+        if bytes <= limit {
+            return Ok((r, act));
+        }
+    }
+    Err(format!(
+        "the fused GPU path needs more workgroup memory than the adapter has ({limit} bytes)"
+    ))
+}
+
+fn buffer(t: &CubeTensor) -> BufferArg {
+    let n = t.meta.shape().num_elements();
+    // SAFETY: the length is the tensor's own element count (contiguous f32 or u32 tensors, as
+    // every caller makes sure), so the kernels' bounds are the buffer's.
+    unsafe { BufferArg::from_raw_parts(t.handle.clone(), n.max(1)) }
+}
+
+/// A 1-D contiguous tensor of `values` on `like`'s device.
+fn upload_u32(like: &CubeTensor, values: &[u32]) -> CubeTensor {
+    let handle = like.client.create_from_slice(bytemuck::cast_slice(values));
+    CubeTensor::new_contiguous(
+        like.client.clone(),
+        like.device.clone(),
+        Shape::new([values.len()]),
+        handle,
+        DType::U32,
+    )
+}
+
+/// A zeroed f32 (or u32) tensor of `len` elements on `like`'s device.
+fn zeros(like: &CubeTensor, len: usize, dtype: DType) -> CubeTensor {
+    let handle = like.client.create_from_slice(&vec![0u8; 4 * len.max(1)]);
+    CubeTensor::new_contiguous(
+        like.client.clone(),
+        like.device.clone(),
+        Shape::new([len.max(1)]),
+        handle,
+        dtype,
+    )
+}
+
+static POISON: AtomicBool = AtomicBool::new(false);
+
+/// With `true`, every buffer a kernel is to fill starts as NaN instead of uninitialised memory
+/// (pooled memory often holds zeros, which would hide a value a kernel fails to write): for
+/// tests.
+pub fn set_poison(on: bool) {
+    POISON.store(on, Ordering::Relaxed);
+}
+
+/// An f32 tensor of `len` elements on `like`'s device, for a kernel to fill (uninitialised, or
+/// NaN under [`set_poison`]).
+fn empty(like: &CubeTensor, len: usize) -> CubeTensor {
+    let bytes = 4 * len.max(1);
+    let handle = if POISON.load(Ordering::Relaxed) {
+        let nan = vec![f32::NAN; len.max(1)];
+        like.client.create_from_slice(bytemuck::cast_slice(&nan))
+    } else {
+        like.client.empty(bytes)
+    };
+    CubeTensor::new_contiguous(
+        like.client.clone(),
+        like.device.clone(),
+        Shape::new([len]),
+        handle,
+        DType::F32,
+    )
+}
+
+fn elementwise_count(len: usize) -> CubeCount {
+    let groups = len.div_ceil(ELEMENTWISE as usize).max(1) as u32;
+    let x = groups.min(65_535);
+    CubeCount::Static(x, groups.div_ceil(x), 1)
+}
+
+/// What [`Trainer::gradients`] reads back.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Gradients {
+    /// Mean loss over samples and channels.
+    pub loss: f32,
+    /// ∂L/∂(MLP weights).
+    pub mlp: Vec<f32>,
+    /// ∂L/∂table, dense (`[entries · F]`; empty without a grid).
+    pub table: Vec<f32>,
+}
+
+/// Adam's constants of one step (as `nrc_cache::cpu::optim::StepConstants`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct AdamStep {
+    /// β₁.
+    pub beta1: f32,
+    /// β₂.
+    pub beta2: f32,
+    /// ε.
+    pub epsilon: f32,
+    /// L2 regularisation.
+    pub l2: f32,
+    /// `learning rate / (1 − β₁^t)`.
+    pub step_size: f32,
+    /// `1 / (1 − β₂^t)`.
+    pub inv_bc2: f32,
+    /// The EMA decay, if any.
+    pub ema: Option<f32>,
+    /// The factor of a table weight's change in its EMA gap.
+    pub gap_growth: f32,
+}
+
+/// The loss settings.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Loss {
+    /// ε of the relative loss.
+    pub epsilon: f32,
+    /// The relative residual beyond which the loss is linear.
+    pub huber: f32,
+}
+
+/// The hash table's training state: weights, Adam's moments and the EMA gap (see
+/// `nrc_cache::cpu::optim`), `[entries · F]` each.
+#[derive(Debug)]
+pub struct TableState<'a> {
+    /// Weights.
+    pub w: &'a CubeTensor,
+    /// Adam's first moment.
+    pub m: &'a CubeTensor,
+    /// Adam's second moment.
+    pub v: &'a CubeTensor,
+    /// The EMA gap.
+    pub q: &'a CubeTensor,
+}
+
+/// The training state, updated in place: the table (`None` without a grid) and the MLP's
+/// weights, moments and raw EMA. Every tensor must be contiguous f32 and not shared
+/// (`CubeTensor::can_mut`). The table's four arrays are separate (not the CPU's per-entry
+/// records): one binding each, so a 2^19-entry table stays within WebGPU's 128 MiB binding.
+#[derive(Debug)]
+pub struct State<'a> {
+    /// The hash table.
+    pub table: Option<TableState<'a>>,
+    /// MLP weights.
+    pub mlp: &'a CubeTensor,
+    /// Adam's first moment of the MLP.
+    pub mlp_m: &'a CubeTensor,
+    /// Adam's second moment.
+    pub mlp_v: &'a CubeTensor,
+    /// The raw EMA.
+    pub mlp_ema: &'a CubeTensor,
+}
+
+/// A run of training steps on one batch: the rows uploaded once, the scratch allocated once,
+/// the losses kept on the device until [`Trainer::losses`].
+#[derive(Debug)]
+pub struct Trainer {
+    layout: Layout,
+    rows: CubeTensor,
+    n: usize,
+    info: CubeTensor,
+    dxg: CubeTensor,
+    wpart: CubeTensor,
+    lpart: CubeTensor,
+    grad: Option<CubeTensor>,
+    touched: Option<CubeTensor>,
+    losses: CubeTensor,
+    no_table: CubeTensor,
+    r_tile: usize,
+    act_len: usize,
+    cubes: usize,
+    atomics: Atomics,
+    steps: usize,
+}
+
+impl Trainer {
+    /// Prepares `steps` steps on the packed rows `rows` (`n` rows of [`Layout::train_row`]
+    /// floats, contiguous f32).
+    pub fn new(
+        layout: &Layout,
+        rows: CubeTensor,
+        n: usize,
+        steps: usize,
+        atomics: Atomics,
+    ) -> Result<Self, String> {
+        layout.check()?;
+        let client = rows.client.clone();
+        let (r_tile, act_len) = tile_rows(&client, layout)?;
+        let tiles = n.div_ceil(r_tile).max(1);
+        let cubes = tiles.min(MAX_TILE_CUBES);
+        let info = upload_u32(&rows, &layout.info());
+        let dxg = empty(&rows, n * layout.grid_dims());
+        let wpart = empty(&rows, cubes * layout.mlp_len());
+        let lpart = empty(&rows, cubes);
+        let entries = layout.grid.as_ref().map_or(0, Grid::entries);
+        let (grad, touched) = if layout.grid.is_some() {
+            (
+                Some(zeros(&rows, entries * layout.features(), DType::F32)),
+                Some(zeros(&rows, entries, DType::U32)),
+            )
+        } else {
+            (None, None)
+        };
+        let losses = zeros(&rows, steps, DType::F32);
+        let no_table = zeros(&rows, 1, DType::F32);
+        Ok(Self {
+            no_table,
+            layout: layout.clone(),
+            rows,
+            n,
+            info,
+            dxg,
+            wpart,
+            lpart,
+            grad,
+            touched,
+            losses,
+            r_tile,
+            act_len,
+            cubes,
+            atomics,
+            steps,
+        })
+    }
+
+    /// Rows per tile chosen for this device.
+    pub fn tile_rows(&self) -> usize {
+        self.r_tile
+    }
+
+    /// Step `index` (0-based within this run) on `state`.
+    pub fn step(&self, index: usize, state: &State<'_>, adam: &AdamStep, loss: Loss) {
+        assert!(
+            index < self.steps,
+            "step {index} of a run of {}",
+            self.steps
+        );
+        let l = &self.layout;
+        let client = &self.rows.client;
+        let (levels, features) = (l.levels(), l.features());
+        let grid = l.grid.as_ref();
+        let (grid_in, grid_out) = grid.map_or((0, 0), |g| (g.in_offset, g.out_offset));
+        let table = state.table.as_ref().map_or(&self.no_table, |t| t.w);
+        let n = self.n;
+        if n > 0 {
+            self.launch_tiles(table, state.mlp, loss, levels, features, grid_in, grid_out);
+        }
+        let w_total = l.mlp_len();
+        kernels::mlp_adam::launch(
+            client,
+            elementwise_count(w_total),
+            CubeDim::new_1d(ELEMENTWISE),
+            buffer(&self.wpart),
+            buffer(&self.lpart),
+            buffer(state.mlp),
+            buffer(state.mlp_m),
+            buffer(state.mlp_v),
+            buffer(state.mlp_ema),
+            buffer(&self.losses),
+            if n > 0 { self.cubes as u32 } else { 0 },
+            w_total as u32,
+            index as u32,
+            1.0 / (3.0 * n.max(1) as f32),
+            adam.beta1,
+            adam.beta2,
+            adam.epsilon,
+            adam.l2,
+            adam.step_size,
+            adam.inv_bc2,
+            adam.ema.unwrap_or(0.0),
+            adam.ema.is_some(),
+        );
+        counted();
+        let (Some(g), Some(table), Some(grad), Some(touched)) =
+            (grid, &state.table, &self.grad, &self.touched)
+        else {
+            return;
+        };
+        if n > 0 {
+            self.launch_scatter(g, grad, touched);
+        }
+        let entries = g.entries();
+        kernels::table_adam::launch(
+            client,
+            elementwise_count(entries),
+            CubeDim::new_1d(ELEMENTWISE),
+            buffer(table.w),
+            buffer(table.m),
+            buffer(table.v),
+            buffer(table.q),
+            buffer(grad),
+            buffer(touched),
+            entries as u32,
+            adam.beta1,
+            adam.beta2,
+            adam.epsilon,
+            adam.l2,
+            adam.step_size,
+            adam.inv_bc2,
+            adam.gap_growth,
+            features,
+            adam.ema.is_some(),
+        );
+        counted();
+    }
+
+    fn launch_tiles(
+        &self,
+        table: &CubeTensor,
+        mlp: &CubeTensor,
+        loss: Loss,
+        levels: usize,
+        features: usize,
+        grid_in: usize,
+        grid_out: usize,
+    ) {
+        let l = &self.layout;
+        let n = self.n;
+        kernels::train_tiles::launch(
+            &self.rows.client,
+            CubeCount::Static(self.cubes as u32, 1, 1),
+            CubeDim::new_1d(WIDTH as u32),
+            buffer(&self.rows),
+            buffer(table),
+            buffer(&self.info),
+            buffer(mlp),
+            buffer(&self.dxg),
+            buffer(&self.wpart),
+            buffer(&self.lpart),
+            n as u32,
+            l.parts.len() as u32,
+            loss.epsilon,
+            loss.huber,
+            1.0 / (3.0 * n as f32),
+            self.r_tile,
+            l.inputs,
+            l.hidden,
+            levels,
+            features,
+            features,
+            l.train_row(),
+            grid_in,
+            grid_out,
+            l.unpadded,
+            l.raw_dims,
+            activation_code(l.activation),
+            l.mlp_len(),
+            self.act_len,
+        );
+        counted();
+    }
+
+    fn launch_scatter(&self, g: &Grid, grad: &CubeTensor, touched: &CubeTensor) {
+        let l = &self.layout;
+        let n = self.n;
+        let (levels, features) = (l.levels(), l.features());
+        let count = elementwise_count(n * levels);
+        let dim = CubeDim::new_1d(ELEMENTWISE);
+        let client = &self.rows.client;
+        match self.atomics {
+            Atomics::Native => kernels::scatter_native::launch(
+                client,
+                count,
+                dim,
+                buffer(&self.rows),
+                buffer(&self.info),
+                buffer(&self.dxg),
+                buffer(grad),
+                buffer(touched),
+                n as u32,
+                levels,
+                features,
+                l.train_row(),
+                g.in_offset,
+            ),
+            Atomics::CompareSwap => kernels::scatter_cas::launch(
+                client,
+                count,
+                dim,
+                buffer(&self.rows),
+                buffer(&self.info),
+                buffer(&self.dxg),
+                buffer(grad),
+                buffer(touched),
+                n as u32,
+                levels,
+                features,
+                l.train_row(),
+                g.in_offset,
+            ),
+        }
+        counted();
+    }
+
+    /// The loss and the gradients of one step on `state`, without an update (the tile pass and
+    /// the scatter only, read back): how the kernels are checked against the CPU's.
+    pub fn gradients(&self, state: &State<'_>, loss: Loss) -> Result<Gradients, String> {
+        let l = &self.layout;
+        let client = &self.rows.client;
+        let n = self.n;
+        let (levels, features) = (l.levels(), l.features());
+        let (grid_in, grid_out) = l
+            .grid
+            .as_ref()
+            .map_or((0, 0), |g| (g.in_offset, g.out_offset));
+        let table = state.table.as_ref().map_or(&self.no_table, |t| t.w);
+        let w_total = l.mlp_len();
+        if n == 0 {
+            return Ok(Gradients {
+                loss: 0.0,
+                mlp: vec![0.0; w_total],
+                table: vec![0.0; l.grid.as_ref().map_or(0, |g| g.entries() * g.features)],
+            });
+        }
+        self.launch_tiles(table, state.mlp, loss, levels, features, grid_in, grid_out);
+        if let (Some(g), Some(grad), Some(touched)) = (&l.grid, &self.grad, &self.touched) {
+            self.launch_scatter(g, grad, touched);
+        }
+        let read = |t: &CubeTensor| -> Result<Vec<f32>, String> {
+            let bytes = client
+                .read_one(t.handle.clone())
+                .map_err(|e| format!("reading back from the GPU: {e:?}"))?;
+            let len = t.meta.shape().num_elements();
+            Ok(bytemuck::cast_slice::<u8, f32>(&bytes[..4 * len]).to_vec())
+        };
+        let parts = read(&self.wpart)?;
+        let mut mlp = vec![0f32; w_total];
+        for part in parts.chunks_exact(w_total).take(self.cubes) {
+            for (g, p) in mlp.iter_mut().zip(part) {
+                *g += p;
+            }
+        }
+        let loss_sum: f32 = read(&self.lpart)?[..self.cubes].iter().sum();
+        let table = match &self.grad {
+            Some(g) => read(g)?,
+            None => Vec::new(),
+        };
+        Ok(Gradients {
+            loss: loss_sum / (3.0 * n as f32),
+            mlp,
+            table,
+        })
+    }
+
+    /// The mean loss of every step of the run (one read of the device).
+    pub fn losses(&self) -> Result<Vec<f32>, String> {
+        let bytes = self
+            .rows
+            .client
+            .read_one(self.losses.handle.clone())
+            .map_err(|e| format!("reading the losses back from the GPU: {e:?}"))?;
+        let values: &[f32] = bytemuck::cast_slice(&bytes[..4 * self.steps]);
+        Ok(values.to_vec())
+    }
+}
+
+fn activation_code(a: Activation) -> u32 {
+    match a {
+        Activation::Exponential => 0,
+        Activation::Softplus => 1,
+        Activation::ReLU => 2,
+    }
+}
+
+/// Fused inference: radiance (an `[n, 3]` tensor) of the packed query rows `rows` (`n` rows of
+/// [`Layout::query_row`] floats) with the table `table` (`[entries · F]`, plain weights) and the
+/// MLP weights `mlp`.
+pub fn infer(
+    layout: &Layout,
+    table: &CubeTensor,
+    mlp: &CubeTensor,
+    rows: &CubeTensor,
+    n: usize,
+) -> Result<CubeTensor, String> {
+    layout.check()?;
+    let client = rows.client.clone();
+    let (r_tile, act_len) = tile_rows(&client, layout)?;
+    let out = empty(rows, 3 * n);
+    let out = CubeTensor::new_contiguous(
+        client.clone(),
+        rows.device.clone(),
+        Shape::new([n, 3]),
+        out.handle,
+        DType::F32,
+    );
+    if n == 0 {
+        return Ok(out);
+    }
+    let info = upload_u32(rows, &layout.info());
+    let (levels, features) = (layout.levels(), layout.features());
+    let (grid_in, grid_out) = layout
+        .grid
+        .as_ref()
+        .map_or((0, 0), |g| (g.in_offset, g.out_offset));
+    let cubes = n.div_ceil(r_tile).min(MAX_TILE_CUBES * 4);
+    kernels::infer_tiles::launch(
+        &client,
+        CubeCount::Static(cubes as u32, 1, 1),
+        CubeDim::new_1d(WIDTH as u32),
+        buffer(rows),
+        buffer(table),
+        buffer(&info),
+        buffer(mlp),
+        buffer(&out),
+        n as u32,
+        layout.parts.len() as u32,
+        r_tile,
+        layout.inputs,
+        layout.hidden,
+        levels,
+        features,
+        features,
+        layout.query_row(),
+        grid_in,
+        grid_out,
+        layout.unpadded,
+        layout.raw_dims,
+        activation_code(layout.activation),
+        act_len,
+    );
+    counted();
+    Ok(out)
+}
+
+/// `y ← (cx·x + cy·y)·cs` in place (the table's EMA gap `y` against its weights `x`).
+pub fn combine_into(x: &CubeTensor, y: &CubeTensor, cx: f32, cy: f32, cs: f32) {
+    let len = y.meta.shape().num_elements();
+    assert_eq!(
+        len,
+        x.meta.shape().num_elements(),
+        "combine_into: lengths differ"
+    );
+    if len == 0 {
+        return;
+    }
+    kernels::combine_into::launch(
+        &y.client,
+        elementwise_count(len),
+        CubeDim::new_1d(ELEMENTWISE),
+        buffer(x),
+        buffer(y),
+        len as u32,
+        cx,
+        cy,
+        cs,
+    );
+    counted();
+}
+
+/// `(cx·x + cy·y)·cs` as a new tensor (`x` and `y` of one length).
+pub fn combine(x: &CubeTensor, y: &CubeTensor, cx: f32, cy: f32, cs: f32) -> CubeTensor {
+    let len = x.meta.shape().num_elements();
+    assert_eq!(
+        len,
+        y.meta.shape().num_elements(),
+        "combine: lengths differ"
+    );
+    let out = empty(x, len);
+    if len > 0 {
+        kernels::combine::launch(
+            &x.client,
+            elementwise_count(len),
+            CubeDim::new_1d(ELEMENTWISE),
+            buffer(x),
+            buffer(y),
+            buffer(&out),
+            len as u32,
+            cx,
+            cy,
+            cs,
+        );
+        counted();
+    }
+    out
+}
