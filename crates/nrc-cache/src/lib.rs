@@ -19,8 +19,9 @@
 //! (hash grid, one-blob, triangle wave, identity, composite) → [`model`] (64-wide bias-free MLP,
 //! parameter layout) → [`loss`] (reflectance factorisation, output mapping, relative L2) →
 //! Adam and the weight EMA ([`cpu::optim`], [`tensor_path`]) → [`snapshot`]. The custom burn ops
-//! are in [`ops`] and [`hash_grid_op`]; their CPU kernels in [`cpu`], their WGSL kernels in
-//! [`gpu`] and `shaders/`.
+//! are in [`ops`] and [`hash_grid_op`]; their CPU kernels in [`cpu`], their GPU kernels in
+//! [`gpu`] (the fused step's CubeCL kernels in the `nrc-gpu` crate, the custom-ops path's WGSL in
+//! `shaders/`).
 
 pub mod batch;
 pub mod bench;

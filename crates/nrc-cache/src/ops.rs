@@ -7,9 +7,9 @@
 //! * [`NrcFusedOps`] — the whole CPU training step (encode, MLP forward/backward, loss, sparse
 //!   Adam + EMA) and fused inference, on tensors that live on the device.
 //!
-//! Both are implemented for Flex (rayon kernels in [`crate::cpu`]) and for wgpu (`CubeBackend`):
-//! [`MlpOps`] by WGSL kernels in [`crate::gpu::mlp`] (the custom-ops path, kept as the measured
-//! baseline), [`NrcFusedOps`] by the `nrc-gpu` crate's CubeCL kernels ([`crate::gpu::fused`]).
+//! [`MlpOps`] is implemented for Flex (rayon kernels in [`crate::cpu`]); on wgpu the custom-ops
+//! path multiplies with burn's matmuls. [`NrcFusedOps`] is implemented for Flex and for wgpu
+//! (`CubeBackend`: the `nrc-gpu` crate's CubeCL kernels, [`crate::gpu::fused`]).
 
 use std::borrow::Cow;
 use std::sync::Arc;
@@ -46,9 +46,8 @@ pub struct Needs {
     pub input: bool,
 }
 
-/// The fused MLP as a differentiable custom op (rayon tiles on Flex, WGSL kernels in
-/// [`crate::gpu::mlp`] on wgpu).
-#[backend_extension(Cube, Flex, Autodiff)]
+/// The fused MLP as a differentiable custom op (rayon tiles on Flex).
+#[backend_extension(Flex, Autodiff)]
 pub trait MlpOps: burn::backend::Backend {
     /// Fused MLP (ReLU hidden layers, no biases, linear output): `weights` is the MLP parameter
     /// group `[W]` (layout of [`LayerShape`]), `input` `[N, in]` → raw outputs `[N, 3]`.

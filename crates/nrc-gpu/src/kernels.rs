@@ -371,10 +371,46 @@ fn huber(r: f32, k: f32, deriv: &mut Array<f32>) -> f32 {
     h
 }
 
+/// Unit `u`'s column of a layer's weight gradient, `Σ_r in[r][kk] · δ[r][u]` for every input
+/// `kk` (the layer's input rows at `in_base`, `in_dims` wide; δ at `d_base`), added to (or, on
+/// the cube's first tile, written to) the cube's partial at `w_at + kk·64 + u`.
+#[cube]
+fn weight_gradient(
+    act: &Shared<[f32]>,
+    delta: &Shared<[f32]>,
+    wpart: &mut [f32],
+    in_base: usize,
+    d_base: usize,
+    w_at: usize,
+    first_tile: bool,
+    #[comptime] in_dims: usize,
+    #[comptime] r_tile: usize,
+) {
+    let u = UNIT_POS as usize;
+    let mut own = Array::<f32>::new(r_tile);
+    #[unroll]
+    for r in 0..r_tile {
+        own[r] = delta[d_base + r * WIDTH + u];
+    }
+    for kk in 0..in_dims {
+        let mut g = 0.0f32;
+        #[unroll]
+        for r in 0..r_tile {
+            g += act[in_base + r * in_dims + kk] * own[r];
+        }
+        let at = w_at + kk * WIDTH + u;
+        if first_tile {
+            wpart[at] = g;
+        } else {
+            wpart[at] += g;
+        }
+    }
+}
+
 /// One training pass over the batch (see the module documentation): forward, loss, backward
 /// per tile; the cube's weight-gradient partial in `wpart[CUBE_POS·w_total..]`, its loss sum in
 /// `lpart[CUBE_POS]`, ∂L/∂(grid columns) in `dxg` (`[n][levels·features]`).
-#[cube(launch)]
+#[cube(launch_unchecked)]
 pub fn train_tiles(
     rows: &[f32],
     table: &[f32],
@@ -473,6 +509,7 @@ pub fn train_tiles(
         #[unroll]
         for c in 0..3usize {
             let mut g = 0.0f32;
+            #[unroll]
             for r in 0..r_tile {
                 g += act[last + r * WIDTH + u] * small[r_tile * 3 + r * 3 + c];
             }
@@ -483,18 +520,20 @@ pub fn train_tiles(
                 wpart[at] += g;
             }
         }
+        let w0 = mlp[out_off + u * 3];
+        let w1 = mlp[out_off + u * 3 + 1];
+        let w2 = mlp[out_off + u * 3 + 2];
+        #[unroll]
         for r in 0..r_tile {
-            let mut s = 0.0f32;
-            #[unroll]
-            for c in 0..3usize {
-                s += mlp[out_off + u * 3 + c] * small[r_tile * 3 + r * 3 + c];
-            }
+            let d = r_tile * 3 + r * 3;
+            let s = w0 * small[d] + w1 * small[d + 1] + w2 * small[d + 2];
             let h = act[last + r * WIDTH + u];
             delta[r * WIDTH + u] = select(h > 0.0f32, s, 0.0f32);
         }
         sync_cube();
         // Hidden layers from the last: weight gradient, then the delta of the layer below.
         let mut cur = 0usize;
+        let mut acc = Array::<f32>::new(r_tile);
         for back in 1..hidden {
             // (A mutable local started from a comptime value fails CubeCL's verifier.)
             let l = hidden - back;
@@ -502,54 +541,59 @@ pub fn train_tiles(
             let in_base = xs_len + (l - 1) * r_tile * WIDTH;
             let cb = cur * r_tile * WIDTH;
             let nb = (1 - cur) * r_tile * WIDTH;
-            for kk in 0..WIDTH {
-                let mut g = 0.0f32;
+            weight_gradient(
+                &act,
+                &delta,
+                wpart,
+                in_base,
+                cb,
+                wp + w_off,
+                first_tile,
+                WIDTH,
+                r_tile,
+            );
+            // δ_below[r][u] = relu'(h[r][u]) · Σ_j W[u][j] · δ[r][j]
+            #[unroll]
+            for r in 0..r_tile {
+                acc[r] = 0.0f32;
+            }
+            for j in 0..WIDTH {
+                let w = mlp[w_off + u * WIDTH + j];
+                #[unroll]
                 for r in 0..r_tile {
-                    g += act[in_base + r * WIDTH + kk] * delta[cb + r * WIDTH + u];
-                }
-                let at = wp + w_off + kk * WIDTH + u;
-                if first_tile {
-                    wpart[at] = g;
-                } else {
-                    wpart[at] += g;
+                    acc[r] += w * delta[cb + r * WIDTH + j];
                 }
             }
+            #[unroll]
             for r in 0..r_tile {
-                let mut s = 0.0f32;
-                for j in 0..WIDTH {
-                    s += mlp[w_off + u * WIDTH + j] * delta[cb + r * WIDTH + j];
-                }
                 let h = act[in_base + r * WIDTH + u];
-                delta[nb + r * WIDTH + u] = select(h > 0.0f32, s, 0.0f32);
+                delta[nb + r * WIDTH + u] = select(h > 0.0f32, acc[r], 0.0f32);
             }
             sync_cube();
             cur = 1 - cur;
         }
         // The first layer: its weight gradient, and ∂L/∂(grid columns) out.
         let cb = cur * r_tile * WIDTH;
-        for kk in 0..k {
-            let mut g = 0.0f32;
-            for r in 0..r_tile {
-                g += act[r * k + kk] * delta[cb + r * WIDTH + u];
-            }
-            let at = wp + kk * WIDTH + u;
-            if first_tile {
-                wpart[at] = g;
-            } else {
-                wpart[at] += g;
-            }
-        }
+        weight_gradient(&act, &delta, wpart, 0usize, cb, wp, first_tile, k, r_tile);
         let mut col = u;
         while col < grid_dims {
             let kk = grid_out + col;
+            #[unroll]
+            for r in 0..r_tile {
+                acc[r] = 0.0f32;
+            }
+            for j in 0..WIDTH {
+                let w = mlp[kk * WIDTH + j];
+                #[unroll]
+                for r in 0..r_tile {
+                    acc[r] += w * delta[cb + r * WIDTH + j];
+                }
+            }
+            #[unroll]
             for r in 0..r_tile {
                 let i = first + r;
                 if i < n {
-                    let mut s = 0.0f32;
-                    for j in 0..WIDTH {
-                        s += mlp[kk * WIDTH + j] * delta[cb + r * WIDTH + j];
-                    }
-                    dxg[i * grid_dims + col] = s;
+                    dxg[i * grid_dims + col] = acc[r];
                 }
             }
             col += WIDTH;
@@ -561,7 +605,7 @@ pub fn train_tiles(
 }
 
 /// Inference over packed query rows: radiance `act(o) · factor` into `out` (`[n][3]`).
-#[cube(launch)]
+#[cube(launch_unchecked)]
 pub fn infer_tiles(
     rows: &[f32],
     table: &[f32],

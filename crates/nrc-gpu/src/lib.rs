@@ -10,6 +10,7 @@
 
 pub mod kernels;
 
+use std::sync::Mutex;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 
 use burn::backend::wgpu::CubeTensor;
@@ -338,6 +339,48 @@ fn elementwise_count(len: usize) -> CubeCount {
     CubeCount::Static(x, groups.div_ceil(x), 1)
 }
 
+/// The table-sized scratch of finished runs (the gradient accumulator and the touched marks),
+/// all zeros again (the table update clears what the scatter wrote), kept for the next run on
+/// the same device and table: a run allocating and zeroing them anew cost a 60 MiB upload
+/// per `train` call with the hash-grid preset.
+static SCRATCH: Mutex<Vec<(CubeTensor, CubeTensor)>> = Mutex::new(Vec::new());
+/// Scratch pairs kept at most (one per cache alive, typically one).
+const SCRATCH_KEPT: usize = 4;
+
+fn take_scratch(like: &CubeTensor, entries: usize, features: usize) -> (CubeTensor, CubeTensor) {
+    let mut pool = SCRATCH.lock().unwrap_or_else(|e| e.into_inner());
+    let fits = |(g, t): &(CubeTensor, CubeTensor)| {
+        g.device == like.device
+            && g.meta.shape().num_elements() == entries * features
+            && t.meta.shape().num_elements() == entries
+    };
+    if let Some(i) = pool.iter().position(fits) {
+        return pool.swap_remove(i);
+    }
+    drop(pool);
+    (
+        zeros(like, entries * features, DType::F32),
+        zeros(like, entries, DType::U32),
+    )
+}
+
+impl Drop for Trainer {
+    fn drop(&mut self) {
+        // Only scratch known to be zero goes back: not after `gradients` (no table update
+        // cleared it) or a panic (a step may have stopped between the scatter and the update).
+        if self.dirty || std::thread::panicking() {
+            return;
+        }
+        if let (Some(g), Some(t)) = (self.grad.take(), self.touched.take()) {
+            let mut pool = SCRATCH.lock().unwrap_or_else(|e| e.into_inner());
+            if pool.len() >= SCRATCH_KEPT {
+                pool.remove(0);
+            }
+            pool.push((g, t));
+        }
+    }
+}
+
 /// What [`Trainer::gradients`] reads back.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Gradients {
@@ -431,6 +474,8 @@ pub struct Trainer {
     cubes: usize,
     atomics: Atomics,
     steps: usize,
+    /// The scratch may hold non-zero values (after [`Trainer::gradients`]).
+    dirty: bool,
 }
 
 impl Trainer {
@@ -454,10 +499,8 @@ impl Trainer {
         let lpart = empty(&rows, cubes);
         let entries = layout.grid.as_ref().map_or(0, Grid::entries);
         let (grad, touched) = if layout.grid.is_some() {
-            (
-                Some(zeros(&rows, entries * layout.features(), DType::F32)),
-                Some(zeros(&rows, entries, DType::U32)),
-            )
+            let (g, t) = take_scratch(&rows, entries, layout.features());
+            (Some(g), Some(t))
         } else {
             (None, None)
         };
@@ -480,6 +523,7 @@ impl Trainer {
             cubes,
             atomics,
             steps,
+            dirty: false,
         })
     }
 
@@ -576,37 +620,43 @@ impl Trainer {
     ) {
         let l = &self.layout;
         let n = self.n;
-        kernels::train_tiles::launch(
-            &self.rows.client,
-            CubeCount::Static(self.cubes as u32, 1, 1),
-            CubeDim::new_1d(WIDTH as u32),
-            buffer(&self.rows),
-            buffer(table),
-            buffer(&self.info),
-            buffer(mlp),
-            buffer(&self.dxg),
-            buffer(&self.wpart),
-            buffer(&self.lpart),
-            n as u32,
-            l.parts.len() as u32,
-            loss.epsilon,
-            loss.huber,
-            1.0 / (3.0 * n as f32),
-            self.r_tile,
-            l.inputs,
-            l.hidden,
-            levels,
-            features,
-            features,
-            l.train_row(),
-            grid_in,
-            grid_out,
-            l.unpadded,
-            l.raw_dims,
-            activation_code(l.activation),
-            l.mlp_len(),
-            self.act_len,
-        );
+        // SAFETY: every index the kernel forms is in bounds: rows and outputs below `n`, table
+        // indices below the level's offset + entries (modulo or mask), partials below `cubes`,
+        // workgroup memory within the sizes `tile_rows` chose (checked by the gradient tests
+        // with poisoned buffers); its loops are bounded by `n`, the tile count and the layout.
+        unsafe {
+            kernels::train_tiles::launch_unchecked(
+                &self.rows.client,
+                CubeCount::Static(self.cubes as u32, 1, 1),
+                CubeDim::new_1d(WIDTH as u32),
+                buffer(&self.rows),
+                buffer(table),
+                buffer(&self.info),
+                buffer(mlp),
+                buffer(&self.dxg),
+                buffer(&self.wpart),
+                buffer(&self.lpart),
+                n as u32,
+                l.parts.len() as u32,
+                loss.epsilon,
+                loss.huber,
+                1.0 / (3.0 * n as f32),
+                self.r_tile,
+                l.inputs,
+                l.hidden,
+                levels,
+                features,
+                features,
+                l.train_row(),
+                grid_in,
+                grid_out,
+                l.unpadded,
+                l.raw_dims,
+                activation_code(l.activation),
+                l.mlp_len(),
+                self.act_len,
+            )
+        };
         counted();
     }
 
@@ -654,7 +704,8 @@ impl Trainer {
 
     /// The loss and the gradients of one step on `state`, without an update (the tile pass and
     /// the scatter only, read back): how the kernels are checked against the CPU's.
-    pub fn gradients(&self, state: &State<'_>, loss: Loss) -> Result<Gradients, String> {
+    pub fn gradients(&mut self, state: &State<'_>, loss: Loss) -> Result<Gradients, String> {
+        self.dirty = true;
         let l = &self.layout;
         let client = &self.rows.client;
         let n = self.n;
@@ -753,31 +804,35 @@ pub fn infer(
         .as_ref()
         .map_or((0, 0), |g| (g.in_offset, g.out_offset));
     let cubes = n.div_ceil(r_tile).min(MAX_TILE_CUBES * 4);
-    kernels::infer_tiles::launch(
-        &client,
-        CubeCount::Static(cubes as u32, 1, 1),
-        CubeDim::new_1d(WIDTH as u32),
-        buffer(rows),
-        buffer(table),
-        buffer(&info),
-        buffer(mlp),
-        buffer(&out),
-        n as u32,
-        layout.parts.len() as u32,
-        r_tile,
-        layout.inputs,
-        layout.hidden,
-        levels,
-        features,
-        features,
-        layout.query_row(),
-        grid_in,
-        grid_out,
-        layout.unpadded,
-        layout.raw_dims,
-        activation_code(layout.activation),
-        act_len,
-    );
+    // SAFETY: as for `train_tiles` (rows and outputs below `n`, table indices within the
+    // levels, workgroup memory within `tile_rows`'s sizes).
+    unsafe {
+        kernels::infer_tiles::launch_unchecked(
+            &client,
+            CubeCount::Static(cubes as u32, 1, 1),
+            CubeDim::new_1d(WIDTH as u32),
+            buffer(rows),
+            buffer(table),
+            buffer(&info),
+            buffer(mlp),
+            buffer(&out),
+            n as u32,
+            layout.parts.len() as u32,
+            r_tile,
+            layout.inputs,
+            layout.hidden,
+            levels,
+            features,
+            features,
+            layout.query_row(),
+            grid_in,
+            grid_out,
+            layout.unpadded,
+            layout.raw_dims,
+            activation_code(layout.activation),
+            act_len,
+        )
+    };
     counted();
     Ok(out)
 }

@@ -245,7 +245,7 @@ impl NrcFusedOps for CubeBackend {
         let batch = into_contiguous(batch);
         let n = elements(&batch) / layout.train_row();
         let client = batch.client.clone();
-        let trainer = Trainer::new(&layout, batch, n, 1, atomics(&client))
+        let mut trainer = Trainer::new(&layout, batch, n, 1, atomics(&client))
             .unwrap_or_else(|e| panic!("the fused GPU step cannot run: {e}"));
         let state = TrainState {
             grid: into_contiguous(state.grid),

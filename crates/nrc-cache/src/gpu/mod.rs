@@ -1,6 +1,7 @@
-//! The wgpu path: WGSL kernels from `shaders/` run on burn's wgpu backend: the hash-grid
-//! encoding ([`hashgrid`], behind [`crate::hash_grid_op::HashGridOps`]) and the fused MLP
-//! ([`mlp`], behind [`crate::ops::MlpOps`]).
+//! The wgpu path: the fused training step and inference as CubeCL kernels ([`fused`], the
+//! `nrc-gpu` crate, behind [`crate::ops::NrcFusedOps`]: the default), and the custom-ops path
+//! kept as the measured baseline, whose hash-grid encoding is WGSL from `shaders/`
+//! ([`hashgrid`], behind [`crate::hash_grid_op::HashGridOps`]) and whose MLP is burn's matmuls.
 //!
 //! # How a hand-written WGSL kernel runs on burn 0.22.1 tensors (the mechanism)
 //!
@@ -54,7 +55,6 @@
 
 pub mod fused;
 pub mod hashgrid;
-pub mod mlp;
 
 use std::sync::OnceLock;
 
