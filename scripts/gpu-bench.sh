@@ -5,35 +5,37 @@
 #   scripts/gpu-bench.sh OUT             # there (or here on lavapipe): write the figures to OUT
 #
 # --prepare copies, stripped, from "$CARGO_TARGET_DIR/release" (after `cargo build --release
-# --locked --workspace --all-targets`): the `nrc` binary, the `gpu_bench` example of nrc-cache
-# and nrc-cache's `backends` and `wgpu_training` test binaries (the device self-check: every wgpu
-# kernel against the CPU path). `.bench/` and the Vulkan loaders `.gl/` are ignored by git and
-# travel with `carry` (the device README's recipe for `.gl`).
+# --locked --workspace --all-targets`): the `nrc` binary and nrc-cache's `gpu_fused`, `backends`
+# and `wgpu_training` test binaries (the device self-check: the fused CubeCL kernels, both atomic
+# paths, and the custom-ops path's kernels against the CPU path). `.bench/` and the Vulkan
+# loaders `.gl/` are ignored by git and travel with `carry` (the device README's recipe for
+# `.gl`).
 #
 # OUT receives, each step under its own time limit (the whole run under 5 minutes on a GPU):
 #   adapter.txt     the adapters, their features and limits (f16, subgroups, float atomics,
 #                   cooperative matrices, workgroup memory), nvidia-smi where it exists
-#   selfcheck.txt   the wgpu kernels against the CPU path (the two test binaries)
+#   selfcheck.txt   the wgpu kernels against the CPU path (the three test binaries)
 #   bench-wgpu.txt  `nrc bench cache --device wgpu`: training samples/s and inference queries/s
-#                   of the hash-grid preset at each batch, custom-ops against generic tensor ops
+#                   of the hash-grid preset at each batch along the fused path (the default), its
+#                   dispatches per step, and fused against custom-ops (and generic tensor ops at
+#                   2^14) at each batch
 #   bench-cpu.txt   the same on the machine's CPU cores (the fused CPU path), for the ratio
-#   kernels.txt     gpu_bench: the WGSL MLP and hash-grid kernels against the burn ops they replace
-#   profile.txt     per-kernel GPU time, totalled, of 3 s of training steps and 3 s of inference at
-#                   2^16 (CubeCL's profile log; the first calls' matmul autotuning included)
+#   profile.txt     per-kernel GPU time, totalled, of 3 s of fused training steps and 3 s of
+#                   inference at 2^16 (CubeCL's profile log)
 #   train-*.csv     short online `nrc train` runs on the Cornell box, wgpu and CPU, 4 096 and 65 536
 #                   records per frame (training batches of at most 2^14), per frame
 #   summary.txt     every step's exit status and duration
 # GPU_BENCH_BATCHES and GPU_BENCH_FRAMES override the batch list and the online run's frames (a
-# software rasteriser needs smaller ones). Worst case, every step at its limit: 595 s.
+# software rasteriser needs smaller ones). Worst case, every step at its limit: 565 s.
 set -uo pipefail
 cd "$(dirname "$0")/.."
 
 if [[ "${1:-}" == "--prepare" ]]; then
   set -e
   dir="${CARGO_TARGET_DIR:-target}/release"
-  mkdir -p .bench
+  rm -rf .bench && mkdir -p .bench
   newest() { ls -t "$dir"/deps/"$1"-* 2>/dev/null | grep -v '\.d$' | head -1; }
-  for pair in "nrc:$dir/nrc" "gpu_bench:$dir/examples/gpu_bench" \
+  for pair in "nrc:$dir/nrc" "gpu_fused:$(newest gpu_fused)" \
     "backends:$(newest backends)" "wgpu_training:$(newest wgpu_training)"; do
     name=${pair%%:*} src=${pair#*:}
     [[ -x "$src" ]] || { echo "error: $name not built ($src)"; exit 1; }
@@ -82,12 +84,11 @@ step adapters 40 adapter-lines.txt "$BIN/nrc" bench cache --device wgpu --config
   --batch 1024 --min-ms 1 --no-compare
 grep '^wgpu' "$OUT/adapter-lines.txt" >>"$OUT/adapter.txt"
 
-NRC_SKIP_LOG="$OUT/skipped.txt" step selfcheck 90 selfcheck.txt bash -c "'$BIN/backends' --test-threads 1; a=\$?; '$BIN/wgpu_training' --test-threads 1 && exit \$a"
+NRC_SKIP_LOG="$OUT/skipped.txt" step selfcheck 120 selfcheck.txt bash -c "s=0; for t in gpu_fused backends wgpu_training; do '$BIN/'\$t --test-threads 1 --nocapture || s=1; done; exit \$s"
 step bench-wgpu 120 bench-wgpu.txt "$BIN/nrc" bench cache --device wgpu --config hashgrid \
   "${batch_args[@]}" --min-ms 1000
 step bench-cpu 45 bench-cpu.txt "$BIN/nrc" bench cache --device cpu --config hashgrid \
   --batch 16384 --batch 65536 --min-ms 1000 --no-compare
-step kernels 60 kernels.txt "$BIN/gpu_bench" 10
 # CubeCL logs each kernel's time and a summary at every device synchronisation.
 CUBECL_DEBUG_LOG="$OUT/profile.log" CUBECL_DEBUG_OPTION=profile \
   step profile 60 profile-run.txt "$BIN/nrc" bench cache --device wgpu --config hashgrid \

@@ -41,6 +41,40 @@ pub struct TrainStats {
     pub profile: TrainProfile,
 }
 
+/// Training steps queued by [`RadianceCache::train_submit`]: their statistics, the losses still
+/// on the device.
+#[derive(Debug)]
+#[must_use = "the steps' losses are read by `wait`"]
+pub struct PendingTrain {
+    stats: TrainStats,
+    losses: Option<Tensor<1>>,
+}
+
+impl PendingTrain {
+    /// Statistics complete already (no step queued, or a cache that trains synchronously).
+    pub fn ready(stats: TrainStats) -> Self {
+        Self {
+            stats,
+            losses: None,
+        }
+    }
+
+    /// Waits for the steps and returns their statistics with the losses.
+    pub fn wait(self) -> TrainStats {
+        let mut stats = self.stats;
+        if let Some(t) = self.losses {
+            let losses = t
+                .into_data()
+                .convert::<f64>()
+                .try_to_vec::<f64>()
+                .expect("losses");
+            stats.first_loss = losses.first().copied().unwrap_or(0.0) as f32;
+            stats.loss = losses.last().copied().unwrap_or(0.0) as f32;
+        }
+        stats
+    }
+}
+
 /// Inference weights, valid for one step count.
 #[derive(Clone, Debug)]
 struct InferenceWeights {
@@ -284,6 +318,18 @@ impl RadianceCache {
     /// Runs `steps` optimisation steps on the batch (each over all of its usable samples).
     /// Bad samples are dropped and counted, never trained on.
     pub fn train(&mut self, batch: &TrainingBatch, steps: u32) -> Result<TrainStats, CacheError> {
+        Ok(self.train_submit(batch, steps)?.wait())
+    }
+
+    /// [`Self::train`] without waiting for the steps where the device runs them asynchronously
+    /// (wgpu): the steps are queued, and [`PendingTrain::wait`] reads their losses. Work queued
+    /// on the cache afterwards (inference) runs after them; the CPU is free meanwhile. On the
+    /// CPU the steps have run when this returns.
+    pub fn train_submit(
+        &mut self,
+        batch: &TrainingBatch,
+        steps: u32,
+    ) -> Result<PendingTrain, CacheError> {
         let t_pack = std::time::Instant::now();
         let packed = pack_training(batch, self.config.loss.max_target)?;
         let mut stats = TrainStats {
@@ -294,7 +340,7 @@ impl RadianceCache {
             ..TrainStats::default()
         };
         if packed.len == 0 || steps == 0 {
-            return Ok(stats);
+            return Ok(PendingTrain::ready(stats));
         }
         // Drop cached inference weights first: they may share storage with the weights, which
         // would make the in-place update copy them.
@@ -312,7 +358,7 @@ impl RadianceCache {
         }
         let state = self.state.take().expect("state present between calls");
         let state_packed = state.packed;
-        let losses: Vec<f64> = match self.path {
+        let losses: Tensor<1> = match self.path {
             ComputePath::Fused => {
                 let spec = self.step_spec(steps, clock.clone());
                 let out = <Dispatch as NrcFusedOps>::fused_train_steps(
@@ -322,7 +368,7 @@ impl RadianceCache {
                 );
                 self.state = Some(TensorState::from_dispatch(out.state, state_packed));
                 self.ema_base = self.ema.map(|_| out.ema_base);
-                out.losses
+                Tensor::from_dispatch(out.losses)
             }
             ComputePath::CustomOps | ComputePath::Unfused => {
                 let mut state = state;
@@ -343,20 +389,17 @@ impl RadianceCache {
                     ));
                 }
                 self.state = Some(state);
-                let all = Tensor::cat(losses, 0);
-                all.into_data()
-                    .convert::<f64>()
-                    .try_to_vec::<f64>()
-                    .expect("losses")
+                Tensor::cat(losses, 0)
             }
         };
         self.step += steps;
         stats.steps = steps;
         stats.total_steps = self.step;
-        stats.first_loss = losses.first().copied().unwrap_or(0.0) as f32;
-        stats.loss = losses.last().copied().unwrap_or(0.0) as f32;
         stats.profile = clock.profile();
-        Ok(stats)
+        Ok(PendingTrain {
+            stats,
+            losses: Some(losses),
+        })
     }
 
     /// The constants of `steps` fused steps from the current one.

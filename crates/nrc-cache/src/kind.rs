@@ -5,7 +5,9 @@
 use std::path::Path;
 
 use crate::hash_cache::{HashCache, HashCacheConfig};
-use crate::{CacheError, CacheQuery, RadianceCache, SceneBox, TrainStats, TrainingBatch};
+use crate::{
+    CacheError, CacheQuery, PendingTrain, RadianceCache, SceneBox, TrainStats, TrainingBatch,
+};
 
 /// The kinds of cache, as `--cache-kind` names them.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -94,11 +96,21 @@ impl Cache {
     /// for the hash cache (its statistics in the neural cache's form: one step, the relative
     /// L2 error of the cells before the update as the loss).
     pub fn train(&mut self, batch: &TrainingBatch, steps: u32) -> Result<TrainStats, CacheError> {
+        Ok(self.train_submit(batch, steps)?.wait())
+    }
+
+    /// [`Cache::train`] without waiting for a GPU's steps ([`RadianceCache::train_submit`]); the
+    /// hash cache trains at once.
+    pub fn train_submit(
+        &mut self,
+        batch: &TrainingBatch,
+        steps: u32,
+    ) -> Result<PendingTrain, CacheError> {
         match self {
-            Self::Neural(c) => c.train(batch, steps),
+            Self::Neural(c) => c.train_submit(batch, steps),
             Self::Hash(c) => {
                 let s = c.train(batch).map_err(CacheError::Input)?;
-                Ok(TrainStats {
+                Ok(PendingTrain::ready(TrainStats {
                     loss: s.loss,
                     first_loss: s.loss,
                     steps: u32::from(s.used > 0),
@@ -107,7 +119,7 @@ impl Cache {
                     dropped_nonfinite: s.dropped_nonfinite,
                     dropped_absurd: s.dropped_absurd,
                     ..Default::default()
-                })
+                }))
             }
         }
     }

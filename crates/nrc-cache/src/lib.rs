@@ -46,7 +46,7 @@ pub mod snapshot;
 pub mod state;
 pub mod tensor_path;
 
-pub use cache::{RadianceCache, TrainStats};
+pub use cache::{PendingTrain, RadianceCache, TrainStats};
 pub use config::{CacheConfig, SceneBox, Sizing};
 pub use device::{CacheDevice, ComputePath};
 pub use error::CacheError;

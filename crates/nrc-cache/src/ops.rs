@@ -102,8 +102,10 @@ pub struct TrainOutcome<B: Backend> {
     /// The updated state.
     #[extension_type]
     pub state: TrainState<B>,
-    /// Mean loss of each step (before its update).
-    pub losses: Vec<f64>,
+    /// Mean loss of each step (before its update), `[steps]`, left on the device: reading it
+    /// waits for the steps, so the caller reads it when it needs it (the online loop traces the
+    /// next work on the CPU meanwhile).
+    pub losses: FloatTensor<B>,
     /// The base step of the table's EMA gap after the steps (see [`crate::cpu::optim`]).
     pub ema_base: u32,
 }
@@ -492,9 +494,10 @@ impl NrcFusedOps for Flex {
             }
             losses
         });
+        let steps = losses.len();
         TrainOutcome {
             state,
-            losses,
+            losses: FlexTensor::from_data(TensorData::new(losses, [steps])),
             ema_base,
         }
     }

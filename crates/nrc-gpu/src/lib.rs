@@ -753,6 +753,18 @@ impl Trainer {
         })
     }
 
+    /// The mean loss of every step of the run, on the device (`[steps]`; reading it waits for
+    /// the steps).
+    pub fn loss_tensor(&self) -> CubeTensor {
+        CubeTensor::new_contiguous(
+            self.losses.client.clone(),
+            self.losses.device.clone(),
+            Shape::new([self.steps]),
+            self.losses.handle.clone(),
+            DType::F32,
+        )
+    }
+
     /// The mean loss of every step of the run (one read of the device).
     pub fn losses(&self) -> Result<Vec<f32>, String> {
         let bytes = self

@@ -293,6 +293,8 @@ pub struct CacheMethodSettings {
     pub batch_size: usize,
     /// Watch for changes in the scene and recover from them (`OnlineSettings::recover`).
     pub recover: bool,
+    /// Read a GPU's training losses after the frame's render (`OnlineSettings::overlap`).
+    pub overlap: bool,
     /// Optimisation steps on each batch while recovering (`OnlineSettings::recovery_steps`).
     pub recovery_steps: u32,
     /// Milliseconds a frame may spend producing and training (`OnlineSettings::train_budget_ms`).
@@ -338,6 +340,7 @@ impl CacheMethodSettings {
             records_per_frame: nrc_train::online::DEFAULT_RECORDS_PER_FRAME,
             batch_size: 1 << 14,
             recover: true,
+            overlap: true,
             recovery_steps: 1,
             train_budget_ms: None,
             online: true,
@@ -573,6 +576,7 @@ pub fn scene_trainer(
     online.producer_options = settings.producer_options;
     online.batch_size = settings.batch_size;
     online.recover = settings.recover;
+    online.overlap = settings.overlap;
     online.recovery_steps = settings.recovery_steps;
     online.train_budget_ms = settings.train_budget_ms;
     online.pass = pass;

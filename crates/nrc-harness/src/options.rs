@@ -336,6 +336,13 @@ pub struct RadianceCacheArgs {
     #[arg(long, default_value_t = 1)]
     pub recovery_steps: u32,
 
+    /// Wait for each training call before the frame goes on. By default, with the cache on a
+    /// GPU, the frame's training steps are queued and the render traces on the CPU while they
+    /// run (its cache queries wait for them); their losses are read after the render. No effect
+    /// on the CPU, whose steps run when queued.
+    #[arg(long)]
+    pub no_overlap: bool,
+
     /// Light training: fraction of its records at uniformly chosen surface points.
     #[arg(long, default_value_t = 0.0)]
     pub lt_surface_balance: f32,
@@ -443,6 +450,7 @@ impl RadianceCacheArgs {
         s.records_per_frame = self.records;
         s.batch_size = self.batch;
         s.recover = !self.no_recover;
+        s.overlap = !self.no_overlap;
         if self.recovery_steps == 0 || self.recovery_steps > 64 {
             bail!(
                 "--recovery-steps must be in 1..=64, got {}",

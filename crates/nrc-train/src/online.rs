@@ -3,7 +3,7 @@
 
 use std::time::Instant;
 
-use nrc_cache::{Cache, CacheError};
+use nrc_cache::{Cache, CacheError, PendingTrain};
 use nrc_render::passes::{self, FrameInput, PassOutput, PassSpec, PassStats, RenderPass, Warmth};
 use nrc_render::sampler::Stream;
 use nrc_render::{PathTracer, PixelSampler, pass_seed};
@@ -59,6 +59,10 @@ pub struct OnlineSettings {
     /// frame produces [`OnlineSettings::records_per_frame`] records (reproducible bit for bit,
     /// which a budget measured in time is not).
     pub train_budget_ms: Option<f64>,
+    /// With the cache on a GPU, queue a frame's training steps and read their losses after the
+    /// render, which traces on the CPU while they run (`false`: wait for each training call).
+    /// Either order gives the same cache and images; only the timing differs.
+    pub overlap: bool,
 }
 
 impl OnlineSettings {
@@ -80,6 +84,7 @@ impl OnlineSettings {
             recover: true,
             recovery_steps: 1,
             train_budget_ms: None,
+            overlap: true,
         }
     }
 
@@ -326,22 +331,19 @@ impl OnlineTrainer {
             }
         }
         // Recovering, the cache takes more steps on each batch (decided before this frame's
-        // score, which may start or end a recovery: the steps follow one frame later).
+        // score, which may start or end a recovery: the steps follow one frame later). On a
+        // GPU the steps are queued and the render below traces on the CPU while they run
+        // (its cache queries wait for them); their losses are read after it.
+        let mut pending = Vec::new();
         for chunk in order.chunks(s.batch_size) {
             let batch = produced.batch.select(chunk);
-            let st = self.cache.train(&batch, steps)?;
-            stats.used += st.used;
-            stats.dropped_nonfinite += st.dropped_nonfinite;
-            stats.dropped_absurd += st.dropped_absurd;
-            stats.steps += st.steps;
-            if st.steps > 0 {
-                stats.loss = st.loss;
+            pending.push(self.cache.train_submit(&batch, steps)?);
+            if !s.overlap {
+                let done = pending.pop().expect("just pushed").wait();
+                pending.push(PendingTrain::ready(done));
             }
         }
         stats.train_ms = t.elapsed().as_secs_f64() * 1e3;
-        if let Some(b) = &mut self.budget {
-            b.observe(stats.records, steps, stats.produce_ms, stats.train_ms);
-        }
 
         let mut output = None;
         if render {
@@ -364,6 +366,21 @@ impl OnlineTrainer {
             stats.inference = out.stats;
             self.previous = out.terminations.clone();
             output = Some(out);
+        }
+        let t = Instant::now();
+        for p in pending {
+            let st = p.wait();
+            stats.used += st.used;
+            stats.dropped_nonfinite += st.dropped_nonfinite;
+            stats.dropped_absurd += st.dropped_absurd;
+            stats.steps += st.steps;
+            if st.steps > 0 {
+                stats.loss = st.loss;
+            }
+        }
+        stats.train_ms += t.elapsed().as_secs_f64() * 1e3;
+        if let Some(b) = &mut self.budget {
+            b.observe(stats.records, steps, stats.produce_ms, stats.train_ms);
         }
         self.frame += 1;
         Ok((stats, output))

@@ -226,12 +226,9 @@ impl NrcFusedOps for CubeBackend {
             };
             trainer.step(k as usize - 1, &s, &adam, loss);
         }
-        let losses = trainer
-            .losses()
-            .unwrap_or_else(|e| panic!("the fused GPU step failed: {e}"));
         TrainOutcome {
             state,
-            losses: losses.into_iter().map(f64::from).collect(),
+            losses: trainer.loss_tensor(),
             ema_base,
         }
     }
