@@ -219,14 +219,33 @@ fn fifty_fused_gpu_steps_follow_the_cpu_and_infer_alike() {
         return;
     }
     nrc_gpu::set_poison(true);
-    for (name, config) in presets(3) {
+    // The preset's own table precisions too: f16 reads in the forward and inference, where the
+    // adapter has f16 arithmetic (lavapipe has).
+    let mut half = presets(3)[0].1.clone();
+    for n in &mut half.encoding.nested {
+        if let NestedEncoding::HashGrid {
+            inference_precision,
+            training_precision,
+            ..
+        } = n
+        {
+            *inference_precision = TablePrecision::F16;
+            *training_precision = TablePrecision::F16;
+        }
+    }
+    let mut configs = presets(3).to_vec();
+    configs.push(("hashgrid with f16 tables", half));
+    for (name, config) in configs {
         let mut gpu = cache(&config, CacheDevice::Wgpu);
         let mut cpu = cache(&config, CacheDevice::Cpu);
+        let description = gpu.describe();
         assert!(
-            gpu.describe().contains("fused CubeCL kernels"),
-            "{name}: {}",
-            gpu.describe()
+            description.contains("fused CubeCL kernels"),
+            "{name}: {description}"
         );
+        if name.contains("f16") {
+            println!("{name}: {}", description.lines().last().unwrap_or(""));
+        }
         let probe = batch(500, 77, false).queries;
         let (a, b) = (gpu.infer(&probe), cpu.infer(&probe));
         for (x, y) in a.iter().zip(&b) {

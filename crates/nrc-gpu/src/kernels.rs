@@ -20,6 +20,9 @@ use burn::cubecl::prelude::*;
 /// Units per cube: the hidden layers' width.
 pub const WIDTH: usize = 64;
 
+/// The largest finite half-precision value: tables are clamped to it before rounding.
+pub const HALF_MAX: f32 = 65504.0;
+
 /// Words per level in the info buffer: scale bits, resolution, entries, offset (entries),
 /// dense flag.
 pub const LEVEL_WORDS: usize = 5;
@@ -114,9 +117,9 @@ fn tri(t: f32) -> f32 {
 /// non-grid parts one unit per row, the hash grid one unit per (row, level). Rows at or past
 /// `n` encode as zeros.
 #[cube]
-fn encode_tile(
+fn encode_tile<T: Float>(
     rows: &[f32],
-    table: &[f32],
+    table: &[T],
     info: &[u32],
     act: &mut Shared<[f32]>,
     first: usize,
@@ -213,7 +216,7 @@ fn encode_tile(
                     let e = index[c] as usize * stride;
                     #[unroll]
                     for f in 0..features {
-                        acc[f] += weight[c] * table[e + f];
+                        acc[f] += weight[c] * f32::cast_from(table[e + f]);
                     }
                 }
                 #[unroll]
@@ -265,9 +268,9 @@ fn dense_forward(
 /// The whole forward of a tile: encoding, hidden layers, and the raw outputs in
 /// `small[r·3 + c]`.
 #[cube]
-fn forward_tile(
+fn forward_tile<T: Float>(
     rows: &[f32],
-    table: &[f32],
+    table: &[T],
     info: &[u32],
     mlp: &[f32],
     act: &mut Shared<[f32]>,
@@ -286,7 +289,7 @@ fn forward_tile(
     #[comptime] grid_out: usize,
     #[comptime] unpadded: usize,
 ) {
-    encode_tile(
+    encode_tile::<T>(
         rows, table, info, act, first, n, n_parts, r_tile, k, levels, features, stride, row_len,
         grid_in, grid_out, unpadded,
     );
@@ -411,9 +414,9 @@ fn weight_gradient(
 /// per tile; the cube's weight-gradient partial in `wpart[CUBE_POS·w_total..]`, its loss sum in
 /// `lpart[CUBE_POS]`, ∂L/∂(grid columns) in `dxg` (`[n][levels·features]`).
 #[cube(launch_unchecked)]
-pub fn train_tiles(
+pub fn train_tiles<T: Float>(
     rows: &[f32],
-    table: &[f32],
+    table: &[T],
     info: &[u32],
     mlp: &[f32],
     dxg: &mut [f32],
@@ -453,7 +456,7 @@ pub fn train_tiles(
     let mut deriv = Array::<f32>::new(1usize);
     while t < tiles {
         let first = t * r_tile;
-        forward_tile(
+        forward_tile::<T>(
             rows, table, info, mlp, &mut act, &mut small, first, n, n_parts, r_tile, k, hidden,
             levels, features, stride, row_len, grid_in, grid_out, unpadded,
         );
@@ -606,9 +609,9 @@ pub fn train_tiles(
 
 /// Inference over packed query rows: radiance `act(o) · factor` into `out` (`[n][3]`).
 #[cube(launch_unchecked)]
-pub fn infer_tiles(
+pub fn infer_tiles<T: Float>(
     rows: &[f32],
-    table: &[f32],
+    table: &[T],
     info: &[u32],
     mlp: &[f32],
     out: &mut [f32],
@@ -636,7 +639,7 @@ pub fn infer_tiles(
     let mut t = CUBE_POS;
     while t < tiles {
         let first = t * r_tile;
-        forward_tile(
+        forward_tile::<T>(
             rows, table, info, mlp, &mut act, &mut small, first, n, n_parts, r_tile, k, hidden,
             levels, features, stride, row_len, grid_in, grid_out, unpadded,
         );
@@ -848,13 +851,14 @@ pub fn mlp_adam(
 /// entry): every entry marked in `touched` is updated from `grad` (and its EMA gap moved by
 /// `gap_growth·(w_old − w_new)`); its gradient and mark are cleared.
 #[cube(launch)]
-pub fn table_adam(
+pub fn table_adam<S: Float>(
     w: &mut [f32],
     m: &mut [f32],
     v: &mut [f32],
     q: &mut [f32],
     grad: &mut [f32],
     touched: &mut [u32],
+    half: &mut [S],
     entries: u32,
     beta1: f32,
     beta2: f32,
@@ -865,6 +869,7 @@ pub fn table_adam(
     gap_growth: f32,
     #[comptime] features: usize,
     #[comptime] with_ema: bool,
+    #[comptime] with_half: bool,
 ) {
     let e = ABSOLUTE_POS;
     if e < entries as usize {
@@ -886,6 +891,9 @@ pub fn table_adam(
                 if with_ema {
                     q[i] += gap_growth * (old - wn);
                 }
+                if with_half {
+                    half[i] = S::cast_from(wn.clamp(-HALF_MAX, HALF_MAX));
+                }
             }
         }
     }
@@ -901,11 +909,26 @@ pub fn combine_into(x: &[f32], y: &mut [f32], len: u32, cx: f32, cy: f32, cs: f3
     }
 }
 
-/// `out = (cx·x + cy·y)·cs`, element by element.
+/// `out = (cx·x + cy·y)·cs`, element by element, stored as `O` (clamped to ±65504 first with
+/// `half`, as the CPU rounds its half-precision tables).
 #[cube(launch)]
-pub fn combine(x: &[f32], y: &[f32], out: &mut [f32], len: u32, cx: f32, cy: f32, cs: f32) {
+pub fn combine<O: Float>(
+    x: &[f32],
+    y: &[f32],
+    out: &mut [O],
+    len: u32,
+    cx: f32,
+    cy: f32,
+    cs: f32,
+    #[comptime] half: bool,
+) {
     let p = ABSOLUTE_POS;
     if p < len as usize {
-        out[p] = (cx * x[p] + cy * y[p]) * cs;
+        let v = (cx * x[p] + cy * y[p]) * cs;
+        if half {
+            out[p] = O::cast_from(v.clamp(-HALF_MAX, HALF_MAX));
+        } else {
+            out[p] = O::cast_from(v);
+        }
     }
 }

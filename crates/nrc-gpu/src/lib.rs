@@ -17,7 +17,7 @@ use burn::backend::wgpu::CubeTensor;
 use burn::cubecl::features::AtomicUsage;
 use burn::cubecl::ir::{ElemType, FloatKind};
 use burn::cubecl::prelude::*;
-use burn::tensor::{DType, Shape};
+use burn::tensor::{DType, Shape, f16};
 
 use kernels::{LEVEL_WORDS, PART_WORDS, WIDTH};
 
@@ -434,6 +434,9 @@ pub struct TableState<'a> {
     pub v: &'a CubeTensor,
     /// The EMA gap.
     pub q: &'a CubeTensor,
+    /// The weights rounded to half precision (f16), which the training forward reads instead
+    /// of `w` where present; every update keeps it equal to `w` rounded.
+    pub half: Option<&'a CubeTensor>,
 }
 
 /// The training state, updated in place: the table (`None` without a grid) and the MLP's
@@ -544,7 +547,10 @@ impl Trainer {
         let (levels, features) = (l.levels(), l.features());
         let grid = l.grid.as_ref();
         let (grid_in, grid_out) = grid.map_or((0, 0), |g| (g.in_offset, g.out_offset));
-        let table = state.table.as_ref().map_or(&self.no_table, |t| t.w);
+        let table = state
+            .table
+            .as_ref()
+            .map_or(&self.no_table, |t| t.half.unwrap_or(t.w));
         let n = self.n;
         if n > 0 {
             self.launch_tiles(table, state.mlp, loss, levels, features, grid_in, grid_out);
@@ -584,27 +590,37 @@ impl Trainer {
             self.launch_scatter(g, grad, touched);
         }
         let entries = g.entries();
-        kernels::table_adam::launch(
-            client,
-            elementwise_count(entries),
-            CubeDim::new_1d(ELEMENTWISE),
-            buffer(table.w),
-            buffer(table.m),
-            buffer(table.v),
-            buffer(table.q),
-            buffer(grad),
-            buffer(touched),
-            entries as u32,
-            adam.beta1,
-            adam.beta2,
-            adam.epsilon,
-            adam.l2,
-            adam.step_size,
-            adam.inv_bc2,
-            adam.gap_growth,
-            features,
-            adam.ema.is_some(),
-        );
+        macro_rules! table_adam {
+            ($h:ty, $half:expr, $with_half:expr) => {
+                kernels::table_adam::launch::<$h>(
+                    client,
+                    elementwise_count(entries),
+                    CubeDim::new_1d(ELEMENTWISE),
+                    buffer(table.w),
+                    buffer(table.m),
+                    buffer(table.v),
+                    buffer(table.q),
+                    buffer(grad),
+                    buffer(touched),
+                    buffer($half),
+                    entries as u32,
+                    adam.beta1,
+                    adam.beta2,
+                    adam.epsilon,
+                    adam.l2,
+                    adam.step_size,
+                    adam.inv_bc2,
+                    adam.gap_growth,
+                    features,
+                    adam.ema.is_some(),
+                    $with_half,
+                )
+            };
+        }
+        match table.half {
+            Some(h) => table_adam!(f16, h, true),
+            None => table_adam!(f32, &self.no_table, false),
+        }
         counted();
     }
 
@@ -624,39 +640,48 @@ impl Trainer {
         // indices below the level's offset + entries (modulo or mask), partials below `cubes`,
         // workgroup memory within the sizes `tile_rows` chose (checked by the gradient tests
         // with poisoned buffers); its loops are bounded by `n`, the tile count and the layout.
-        unsafe {
-            kernels::train_tiles::launch_unchecked(
-                &self.rows.client,
-                CubeCount::Static(self.cubes as u32, 1, 1),
-                CubeDim::new_1d(WIDTH as u32),
-                buffer(&self.rows),
-                buffer(table),
-                buffer(&self.info),
-                buffer(mlp),
-                buffer(&self.dxg),
-                buffer(&self.wpart),
-                buffer(&self.lpart),
-                n as u32,
-                l.parts.len() as u32,
-                loss.epsilon,
-                loss.huber,
-                1.0 / (3.0 * n as f32),
-                self.r_tile,
-                l.inputs,
-                l.hidden,
-                levels,
-                features,
-                features,
-                l.train_row(),
-                grid_in,
-                grid_out,
-                l.unpadded,
-                l.raw_dims,
-                activation_code(l.activation),
-                l.mlp_len(),
-                self.act_len,
-            )
-        };
+        macro_rules! tiles {
+            ($t:ty) => {
+                unsafe {
+                    kernels::train_tiles::launch_unchecked::<$t>(
+                        &self.rows.client,
+                        CubeCount::Static(self.cubes as u32, 1, 1),
+                        CubeDim::new_1d(WIDTH as u32),
+                        buffer(&self.rows),
+                        buffer(table),
+                        buffer(&self.info),
+                        buffer(mlp),
+                        buffer(&self.dxg),
+                        buffer(&self.wpart),
+                        buffer(&self.lpart),
+                        n as u32,
+                        l.parts.len() as u32,
+                        loss.epsilon,
+                        loss.huber,
+                        1.0 / (3.0 * n as f32),
+                        self.r_tile,
+                        l.inputs,
+                        l.hidden,
+                        levels,
+                        features,
+                        features,
+                        l.train_row(),
+                        grid_in,
+                        grid_out,
+                        l.unpadded,
+                        l.raw_dims,
+                        activation_code(l.activation),
+                        l.mlp_len(),
+                        self.act_len,
+                    )
+                }
+            };
+        }
+        if table.dtype == DType::F16 {
+            tiles!(f16)
+        } else {
+            tiles!(f32)
+        }
         counted();
     }
 
@@ -818,33 +843,42 @@ pub fn infer(
     let cubes = n.div_ceil(r_tile).min(MAX_TILE_CUBES * 4);
     // SAFETY: as for `train_tiles` (rows and outputs below `n`, table indices within the
     // levels, workgroup memory within `tile_rows`'s sizes).
-    unsafe {
-        kernels::infer_tiles::launch_unchecked(
-            &client,
-            CubeCount::Static(cubes as u32, 1, 1),
-            CubeDim::new_1d(WIDTH as u32),
-            buffer(rows),
-            buffer(table),
-            buffer(&info),
-            buffer(mlp),
-            buffer(&out),
-            n as u32,
-            layout.parts.len() as u32,
-            r_tile,
-            layout.inputs,
-            layout.hidden,
-            levels,
-            features,
-            features,
-            layout.query_row(),
-            grid_in,
-            grid_out,
-            layout.unpadded,
-            layout.raw_dims,
-            activation_code(layout.activation),
-            act_len,
-        )
-    };
+    macro_rules! infer {
+        ($t:ty) => {
+            unsafe {
+                kernels::infer_tiles::launch_unchecked::<$t>(
+                    &client,
+                    CubeCount::Static(cubes as u32, 1, 1),
+                    CubeDim::new_1d(WIDTH as u32),
+                    buffer(rows),
+                    buffer(table),
+                    buffer(&info),
+                    buffer(mlp),
+                    buffer(&out),
+                    n as u32,
+                    layout.parts.len() as u32,
+                    r_tile,
+                    layout.inputs,
+                    layout.hidden,
+                    levels,
+                    features,
+                    features,
+                    layout.query_row(),
+                    grid_in,
+                    grid_out,
+                    layout.unpadded,
+                    layout.raw_dims,
+                    activation_code(layout.activation),
+                    act_len,
+                )
+            }
+        };
+    }
+    if table.dtype == DType::F16 {
+        infer!(f16)
+    } else {
+        infer!(f32)
+    }
     counted();
     Ok(out)
 }
@@ -874,29 +908,70 @@ pub fn combine_into(x: &CubeTensor, y: &CubeTensor, cx: f32, cy: f32, cs: f32) {
     counted();
 }
 
-/// `(cx·x + cy·y)·cs` as a new tensor (`x` and `y` of one length).
+/// `(cx·x + cy·y)·cs` as a new f32 tensor (`x` and `y` of one length).
 pub fn combine(x: &CubeTensor, y: &CubeTensor, cx: f32, cy: f32, cs: f32) -> CubeTensor {
+    combine_as(x, y, cx, cy, cs, false)
+}
+
+/// [`combine`] stored as f16 with `half` (clamped to ±65504 and rounded, as the CPU's
+/// half-precision tables), as f32 otherwise.
+pub fn combine_as(
+    x: &CubeTensor,
+    y: &CubeTensor,
+    cx: f32,
+    cy: f32,
+    cs: f32,
+    half: bool,
+) -> CubeTensor {
     let len = x.meta.shape().num_elements();
     assert_eq!(
         len,
         y.meta.shape().num_elements(),
         "combine: lengths differ"
     );
-    let out = empty(x, len);
+    let out = if half {
+        let handle = x.client.empty(2 * len.max(2));
+        CubeTensor::new_contiguous(
+            x.client.clone(),
+            x.device.clone(),
+            Shape::new([len]),
+            handle,
+            DType::F16,
+        )
+    } else {
+        empty(x, len)
+    };
     if len > 0 {
-        kernels::combine::launch(
-            &x.client,
-            elementwise_count(len),
-            CubeDim::new_1d(ELEMENTWISE),
-            buffer(x),
-            buffer(y),
-            buffer(&out),
-            len as u32,
-            cx,
-            cy,
-            cs,
-        );
+        macro_rules! combine {
+            ($o:ty) => {
+                kernels::combine::launch::<$o>(
+                    &x.client,
+                    elementwise_count(len),
+                    CubeDim::new_1d(ELEMENTWISE),
+                    buffer(x),
+                    buffer(y),
+                    buffer(&out),
+                    len as u32,
+                    cx,
+                    cy,
+                    cs,
+                    half,
+                )
+            };
+        }
+        if half {
+            combine!(f16)
+        } else {
+            combine!(f32)
+        }
         counted();
     }
     out
+}
+
+/// Whether `client`'s device computes with half-precision floats (wgpu's `shader-f16`).
+pub fn supports_f16(client: &Client) -> bool {
+    client
+        .properties()
+        .supports_type(ElemType::Float(FloatKind::F16))
 }

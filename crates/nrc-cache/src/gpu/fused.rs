@@ -1,21 +1,26 @@
 //! The fused training step and inference on burn's Cube backend: [`NrcFusedOps`] for
 //! `CubeBackend`, by the CubeCL kernels of the `nrc-gpu` crate.
 //!
-//! The state is the CPU fused path's but for the table's layout: weights, moments and the EMA
-//! gap (see [`crate::cpu::optim`]) as four arrays in `grid`, `grid_m`, `grid_v`, `grid_ema`
-//! instead of per-entry records (each one binding: a 2^19-entry table's records would exceed
-//! WebGPU's 128 MiB per binding), so EMA conversions and the cache's bookkeeping are shared. Everything is f32 here: the configuration's f16 table precisions and
-//! bf16 MLP products apply to the CPU path (the description line says so).
+//! The table is read in f16 where the configuration asks for it and the device has f16
+//! arithmetic (the training forward from an f16 copy of the weights that every update keeps,
+//! as on the CPU); everything else is f32 (bf16 MLP products are the CPU path's; the
+//! description line says which). The state is the CPU fused path's but for the table's
+//! layout: weights, moments and the EMA gap (see [`crate::cpu::optim`]) as four arrays in
+//! `grid`, `grid_m`, `grid_v`, `grid_ema` instead of per-entry records (each one binding: a
+//! 2^19-entry table's records would exceed WebGPU's 128 MiB per binding), so EMA conversions
+//! and the cache's bookkeeping are shared.
 
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU8, Ordering};
 
 use burn::backend::wgpu::{CubeBackend, CubeTensor, into_contiguous};
+use burn::tensor::DType;
 use nrc_gpu::{AdamStep, Atomics, Layout, Loss, PartKind, State, TableState, Trainer};
 
 use crate::config::OutputActivation;
 use crate::cpu::optim::{StepConstants, decay_pow, ema_rebase_interval};
 use crate::encoding::EncodingKind;
+use crate::encoding::hash_grid::TablePrecision;
 use crate::model::ModelLayout;
 use crate::ops::{
     EmaConversion, GradientOutcome, InferenceWeights, NrcFusedOps, StepSpec, TrainOutcome,
@@ -67,10 +72,19 @@ pub fn describe(device: &burn::tensor::Device, layout: &ModelLayout) -> String {
         Ok((r, _)) => format!("{r} rows a tile"),
         Err(e) => e,
     };
+    let precision = |training: bool| {
+        if half_table(&client, layout, training) {
+            "f16"
+        } else {
+            "f32"
+        }
+    };
     format!(
-        "fused CubeCL kernels on {}: f32 throughout (the configuration's f16 tables and bf16 \
-         products are the CPU path's), {}, {tile}, {} dispatches a step",
+        "fused CubeCL kernels on {}: table read in {} by the training forward and {} by \
+         inference, f32 MLP (bf16 products are the CPU path's), {}, {tile}, {} dispatches a step",
         client.name(),
+        precision(true),
+        precision(false),
         atomics(&client).name(),
         if l.grid.is_some() {
             nrc_gpu::STEP_DISPATCHES
@@ -164,13 +178,33 @@ fn owned_state(s: TrainState<CubeBackend>) -> TrainState<CubeBackend> {
     }
 }
 
-fn table(s: &TrainState<CubeBackend>) -> TableState<'_> {
+/// The table's state; with `half`, the forward reads `grid_half` (an f16 copy).
+fn table(s: &TrainState<CubeBackend>, half: bool) -> TableState<'_> {
     TableState {
         w: &s.grid,
         m: &s.grid_m,
         v: &s.grid_v,
         q: &s.grid_ema,
+        half: half.then_some(&s.grid_half),
     }
+}
+
+/// Whether `layout`'s table is read in half precision by the training forward
+/// (`"training_precision": "f16"`) or by inference on `client`'s device: where it has f16
+/// arithmetic (wgpu's `shader-f16`), else in f32.
+fn half_table(
+    client: &burn::cubecl::prelude::Client,
+    layout: &ModelLayout,
+    training: bool,
+) -> bool {
+    layout.encoding.grid().is_some_and(|(hg, _)| {
+        let p = if training {
+            hg.params.training_precision
+        } else {
+            hg.params.inference_precision
+        };
+        p == TablePrecision::F16 && nrc_gpu::supports_f16(client)
+    })
 }
 
 fn elements(t: &CubeTensor) -> usize {
@@ -191,6 +225,20 @@ impl NrcFusedOps for CubeBackend {
         let trainer = Trainer::new(&layout, batch, n, spec.steps as usize, atomics(&client))
             .unwrap_or_else(|e| panic!("the fused GPU step cannot run: {e}"));
         let has_grid = spec.layout.grid_params > 0;
+        // The f16 copy the forward reads: kept from the last call when it is one (every update
+        // keeps it equal to the weights rounded), else made from the weights.
+        let half = half_table(&client, &spec.layout, true);
+        let state = if half
+            && !(state.grid_half.dtype == DType::F16
+                && elements(&state.grid_half) == elements(&state.grid))
+        {
+            TrainState {
+                grid_half: nrc_gpu::combine_as(&state.grid, &state.grid, 1.0, 0.0, 1.0, true),
+                ..state
+            }
+        } else {
+            state
+        };
         let mut ema_base = spec.ema_base;
         for k in 1..=spec.steps {
             let done = spec.first_step + k - 1;
@@ -214,7 +262,7 @@ impl NrcFusedOps for CubeBackend {
                 gap_growth: c.gap_growth,
             };
             let s = State {
-                table: has_grid.then(|| table(&state)),
+                table: has_grid.then(|| table(&state, half)),
                 mlp: &state.mlp,
                 mlp_m: &state.mlp_m,
                 mlp_v: &state.mlp_v,
@@ -250,7 +298,7 @@ impl NrcFusedOps for CubeBackend {
             ..state
         };
         let s = State {
-            table: (spec.layout.grid_params > 0).then(|| table(&state)),
+            table: (spec.layout.grid_params > 0).then(|| table(&state, false)),
             mlp: &state.mlp,
             mlp_m: &state.mlp_m,
             mlp_v: &state.mlp_v,
@@ -293,7 +341,8 @@ impl NrcFusedOps for CubeBackend {
                     }
                     None => (1.0, 0.0, 1.0),
                 };
-                nrc_gpu::combine(&w, &q, cw, cq, cs)
+                let half = half_table(&w.client, &layout, false);
+                nrc_gpu::combine_as(&w, &q, cw, cq, cs, half)
             }
             None => state.grid,
         };
