@@ -163,6 +163,9 @@ impl RadianceCache {
     ) -> Result<Self, CacheError> {
         let layout = Arc::new(ModelLayout::new(&config));
         let burn_device = device.burn_device()?;
+        if device == CacheDevice::Wgpu && path == ComputePath::Fused {
+            crate::gpu::fused::check(&burn_device, &layout).map_err(CacheError::Device)?;
+        }
         let (adam, ema) = config.optimizer.resolve();
         // The fused CPU step keeps the table as per-entry records; the GPU's as four arrays.
         let packed = (path == ComputePath::Fused && device == CacheDevice::Cpu)

@@ -3,7 +3,8 @@
 //! (both atomic paths, batches of 1, 63, 65 and 4097 rows, both presets, 1 and 5 hidden
 //! layers, a batch whose every sample hits the same table entries, every scratch buffer
 //! poisoned with NaN), 50 training steps loss by loss, inference, the sparse update (untouched
-//! entries keep their bits; the lazy EMA equals a dense one) and the dispatches per step.
+//! entries keep their bits; the lazy EMA equals a dense one, inference reads it bias-corrected),
+//! queued steps (losses read later) against waited ones, and the dispatches per step.
 //! Skipped with a message where no adapter exists (CI refuses the skip).
 //!
 //! Tolerances: the GPU sums in f32 in another order than the CPU (whose loss is f64), so
@@ -169,18 +170,22 @@ fn fused_gpu_gradients_equal_the_cpu_kernels() {
             for (name, config) in presets(hidden) {
                 let mut gpu = cache(&config, CacheDevice::Wgpu);
                 let mut cpu = cache(&config, CacheDevice::Cpu);
-                for (n, one_point) in [
-                    (1, false),
-                    (63, false),
-                    (65, false),
-                    (4097, false),
-                    (300, true),
+                for (n, one_point, cap) in [
+                    (1, false, None),
+                    (63, false, None),
+                    (65, false, None),
+                    (4097, false, None),
+                    // Three cubes: each sums many tiles into its partials.
+                    (4097, false, Some(3)),
+                    (300, true, None),
                 ] {
                     seed += 1;
+                    nrc_gpu::set_cube_cap(cap);
                     let b = batch(n, seed, one_point);
                     let what = format!(
-                        "{name}, {hidden} hidden, {n} rows{}, {atomics:?}",
-                        if one_point { " at one point" } else { "" }
+                        "{name}, {hidden} hidden, {n} rows{}{}, {atomics:?}",
+                        if one_point { " at one point" } else { "" },
+                        if cap.is_some() { " on 3 cubes" } else { "" }
                     );
                     let (lg, gg, mg) = gpu.gradients(&b).unwrap();
                     let (lc, gc, mc) = cpu.gradients(&b).unwrap();
@@ -208,6 +213,7 @@ fn fused_gpu_gradients_equal_the_cpu_kernels() {
         }
     }
     force_atomics(None);
+    nrc_gpu::set_cube_cap(None);
     nrc_gpu::set_poison(false);
     println!("largest relative L2 gradient error: {worst:e}");
 }
@@ -396,6 +402,62 @@ fn fused_gpu_sparse_update_keeps_untouched_entries_and_a_dense_ema() {
         err <= 1e-5,
         "the lazy EMA differs from a dense one by {err:e}"
     );
+    // Inference reads the bias-corrected average, e_t / (1 − α^t) (the weights, t = 30 steps).
+    let (table, _) = gpu.inference_weights_host();
+    let inv = 1.0 / (1.0 - alpha.powi(steps));
+    let corrected: Vec<f32> = dense_ema.iter().map(|e| e * inv).collect();
+    let err = relative_l2(&table, &corrected);
+    assert!(
+        err <= 1e-5,
+        "the inference table differs from the corrected EMA by {err:e}"
+    );
+}
+
+#[test]
+fn queued_gpu_steps_give_what_waited_ones_give() {
+    let _serial = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    if !wgpu_or_skip("queued_gpu_steps_give_what_waited_ones_give") {
+        return;
+    }
+    let config = presets(3)[0].1.clone();
+    let (mut queued, mut waited) = (
+        cache(&config, CacheDevice::Wgpu),
+        cache(&config, CacheDevice::Wgpu),
+    );
+    let probe = batch(300, 91, false).queries;
+    for step in 0..4 {
+        let b = batch(2048, 700 + step, false);
+        // Queued: inference is asked before the losses are read, and must see the new steps
+        // (the scatter's float atomics add in any order: equal to rounding, not to the bit).
+        let before = queued.infer(&probe);
+        let pending = queued.train_submit(&b, 2).unwrap();
+        let early = queued.infer(&probe);
+        let q = pending.wait();
+        let w = waited.train(&b, 2).unwrap();
+        let late = waited.infer(&probe);
+        assert_eq!((q.steps, q.used), (w.steps, w.used), "step {step}");
+        for (x, y) in [(q.first_loss, w.first_loss), (q.loss, w.loss)] {
+            assert!(
+                (x - y).abs() <= 1e-4 * y.abs(),
+                "step {step}: losses {x} queued, {y} waited"
+            );
+        }
+        let (mut moved, mut apart) = (0f32, 0f32);
+        for ((a, b), c) in early.iter().zip(&late).zip(&before) {
+            for k in 0..3 {
+                apart = apart.max((a[k] - b[k]).abs() / (1e-3 + b[k].abs()));
+                moved = moved.max((a[k] - c[k]).abs() / (1e-3 + c[k].abs()));
+            }
+        }
+        assert!(
+            apart <= 1e-3,
+            "step {step}: queued and waited answers {apart:e} apart"
+        );
+        assert!(
+            moved > 100.0 * apart.max(1e-6),
+            "step {step}: the answers after queued steps did not move ({moved:e}): inference ran before them?"
+        );
+    }
 }
 
 #[test]
@@ -416,8 +478,8 @@ fn fused_gpu_step_takes_four_dispatches() {
             counts.push(nrc_gpu::dispatches() - start);
         }
         assert_eq!(
-            (counts[1] - counts[0]) / 5,
-            per_step,
+            counts[1] - counts[0],
+            5 * per_step,
             "{name}: dispatches per step (1 step: {}, 6 steps: {})",
             counts[0],
             counts[1]

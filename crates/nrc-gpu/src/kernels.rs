@@ -297,6 +297,7 @@ fn forward_tile<T: Float>(
     let xs_len = r_tile * k;
     dense_forward(mlp, 0usize, act, 0usize, xs_len, k, r_tile);
     sync_cube();
+    #[unroll]
     for l in 1..hidden {
         dense_forward(
             mlp,
@@ -535,15 +536,19 @@ pub fn train_tiles<T: Float>(
         }
         sync_cube();
         // Hidden layers from the last: weight gradient, then the delta of the layer below.
-        let mut cur = 0usize;
         let mut acc = Array::<f32>::new(r_tile);
+        // Unrolled, with each layer's δ buffer half fixed by its parity: a runtime loop over the
+        // layers here, with a mutable buffer index, trained wrongly on lavapipe as soon as a
+        // cube took several tiles and the network had 4 or more hidden layers (the gradient
+        // test with a cube cap of 3 catches it).
+        #[unroll]
         for back in 1..hidden {
             // (A mutable local started from a comptime value fails CubeCL's verifier.)
             let l = hidden - back;
             let w_off = k * WIDTH + (l - 1) * WIDTH * WIDTH;
             let in_base = xs_len + (l - 1) * r_tile * WIDTH;
-            let cb = cur * r_tile * WIDTH;
-            let nb = (1 - cur) * r_tile * WIDTH;
+            let cb = ((back - 1) % 2) * r_tile * WIDTH;
+            let nb = (back % 2) * r_tile * WIDTH;
             weight_gradient(
                 &act,
                 &delta,
@@ -573,10 +578,9 @@ pub fn train_tiles<T: Float>(
                 delta[nb + r * WIDTH + u] = select(h > 0.0f32, acc[r], 0.0f32);
             }
             sync_cube();
-            cur = 1 - cur;
         }
         // The first layer: its weight gradient, and ∂L/∂(grid columns) out.
-        let cb = cur * r_tile * WIDTH;
+        let cb = ((hidden - 1) % 2) * r_tile * WIDTH;
         weight_gradient(&act, &delta, wpart, 0usize, cb, wp, first_tile, k, r_tile);
         let mut col = u;
         while col < grid_dims {
@@ -658,7 +662,10 @@ pub fn infer_tiles<T: Float>(
 }
 
 /// `value` added to the f32 whose bits `buf[at]` holds, by a compare-and-swap loop (WGSL has no
-/// float atomics).
+/// float atomics). CubeCL's weak exchange returns only the old value: a spurious failure that
+/// still returns the expected value would end the loop without the add. SPIR-V's and CUDA's
+/// exchanges are strong (WGSL's compiles to SPIR-V's on Vulkan); the native path
+/// ([`scatter_native`]) is taken wherever the adapter has float atomics.
 #[cube]
 fn atomic_add_cas(buf: &[Atomic<u32>], at: usize, value: f32) {
     let mut v = buf[at].load();
@@ -899,13 +906,24 @@ pub fn table_adam<S: Float>(
     }
 }
 
+/// `c·v`, exactly 0 for `c = 0` whatever `v` (a non-finite value left out, not turned into
+/// NaN: the CPU's conversions overwrite).
+#[cube]
+fn term(c: f32, v: f32) -> f32 {
+    let mut t = 0.0f32;
+    if c != 0.0f32 {
+        t = c * v;
+    }
+    t
+}
+
 /// `y ← (cx·x + cy·y)·cs`, element by element (the table's EMA conversions and rebases, `y`
 /// the EMA slot and `x` the weights).
 #[cube(launch)]
 pub fn combine_into(x: &[f32], y: &mut [f32], len: u32, cx: f32, cy: f32, cs: f32) {
     let p = ABSOLUTE_POS;
     if p < len as usize {
-        y[p] = (cx * x[p] + cy * y[p]) * cs;
+        y[p] = (term(cx, x[p]) + term(cy, y[p])) * cs;
     }
 }
 
@@ -924,7 +942,7 @@ pub fn combine<O: Float>(
 ) {
     let p = ABSOLUTE_POS;
     if p < len as usize {
-        let v = (cx * x[p] + cy * y[p]) * cs;
+        let v = (term(cx, x[p]) + term(cy, y[p])) * cs;
         if half {
             out[p] = O::cast_from(v.clamp(-HALF_MAX, HALF_MAX));
         } else {

@@ -28,10 +28,41 @@ pub const STEP_DISPATCHES: u64 = 4;
 /// Cubes of the tile passes at most: each keeps a weight-gradient partial, so more cubes cost
 /// memory and reduction time; this many fill a large GPU.
 const MAX_TILE_CUBES: usize = 1024;
+/// Workgroup barriers one cube of a tile pass may execute, at most: each cube takes at least
+/// enough tiles for this. On lavapipe (llvmpipe, Mesa 22.3) a cube that executed more than
+/// about 700–950 barriers computed wrong results (the 4097-row gradient test with the cubes
+/// capped at 3: 86 tiles of a 4-hidden-layer network, 12 barriers a tile, lost a third of its
+/// loss; 64 tiles were right); whether hardware drivers share the limit is not known, and the
+/// extra cubes cost only partials.
+const MAX_BARRIERS_PER_CUBE: usize = 512;
+
+/// Cubes for `tiles` tiles of `barriers` barriers each, at most `cap` unless the barrier bound
+/// needs more.
+fn tile_cubes(tiles: usize, barriers: usize, cap: usize) -> usize {
+    let per_cube = (MAX_BARRIERS_PER_CUBE / barriers).max(1);
+    tiles.min(cap).max(tiles.div_ceil(per_cube)).max(1)
+}
+
 /// Units per cube of the element-wise kernels.
 const ELEMENTWISE: u32 = 256;
 
 static DISPATCHES: AtomicU64 = AtomicU64::new(0);
+/// A smaller cap on the tile passes' cubes (0: none), so that tests make every cube walk
+/// several tiles on small batches.
+static CUBE_CAP: AtomicU64 = AtomicU64::new(0);
+
+/// Caps the tile passes' cubes below [`MAX_TILE_CUBES`] (`None`: no cap): for tests of the path
+/// where a cube sums several tiles into its partial.
+pub fn set_cube_cap(cap: Option<usize>) {
+    CUBE_CAP.store(cap.map_or(0, |c| c.max(1) as u64), Ordering::Relaxed);
+}
+
+fn max_cubes() -> usize {
+    match CUBE_CAP.load(Ordering::Relaxed) {
+        0 => MAX_TILE_CUBES,
+        c => (c as usize).min(MAX_TILE_CUBES),
+    }
+}
 
 /// Kernel launches by this crate since the process started (for dispatch-count guards).
 pub fn dispatches() -> u64 {
@@ -219,6 +250,27 @@ impl Layout {
             return Err(format!(
                 "the fused GPU path takes 1, 2, 4 or 8 features per level, not {}",
                 g.features
+            ));
+        }
+        if let Some(g) = &self.grid
+            && g.entries() * g.features >= 1 << 31
+        {
+            return Err(format!(
+                "the fused GPU path indexes the table with 32-bit integers: {} entries of {} \
+                 features are too many",
+                g.entries(),
+                g.features
+            ));
+        }
+        Ok(())
+    }
+
+    /// Checks that a batch of `n` rows can be indexed with 32-bit integers.
+    fn check_rows(&self, n: usize) -> Result<(), String> {
+        let widest = self.train_row().max(self.grid_dims()).max(3);
+        if n.saturating_mul(widest) >= 1 << 31 {
+            return Err(format!(
+                "the fused GPU path indexes with 32-bit integers: {n} rows are too many"
             ));
         }
         Ok(())
@@ -492,10 +544,13 @@ impl Trainer {
         atomics: Atomics,
     ) -> Result<Self, String> {
         layout.check()?;
+        layout.check_rows(n)?;
         let client = rows.client.clone();
         let (r_tile, act_len) = tile_rows(&client, layout)?;
         let tiles = n.div_ceil(r_tile).max(1);
-        let cubes = tiles.min(MAX_TILE_CUBES);
+        // Barriers a tile: encoding, each layer forward, the loss, the output layer and each
+        // hidden layer backward, the tile's end.
+        let cubes = tile_cubes(tiles, 2 * layout.hidden + 4, max_cubes());
         let info = upload_u32(&rows, &layout.info());
         let dxg = empty(&rows, n * layout.grid_dims());
         let wpart = empty(&rows, cubes * layout.mlp_len());
@@ -821,6 +876,7 @@ pub fn infer(
     n: usize,
 ) -> Result<CubeTensor, String> {
     layout.check()?;
+    layout.check_rows(n)?;
     let client = rows.client.clone();
     let (r_tile, act_len) = tile_rows(&client, layout)?;
     let out = empty(rows, 3 * n);
@@ -840,7 +896,7 @@ pub fn infer(
         .grid
         .as_ref()
         .map_or((0, 0), |g| (g.in_offset, g.out_offset));
-    let cubes = n.div_ceil(r_tile).min(MAX_TILE_CUBES * 4);
+    let cubes = tile_cubes(n.div_ceil(r_tile), layout.hidden + 3, 4 * max_cubes());
     // SAFETY: as for `train_tiles` (rows and outputs below `n`, table indices within the
     // levels, workgroup memory within `tile_rows`'s sizes).
     macro_rules! infer {

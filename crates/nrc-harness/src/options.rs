@@ -339,7 +339,8 @@ pub struct RadianceCacheArgs {
     /// Wait for each training call before the frame goes on. By default, with the cache on a
     /// GPU, the frame's training steps are queued and the render traces on the CPU while they
     /// run (its cache queries wait for them); their losses are read after the render. No effect
-    /// on the CPU, whose steps run when queued.
+    /// on the CPU, whose steps run when queued, or under --train-budget-ms, which prices
+    /// training by its time and so waits for it.
     #[arg(long)]
     pub no_overlap: bool,
 

@@ -61,7 +61,9 @@ pub struct OnlineSettings {
     pub train_budget_ms: Option<f64>,
     /// With the cache on a GPU, queue a frame's training steps and read their losses after the
     /// render, which traces on the CPU while they run (`false`: wait for each training call).
-    /// Either order gives the same cache and images; only the timing differs.
+    /// Either order gives the same cache and images; only the timing differs (the render's
+    /// time then holds the wait for the steps). Not under a training budget
+    /// ([`OnlineSettings::train_budget_ms`]), which prices training by its time.
     pub overlap: bool,
 }
 
@@ -334,11 +336,14 @@ impl OnlineTrainer {
         // score, which may start or end a recovery: the steps follow one frame later). On a
         // GPU the steps are queued and the render below traces on the CPU while they run
         // (its cache queries wait for them); their losses are read after it.
+        // Under a time budget each call is waited for: the budget prices training by its time,
+        // which a wait hidden in the render would move out of sight.
+        let overlap = s.overlap && self.budget.is_none();
         let mut pending = Vec::new();
         for chunk in order.chunks(s.batch_size) {
             let batch = produced.batch.select(chunk);
             pending.push(self.cache.train_submit(&batch, steps)?);
-            if !s.overlap {
+            if !overlap {
                 let done = pending.pop().expect("just pushed").wait();
                 pending.push(PendingTrain::ready(done));
             }

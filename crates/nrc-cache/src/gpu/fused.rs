@@ -61,6 +61,17 @@ pub fn client(device: &burn::tensor::Device) -> Option<burn::cubecl::prelude::Cl
     }
 }
 
+/// Whether the fused path can run `layout` on `device` (the table within 32-bit indexing, a
+/// tile within the adapter's workgroup memory): the error names what stands in the way.
+pub fn check(device: &burn::tensor::Device, layout: &ModelLayout) -> Result<(), String> {
+    let l = gpu_layout(layout);
+    l.check()?;
+    if let Some(client) = client(device) {
+        nrc_gpu::tile_rows(&client, &l)?;
+    }
+    Ok(())
+}
+
 /// How the fused path runs on `device` (for the cache's description line): the runtime, the
 /// precision, the atomics and the rows per tile.
 pub fn describe(device: &burn::tensor::Device, layout: &ModelLayout) -> String {
@@ -230,7 +241,9 @@ impl NrcFusedOps for CubeBackend {
         let half = half_table(&client, &spec.layout, true);
         let state = if half
             && !(state.grid_half.dtype == DType::F16
-                && elements(&state.grid_half) == elements(&state.grid))
+                && elements(&state.grid_half) == elements(&state.grid)
+                && state.grid_half.can_mut()
+                && state.grid_half.is_contiguous())
         {
             TrainState {
                 grid_half: nrc_gpu::combine_as(&state.grid, &state.grid, 1.0, 0.0, 1.0, true),
