@@ -414,6 +414,43 @@ fn fused_gpu_sparse_update_keeps_untouched_entries_and_a_dense_ema() {
 }
 
 #[test]
+fn listed_and_dense_table_updates_agree_over_runs_of_steps() {
+    let _serial = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    if !wgpu_or_skip("listed_and_dense_table_updates_agree_over_runs_of_steps") {
+        return;
+    }
+    let config = presets(2)[0].1.clone();
+    let mut states = Vec::new();
+    for list in [true, false] {
+        nrc_gpu::set_table_list(Some(list));
+        let mut gpu = cache(&config, CacheDevice::Wgpu);
+        for call in 0..5 {
+            // Runs of 3 steps: the list's counters alternate within a run.
+            gpu.train(&batch(700, 40 + call, false), 3).unwrap();
+        }
+        states.push(gpu.host_state());
+    }
+    nrc_gpu::set_table_list(None);
+    let (a, b) = (&states[0], &states[1]);
+    for (name, x, y) in [
+        ("weights", &a.grid, &b.grid),
+        ("first moments", &a.grid_m, &b.grid_m),
+        ("second moments", &a.grid_v, &b.grid_v),
+        ("EMA", &a.grid_ema, &b.grid_ema),
+    ] {
+        let err = relative_l2(x, y);
+        assert!(
+            err <= 1e-5,
+            "the table's {name} differ by {err:e}, listed against dense"
+        );
+    }
+    assert!(
+        a.grid_v.iter().any(|v| *v > 0.0),
+        "no table entry was updated: the test checks nothing"
+    );
+}
+
+#[test]
 fn queued_gpu_steps_give_what_waited_ones_give() {
     let _serial = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
     if !wgpu_or_skip("queued_gpu_steps_give_what_waited_ones_give") {

@@ -679,20 +679,47 @@ fn atomic_add_cas(buf: &[Atomic<u32>], at: usize, value: f32) {
     }
 }
 
+/// Marks entry `e` referenced; with `with_list`, the first mark of an entry also appends it to
+/// `list` (its length counted in `counter[parity]`), so that the table update visits only the
+/// referenced entries.
+#[cube]
+fn mark(
+    touched: &[Atomic<u32>],
+    list: &mut [u32],
+    counter: &[Atomic<u32>],
+    parity: u32,
+    e: usize,
+    #[comptime] with_list: bool,
+) {
+    if with_list {
+        let prev = touched[e].exchange(1u32);
+        if prev == 0u32 {
+            let slot = counter[parity as usize].fetch_add(1u32);
+            list[slot as usize] = e as u32;
+        }
+    } else {
+        touched[e].store(1u32);
+    }
+}
+
 /// The hash-grid gradient scatter, one unit per (sample, level), with compare-and-swap adds;
-/// marks every referenced entry in `touched`.
+/// marks every referenced entry in `touched` (and lists it, with `with_list`).
 #[cube(launch)]
 pub fn scatter_cas(
     rows: &[f32],
     info: &[u32],
     dxg: &[f32],
     grad: &[Atomic<u32>],
-    touched: &mut [u32],
+    touched: &[Atomic<u32>],
+    list: &mut [u32],
+    counter: &[Atomic<u32>],
     n: u32,
+    parity: u32,
     #[comptime] levels: usize,
     #[comptime] features: usize,
     #[comptime] row_len: usize,
     #[comptime] grid_in: usize,
+    #[comptime] with_list: bool,
 ) {
     let p = ABSOLUTE_POS;
     if p < n as usize * levels {
@@ -714,7 +741,7 @@ pub fn scatter_cas(
         #[unroll]
         for c in 0..8usize {
             let e = index[c] as usize;
-            touched[e] = 1u32;
+            mark(touched, list, counter, parity, e, with_list);
             #[unroll]
             for f in 0..features {
                 let v = weight[c] * dxg[d + f];
@@ -733,12 +760,16 @@ pub fn scatter_native(
     info: &[u32],
     dxg: &[f32],
     grad: &[Atomic<f32>],
-    touched: &mut [u32],
+    touched: &[Atomic<u32>],
+    list: &mut [u32],
+    counter: &[Atomic<u32>],
     n: u32,
+    parity: u32,
     #[comptime] levels: usize,
     #[comptime] features: usize,
     #[comptime] row_len: usize,
     #[comptime] grid_in: usize,
+    #[comptime] with_list: bool,
 ) {
     let p = ABSOLUTE_POS;
     if p < n as usize * levels {
@@ -760,7 +791,7 @@ pub fn scatter_native(
         #[unroll]
         for c in 0..8usize {
             let e = index[c] as usize;
-            touched[e] = 1u32;
+            mark(touched, list, counter, parity, e, with_list);
             #[unroll]
             for f in 0..features {
                 let v = weight[c] * dxg[d + f];
@@ -856,7 +887,9 @@ pub fn mlp_adam(
 
 /// Sparse Adam over the table (weights `w`, moments `m` and `v`, EMA gap `q`, `features` per
 /// entry): every entry marked in `touched` is updated from `grad` (and its EMA gap moved by
-/// `gap_growth·(w_old − w_new)`); its gradient and mark are cleared.
+/// `gap_growth·(w_old − w_new)`); its gradient and mark are cleared. One unit per entry, or with
+/// `with_list` one per listed entry (the first `counter[parity]` of `list`; unit 0 also zeroes
+/// the other parity's counter, which the next step's scatter counts in).
 #[cube(launch)]
 pub fn table_adam<S: Float>(
     w: &mut [f32],
@@ -866,6 +899,9 @@ pub fn table_adam<S: Float>(
     grad: &mut [f32],
     touched: &mut [u32],
     half: &mut [S],
+    list: &[u32],
+    counter: &[Atomic<u32>],
+    parity: u32,
     entries: u32,
     beta1: f32,
     beta2: f32,
@@ -877,10 +913,24 @@ pub fn table_adam<S: Float>(
     #[comptime] features: usize,
     #[comptime] with_ema: bool,
     #[comptime] with_half: bool,
+    #[comptime] with_list: bool,
 ) {
-    let e = ABSOLUTE_POS;
-    if e < entries as usize {
-        if touched[e] != 0u32 {
+    let p = ABSOLUTE_POS;
+    let mut e = p;
+    let mut go = false;
+    if with_list {
+        if p == 0 {
+            counter[1 - parity as usize].store(0u32);
+        }
+        if p < counter[parity as usize].load() as usize {
+            e = list[p] as usize;
+            go = true;
+        }
+    } else if p < entries as usize {
+        go = touched[p] != 0u32;
+    }
+    {
+        if go {
             touched[e] = 0u32;
             let mut mv = Array::<f32>::new(2usize);
             #[unroll]

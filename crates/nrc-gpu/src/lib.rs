@@ -6,7 +6,9 @@
 //! training step is four dispatches ([`STEP_DISPATCHES`]; two without a hash grid): the tile
 //! pass (encode → MLP forward → loss → MLP backward, per tile of rows in workgroup memory), the
 //! MLP's reduction + Adam + EMA, the hash-grid gradient scatter, and the table's sparse Adam +
-//! EMA gap. Inference is one dispatch. `nrc_cache` implements its fused-ops interface with it.
+//! EMA gap (over a list of the referenced entries where the batch is small against the table,
+//! else over every entry, skipping the untouched). Inference is one dispatch. `nrc_cache`
+//! implements its fused-ops interface with it.
 
 pub mod kernels;
 
@@ -55,6 +57,23 @@ static CUBE_CAP: AtomicU64 = AtomicU64::new(0);
 /// where a cube sums several tiles into its partial.
 pub fn set_cube_cap(cap: Option<usize>) {
     CUBE_CAP.store(cap.map_or(0, |c| c.max(1) as u64), Ordering::Relaxed);
+}
+
+/// 0: the table update lists the referenced entries on small batches only; 1: always; 2: never.
+static TABLE_LIST: AtomicU64 = AtomicU64::new(0);
+
+/// Forces the table update's mode (`Some(true)`: visit a list of the referenced entries;
+/// `Some(false)`: every entry; `None`: a list where the batch references fewer than a quarter
+/// of them): for tests of both.
+pub fn set_table_list(list: Option<bool>) {
+    TABLE_LIST.store(
+        match list {
+            None => 0,
+            Some(true) => 1,
+            Some(false) => 2,
+        },
+        Ordering::Relaxed,
+    );
 }
 
 fn max_cubes() -> usize {
@@ -531,6 +550,9 @@ pub struct Trainer {
     steps: usize,
     /// The scratch may hold non-zero values (after [`Trainer::gradients`]).
     dirty: bool,
+    /// The referenced entries, listed by the scatter for the table update (small batches: see
+    /// [`Trainer::new`]), and the two counters of their lengths (by step parity).
+    list: Option<(CubeTensor, CubeTensor)>,
 }
 
 impl Trainer {
@@ -564,6 +586,24 @@ impl Trainer {
         };
         let losses = zeros(&rows, steps, DType::F32);
         let no_table = zeros(&rows, 1, DType::F32);
+        // The table update visits the listed entries instead of all of them where the batch
+        // can reference fewer than a quarter of the entries (each sample 8 corners a level).
+        let references = n * layout.levels() * 8;
+        let small = match TABLE_LIST.load(Ordering::Relaxed) {
+            1 => true,
+            2 => false,
+            _ => 4 * references < entries,
+        };
+        let list = (layout.grid.is_some() && small).then(|| {
+            let list = CubeTensor::new_contiguous(
+                rows.client.clone(),
+                rows.device.clone(),
+                Shape::new([references]),
+                rows.client.empty(4 * references.max(1)),
+                DType::U32,
+            );
+            (list, zeros(&rows, 2, DType::U32))
+        });
         Ok(Self {
             no_table,
             layout: layout.clone(),
@@ -582,6 +622,7 @@ impl Trainer {
             atomics,
             steps,
             dirty: false,
+            list,
         })
     }
 
@@ -601,6 +642,8 @@ impl Trainer {
         let client = &self.rows.client;
         let (levels, features) = (l.levels(), l.features());
         let grid = l.grid.as_ref();
+        // The list counter this step's scatter counts in (the table update zeroes the other).
+        let parity = (index % 2) as u32;
         let (grid_in, grid_out) = grid.map_or((0, 0), |g| (g.in_offset, g.out_offset));
         let table = state
             .table
@@ -642,14 +685,16 @@ impl Trainer {
             return;
         };
         if n > 0 {
-            self.launch_scatter(g, grad, touched);
+            self.launch_scatter(g, grad, touched, parity);
         }
         let entries = g.entries();
+        let (list, counter, with_list) = self.list_args();
+        let units = if with_list { n * levels * 8 } else { entries };
         macro_rules! table_adam {
             ($h:ty, $half:expr, $with_half:expr) => {
                 kernels::table_adam::launch::<$h>(
                     client,
-                    elementwise_count(entries),
+                    elementwise_count(units),
                     CubeDim::new_1d(ELEMENTWISE),
                     buffer(table.w),
                     buffer(table.m),
@@ -658,6 +703,9 @@ impl Trainer {
                     buffer(grad),
                     buffer(touched),
                     buffer($half),
+                    buffer(list),
+                    buffer(counter),
+                    parity,
                     entries as u32,
                     adam.beta1,
                     adam.beta2,
@@ -669,6 +717,7 @@ impl Trainer {
                     features,
                     adam.ema.is_some(),
                     $with_half,
+                    with_list,
                 )
             };
         }
@@ -740,7 +789,8 @@ impl Trainer {
         counted();
     }
 
-    fn launch_scatter(&self, g: &Grid, grad: &CubeTensor, touched: &CubeTensor) {
+    fn launch_scatter(&self, g: &Grid, grad: &CubeTensor, touched: &CubeTensor, parity: u32) {
+        let (list, counter, with_list) = self.list_args();
         let l = &self.layout;
         let n = self.n;
         let (levels, features) = (l.levels(), l.features());
@@ -757,11 +807,15 @@ impl Trainer {
                 buffer(&self.dxg),
                 buffer(grad),
                 buffer(touched),
+                buffer(list),
+                buffer(counter),
                 n as u32,
+                parity,
                 levels,
                 features,
                 l.train_row(),
                 g.in_offset,
+                with_list,
             ),
             Atomics::CompareSwap => kernels::scatter_cas::launch(
                 client,
@@ -772,14 +826,26 @@ impl Trainer {
                 buffer(&self.dxg),
                 buffer(grad),
                 buffer(touched),
+                buffer(list),
+                buffer(counter),
                 n as u32,
+                parity,
                 levels,
                 features,
                 l.train_row(),
                 g.in_offset,
+                with_list,
             ),
         }
         counted();
+    }
+
+    /// The list buffers the scatter and the table update take (dummies without a list).
+    fn list_args(&self) -> (&CubeTensor, &CubeTensor, bool) {
+        match &self.list {
+            Some((list, counter)) => (list, counter, true),
+            None => (&self.no_table, &self.no_table, false),
+        }
     }
 
     /// The loss and the gradients of one step on `state`, without an update (the tile pass and
@@ -805,7 +871,7 @@ impl Trainer {
         }
         self.launch_tiles(table, state.mlp, loss, levels, features, grid_in, grid_out);
         if let (Some(g), Some(grad), Some(touched)) = (&l.grid, &self.grad, &self.touched) {
-            self.launch_scatter(g, grad, touched);
+            self.launch_scatter(g, grad, touched, 0);
         }
         let read = |t: &CubeTensor| -> Result<Vec<f32>, String> {
             let bytes = client
