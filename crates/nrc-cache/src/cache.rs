@@ -335,6 +335,7 @@ impl RadianceCache {
     ) -> Result<PendingTrain, CacheError> {
         let t_pack = std::time::Instant::now();
         let packed = pack_training(batch, self.config.loss.max_target)?;
+        self.check_batch(packed.len)?;
         let mut stats = TrainStats {
             used: packed.len,
             dropped_nonfinite: packed.dropped_nonfinite,
@@ -405,6 +406,14 @@ impl RadianceCache {
         })
     }
 
+    /// Refuses a batch the fused GPU step cannot index (an error, not a panic in a kernel).
+    fn check_batch(&self, rows: usize) -> Result<(), CacheError> {
+        if self.device == CacheDevice::Wgpu && self.path == ComputePath::Fused {
+            crate::gpu::fused::check_batch(&self.layout, rows).map_err(CacheError::Input)?;
+        }
+        Ok(())
+    }
+
     /// The constants of `steps` fused steps from the current one.
     fn step_spec(&self, steps: u32, clock: Arc<TrainClock>) -> StepSpec {
         StepSpec {
@@ -438,6 +447,7 @@ impl RadianceCache {
             )));
         }
         let packed = pack_training(batch, self.config.loss.max_target)?;
+        self.check_batch(packed.len)?;
         let rows = Tensor::<2>::from_data(
             TensorData::new(packed.rows, [packed.len, TRAIN_ROW]),
             &self.burn_device,

@@ -702,8 +702,53 @@ fn mark(
     }
 }
 
-/// The hash-grid gradient scatter, one unit per (sample, level), with compare-and-swap adds;
-/// marks every referenced entry in `touched` (and lists it, with `with_list`).
+/// What unit `p` of a scatter adds (one unit per (sample, level)): the eight corners' entries
+/// of its sample on its level in `index`, weight × upstream gradient in `value` (`features` per
+/// corner); marks the entries referenced (and lists them, with `with_list`).
+#[cube]
+fn scatter_values(
+    rows: &[f32],
+    info: &[u32],
+    dxg: &[f32],
+    touched: &[Atomic<u32>],
+    list: &mut [u32],
+    counter: &[Atomic<u32>],
+    parity: u32,
+    p: usize,
+    index: &mut Array<u32>,
+    value: &mut Array<f32>,
+    #[comptime] levels: usize,
+    #[comptime] features: usize,
+    #[comptime] row_len: usize,
+    #[comptime] grid_in: usize,
+    #[comptime] with_list: bool,
+) {
+    let i = p / levels;
+    let l = p % levels;
+    let mut weight = Array::<f32>::new(8usize);
+    let at = i * row_len + grid_in;
+    corners(
+        info,
+        l,
+        rows[at],
+        rows[at + 1],
+        rows[at + 2],
+        index,
+        &mut weight,
+    );
+    let d = i * levels * features + l * features;
+    #[unroll]
+    for c in 0..8usize {
+        mark(touched, list, counter, parity, index[c] as usize, with_list);
+        #[unroll]
+        for f in 0..features {
+            value[c * features + f] = weight[c] * dxg[d + f];
+        }
+    }
+}
+
+/// The hash-grid gradient scatter ([`scatter_values`] per (sample, level)) with
+/// compare-and-swap adds.
 #[cube(launch)]
 pub fn scatter_cas(
     rows: &[f32],
@@ -723,30 +768,19 @@ pub fn scatter_cas(
 ) {
     let p = ABSOLUTE_POS;
     if p < n as usize * levels {
-        let i = p / levels;
-        let l = p % levels;
         let mut index = Array::<u32>::new(8usize);
-        let mut weight = Array::<f32>::new(8usize);
-        let at = i * row_len + grid_in;
-        corners(
-            info,
-            l,
-            rows[at],
-            rows[at + 1],
-            rows[at + 2],
-            &mut index,
-            &mut weight,
+        let mut value = Array::<f32>::new(8 * features);
+        scatter_values(
+            rows, info, dxg, touched, list, counter, parity, p, &mut index, &mut value, levels,
+            features, row_len, grid_in, with_list,
         );
-        let d = i * levels * features + l * features;
         #[unroll]
         for c in 0..8usize {
-            let e = index[c] as usize;
-            mark(touched, list, counter, parity, e, with_list);
             #[unroll]
             for f in 0..features {
-                let v = weight[c] * dxg[d + f];
+                let v = value[c * features + f];
                 if v != 0.0f32 {
-                    atomic_add_cas(grad, e * features + f, v);
+                    atomic_add_cas(grad, index[c] as usize * features + f, v);
                 }
             }
         }
@@ -773,30 +807,19 @@ pub fn scatter_native(
 ) {
     let p = ABSOLUTE_POS;
     if p < n as usize * levels {
-        let i = p / levels;
-        let l = p % levels;
         let mut index = Array::<u32>::new(8usize);
-        let mut weight = Array::<f32>::new(8usize);
-        let at = i * row_len + grid_in;
-        corners(
-            info,
-            l,
-            rows[at],
-            rows[at + 1],
-            rows[at + 2],
-            &mut index,
-            &mut weight,
+        let mut value = Array::<f32>::new(8 * features);
+        scatter_values(
+            rows, info, dxg, touched, list, counter, parity, p, &mut index, &mut value, levels,
+            features, row_len, grid_in, with_list,
         );
-        let d = i * levels * features + l * features;
         #[unroll]
         for c in 0..8usize {
-            let e = index[c] as usize;
-            mark(touched, list, counter, parity, e, with_list);
             #[unroll]
             for f in 0..features {
-                let v = weight[c] * dxg[d + f];
+                let v = value[c * features + f];
                 if v != 0.0f32 {
-                    grad[e * features + f].fetch_add(v);
+                    grad[index[c] as usize * features + f].fetch_add(v);
                 }
             }
         }

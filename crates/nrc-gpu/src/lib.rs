@@ -285,7 +285,7 @@ impl Layout {
     }
 
     /// Checks that a batch of `n` rows can be indexed with 32-bit integers.
-    fn check_rows(&self, n: usize) -> Result<(), String> {
+    pub fn check_rows(&self, n: usize) -> Result<(), String> {
         let widest = self.train_row().max(self.grid_dims()).max(3);
         if n.saturating_mul(widest) >= 1 << 31 {
             return Err(format!(
@@ -797,45 +797,32 @@ impl Trainer {
         let count = elementwise_count(n * levels);
         let dim = CubeDim::new_1d(ELEMENTWISE);
         let client = &self.rows.client;
+        macro_rules! scatter {
+            ($kernel:ident) => {
+                kernels::$kernel::launch(
+                    client,
+                    count,
+                    dim,
+                    buffer(&self.rows),
+                    buffer(&self.info),
+                    buffer(&self.dxg),
+                    buffer(grad),
+                    buffer(touched),
+                    buffer(list),
+                    buffer(counter),
+                    n as u32,
+                    parity,
+                    levels,
+                    features,
+                    l.train_row(),
+                    g.in_offset,
+                    with_list,
+                )
+            };
+        }
         match self.atomics {
-            Atomics::Native => kernels::scatter_native::launch(
-                client,
-                count,
-                dim,
-                buffer(&self.rows),
-                buffer(&self.info),
-                buffer(&self.dxg),
-                buffer(grad),
-                buffer(touched),
-                buffer(list),
-                buffer(counter),
-                n as u32,
-                parity,
-                levels,
-                features,
-                l.train_row(),
-                g.in_offset,
-                with_list,
-            ),
-            Atomics::CompareSwap => kernels::scatter_cas::launch(
-                client,
-                count,
-                dim,
-                buffer(&self.rows),
-                buffer(&self.info),
-                buffer(&self.dxg),
-                buffer(grad),
-                buffer(touched),
-                buffer(list),
-                buffer(counter),
-                n as u32,
-                parity,
-                levels,
-                features,
-                l.train_row(),
-                g.in_offset,
-                with_list,
-            ),
+            Atomics::Native => scatter!(scatter_native),
+            Atomics::CompareSwap => scatter!(scatter_cas),
         }
         counted();
     }

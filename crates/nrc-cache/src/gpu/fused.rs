@@ -200,6 +200,29 @@ fn table(s: &TrainState<CubeBackend>, half: bool) -> TableState<'_> {
     }
 }
 
+/// The state as the kernels take it (the table only with a grid; its f16 copy with `half`).
+fn kernel_state(s: &TrainState<CubeBackend>, grid: bool, half: bool) -> State<'_> {
+    State {
+        table: grid.then(|| table(s, half)),
+        mlp: &s.mlp,
+        mlp_m: &s.mlp_m,
+        mlp_v: &s.mlp_v,
+        mlp_ema: &s.mlp_ema,
+    }
+}
+
+fn loss(spec: &StepSpec) -> Loss {
+    Loss {
+        epsilon: spec.loss.epsilon,
+        huber: spec.loss.max_relative_error,
+    }
+}
+
+/// Whether a batch of `n` rows can go through the fused GPU step (32-bit indexing).
+pub fn check_batch(layout: &ModelLayout, n: usize) -> Result<(), String> {
+    gpu_layout(layout).check_rows(n)
+}
+
 /// Whether `layout`'s table is read in half precision by the training forward
 /// (`"training_precision": "f16"`) or by inference on `client`'s device: where it has f16
 /// arithmetic (wgpu's `shader-f16`), else in f32.
@@ -274,18 +297,12 @@ impl NrcFusedOps for CubeBackend {
                 ema: spec.ema,
                 gap_growth: c.gap_growth,
             };
-            let s = State {
-                table: has_grid.then(|| table(&state, half)),
-                mlp: &state.mlp,
-                mlp_m: &state.mlp_m,
-                mlp_v: &state.mlp_v,
-                mlp_ema: &state.mlp_ema,
-            };
-            let loss = Loss {
-                epsilon: spec.loss.epsilon,
-                huber: spec.loss.max_relative_error,
-            };
-            trainer.step(k as usize - 1, &s, &adam, loss);
+            trainer.step(
+                k as usize - 1,
+                &kernel_state(&state, has_grid, half),
+                &adam,
+                loss(&spec),
+            );
         }
         TrainOutcome {
             state,
@@ -310,19 +327,9 @@ impl NrcFusedOps for CubeBackend {
             mlp: into_contiguous(state.mlp),
             ..state
         };
-        let s = State {
-            table: (spec.layout.grid_params > 0).then(|| table(&state, false)),
-            mlp: &state.mlp,
-            mlp_m: &state.mlp_m,
-            mlp_v: &state.mlp_v,
-            mlp_ema: &state.mlp_ema,
-        };
-        let loss = Loss {
-            epsilon: spec.loss.epsilon,
-            huber: spec.loss.max_relative_error,
-        };
+        let s = kernel_state(&state, spec.layout.grid_params > 0, false);
         let g = trainer
-            .gradients(&s, loss)
+            .gradients(&s, loss(&spec))
             .unwrap_or_else(|e| panic!("the fused GPU step failed: {e}"));
         GradientOutcome {
             state,
