@@ -3,7 +3,8 @@
 //!
 //! Subcommands: `render` (the reference path tracer, or rendering from a cache snapshot),
 //! `train` (the online loop), `compare` (methods against a reference), `reference`, `info`,
-//! `export` (a snapshot as portable weights) and `bench` (measured throughput). Every failure
+//! `export` (a snapshot as portable weights), `bench` (measured throughput) and `view` (the
+//! online loop live in a window). Every failure
 //! is an error whose [`one_line`] is the program's `error: ...` line.
 
 mod bench;
@@ -14,6 +15,7 @@ mod reference;
 pub mod render;
 mod study;
 pub mod train;
+pub mod view;
 
 use std::ffi::OsString;
 
@@ -47,6 +49,9 @@ enum Command {
     /// Export a neural cache snapshot as portable weights (safetensors) and a
     /// tiny-cuda-nn–style JSON description of the encoding and network (docs/export.md).
     Export(export::ExportArgs),
+    /// Watch the online loop live in a window: the cache learning, fly controls, the passes,
+    /// debug views and plots (`--headless` for pictures without a display).
+    View(Box<view::ViewArgs>),
     /// Run jobs of a study planned by `nrc compare --plan DIR` (a job whose result exists is
     /// skipped).
     Job(study::JobArgs),
@@ -72,6 +77,7 @@ pub fn run(cli: Cli, argv: &[OsString]) -> anyhow::Result<()> {
         Command::Train(a) => train::run(&a),
         Command::Export(a) => export::run(&a),
         Command::Job(a) => study::job(&a),
+        Command::View(a) => view::run(&a),
     }
 }
 

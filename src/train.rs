@@ -116,13 +116,7 @@ pub struct TrainArgs {
 /// which device the cache computes on.
 pub fn trainer(args: &TrainArgs, scene: &Scene, print: bool) -> Result<OnlineTrainer> {
     check(args)?;
-    let mut settings = args.cache.method_settings(0, args.seed, print)?;
-    settings.kind = args.cache_kind;
-    if let Some(why) = settings.resolve_resolution(scene, args.width, args.height)?
-        && print
-    {
-        eprintln!("{why}");
-    }
+    let settings = cache_settings(args, scene, print)?;
     let tracer = args.tracer.tracer();
     let pass = args.pass.clone().unwrap_or_else(|| {
         CacheTerminatedSettings {
@@ -139,8 +133,25 @@ pub fn trainer(args: &TrainArgs, scene: &Scene, print: bool) -> Result<OnlineTra
     Ok(trainer)
 }
 
+/// The cache's settings `args` describe for `scene` (the model sized from the camera where
+/// asked); `print`: say how the size was chosen.
+pub fn cache_settings(
+    args: &TrainArgs,
+    scene: &Scene,
+    print: bool,
+) -> Result<nrc_harness::methods::CacheMethodSettings> {
+    let mut settings = args.cache.method_settings(0, args.seed, print)?;
+    settings.kind = args.cache_kind;
+    if let Some(why) = settings.resolve_resolution(scene, args.width, args.height)?
+        && print
+    {
+        eprintln!("{why}");
+    }
+    Ok(settings)
+}
+
 /// Checks the settings that need no scene.
-fn check(args: &TrainArgs) -> Result<()> {
+pub(crate) fn check(args: &TrainArgs) -> Result<()> {
     if args.width == 0 || args.height == 0 {
         bail!("image size {}x{} is empty", args.width, args.height);
     }

@@ -303,6 +303,14 @@ pub struct AdamParams {
 }
 
 impl OptimizerConfig {
+    /// Sets Adam's learning rate (the nested optimizer's, under an EMA).
+    pub fn set_learning_rate(&mut self, lr: f32) {
+        match self {
+            Self::EMA { nested, .. } => nested.set_learning_rate(lr),
+            Self::Adam { learning_rate, .. } => *learning_rate = lr,
+        }
+    }
+
     /// The Adam parameters and the EMA decay (None without EMA).
     pub fn resolve(&self) -> (AdamParams, Option<f32>) {
         match self {

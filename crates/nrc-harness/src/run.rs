@@ -17,7 +17,7 @@ use nrc_train::schedule::Phase;
 use nrc_train::{FrameStats, OnlineTrainer, QueryMaker};
 
 /// One keyframe of a camera path.
-#[derive(serde::Deserialize, Debug, Clone)]
+#[derive(serde::Deserialize, serde::Serialize, Debug, Clone)]
 #[serde(deny_unknown_fields)]
 pub struct Keyframe {
     pub position: [f32; 3],

@@ -198,6 +198,9 @@ pub struct OnlineTrainer {
     monitor: ChangeMonitor,
     detector: ChangeDetector,
     budget: Option<TrainBudget>,
+    /// The last frame's training records' positions (normalised to the scene box, as the
+    /// cache sees them): where the frame trained (the viewer's heat map).
+    record_positions: Vec<[f32; 3]>,
 }
 
 impl OnlineTrainer {
@@ -224,8 +227,75 @@ impl OnlineTrainer {
             budget: settings
                 .train_budget_ms
                 .map(|ms| TrainBudget::new(ms, settings.records_per_frame)),
+            record_positions: Vec::new(),
             settings,
         })
+    }
+
+    /// Replaces the inference pass (its state starts afresh).
+    pub fn set_pass(&mut self, pass: PassSpec) {
+        self.pass = pass.build(&self.settings.tracer);
+        self.settings.pass = pass;
+        self.warmth.reset();
+        self.previous.clear();
+    }
+
+    /// Replaces the producers; an error names a producer that cannot serve `scene` (the
+    /// trainer is then unchanged).
+    pub fn set_producer(
+        &mut self,
+        producer: ProducerSpec,
+        scene: &Scene,
+    ) -> Result<(), TrainError> {
+        let mix = ProducerMix::new(&producer, &self.settings.producer_options);
+        mix.check(scene)?;
+        self.mix = mix;
+        self.settings.producer = producer;
+        Ok(())
+    }
+
+    /// Sets the records a frame produces without a budget, and the per-frame training budget
+    /// (`None`: none); an error names a bad value (the trainer is then unchanged).
+    pub fn set_records(
+        &mut self,
+        records_per_frame: usize,
+        train_budget_ms: Option<f64>,
+    ) -> Result<(), TrainError> {
+        let settings = OnlineSettings {
+            records_per_frame,
+            train_budget_ms,
+            ..self.settings.clone()
+        };
+        settings.validate()?;
+        if settings.train_budget_ms != self.settings.train_budget_ms
+            || settings.records_per_frame != self.settings.records_per_frame
+        {
+            self.budget = train_budget_ms.map(|ms| TrainBudget::new(ms, records_per_frame));
+        }
+        self.settings = settings;
+        Ok(())
+    }
+
+    /// Replaces the cache (a fresh one, or a loaded snapshot): the change watch and the
+    /// pass's history start afresh, since both describe the old cache's answers.
+    pub fn set_cache(&mut self, cache: impl Into<Cache>) {
+        self.cache = cache.into();
+        self.monitor = ChangeMonitor::default();
+        self.detector = ChangeDetector::default();
+        self.pass.reset();
+        self.warmth.reset();
+        self.previous.clear();
+    }
+
+    /// The inference pass's own debug views after its last frame.
+    pub fn pass_views(&self) -> Vec<passes::PassView> {
+        self.pass.debug_views()
+    }
+
+    /// The last frame's training records' positions, normalised to the scene box (empty
+    /// before the first frame).
+    pub fn record_positions(&self) -> &[[f32; 3]] {
+        &self.record_positions
     }
 
     /// Renders a frame with the inference pass and the cache as it is (no training).
@@ -301,6 +371,9 @@ impl OnlineTrainer {
         );
         stats.produce_ms = t.elapsed().as_secs_f64() * 1e3;
         stats.records = produced.batch.queries.len();
+        self.record_positions.clear();
+        self.record_positions
+            .extend(produced.batch.queries.iter().map(|q| q.position));
         stats.producer = produced.stats;
         let finite: Vec<f32> = produced
             .batch

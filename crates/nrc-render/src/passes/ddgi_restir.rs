@@ -726,6 +726,17 @@ impl RenderPass for DdgiRestirPass {
         self.volume = None;
     }
 
+    fn debug_views(&self) -> Vec<super::frame::PassView> {
+        let Some(h) = &self.history else {
+            return Vec::new();
+        };
+        let mut views = vec![h.m_view()];
+        if let Some(v) = &self.volume {
+            views.push(crate::ddgi::probe_view(v, &h.g.camera, h.g.width, h.g.height));
+        }
+        views
+    }
+
     fn prepare(&mut self, input: &FrameInput) {
         if !self.settings.uses_probes() {
             return;

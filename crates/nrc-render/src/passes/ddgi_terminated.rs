@@ -164,6 +164,8 @@ pub struct DdgiTerminatedPass {
     rays: Option<ProbeRays>,
     /// Milliseconds of the last probe update.
     pub update_ms: f64,
+    /// The last frame's camera and size (the probe view).
+    view: Option<(nrc_scene::Camera, u32, u32)>,
 }
 
 impl DdgiTerminatedPass {
@@ -175,6 +177,7 @@ impl DdgiTerminatedPass {
             queries: Vec::new(),
             rays: None,
             update_ms: 0.0,
+            view: None,
         }
     }
 
@@ -197,7 +200,15 @@ impl RenderPass for DdgiTerminatedPass {
         self.volume = None;
     }
 
+    fn debug_views(&self) -> Vec<super::frame::PassView> {
+        match (&self.volume, &self.view) {
+            (Some(v), Some((camera, w, h))) => vec![crate::ddgi::probe_view(v, camera, *w, *h)],
+            _ => Vec::new(),
+        }
+    }
+
     fn prepare(&mut self, input: &FrameInput) {
+        self.view = Some((*input.camera, input.width, input.height));
         let t = std::time::Instant::now();
         if self.volume.is_none() {
             // Settings were validated when the pass was named; an empty scene box leaves the

@@ -108,6 +108,71 @@ pub trait RenderPass: Send {
 
     /// Combines the answers (one per query of [`RenderPass::trace`], in order) into the frame.
     fn resolve(&mut self, input: &FrameInput, answers: &[Vec3]) -> PassOutput;
+
+    /// Images of the pass's own state after its last frame, for the viewer's debug views
+    /// (`nrc view`). Default: none.
+    fn debug_views(&self) -> Vec<PassView> {
+        Vec::new()
+    }
+}
+
+/// One image of a pass's state ([`RenderPass::debug_views`]).
+#[derive(Clone, Debug)]
+pub struct PassView {
+    /// Short name, as `nrc view --view` takes it (e.g. `reservoir-m`).
+    pub name: &'static str,
+    /// A scalar per pixel in the red channel (shown in false colour), else a colour.
+    pub scalar: bool,
+    pub image: Image,
+}
+
+impl PassView {
+    /// A colour view of `points` (position, colour) seen through `camera` in a `width × height`
+    /// image: a disc of `radius` pixels each, nearer points over farther ones, unoccluded by the
+    /// scene (probe and VPL positions).
+    pub fn points(
+        name: &'static str,
+        camera: &Camera,
+        width: u32,
+        height: u32,
+        points: impl IntoIterator<Item = (Vec3, Vec3)>,
+        radius: f32,
+    ) -> Self {
+        let mut image = Image::new(width as usize, height as usize);
+        let mut seen: Vec<(f32, glam::Vec2, Vec3)> = points
+            .into_iter()
+            .filter_map(|(p, c)| {
+                let film = camera.project(p, width, height)?;
+                Some(((p - camera.position).length(), film, c))
+            })
+            .collect();
+        // Farthest first, so the nearest is drawn last.
+        seen.sort_by(|a, b| b.0.total_cmp(&a.0));
+        let r = radius.max(0.5);
+        for (_, film, colour) in seen {
+            let (x0, x1) = (
+                (film.x - r).floor().max(0.0) as u32,
+                (film.x + r).ceil() as u32,
+            );
+            let (y0, y1) = (
+                (film.y - r).floor().max(0.0) as u32,
+                (film.y + r).ceil() as u32,
+            );
+            for y in y0..y1.min(height) {
+                for x in x0..x1.min(width) {
+                    let d = glam::Vec2::new(x as f32 + 0.5, y as f32 + 0.5) - film;
+                    if d.length() <= r {
+                        image.set(x as usize, y as usize, colour);
+                    }
+                }
+            }
+        }
+        Self {
+            name,
+            scalar: false,
+            image,
+        }
+    }
 }
 
 /// Consecutive frames of one size a pass has rendered since its state was last reset: how

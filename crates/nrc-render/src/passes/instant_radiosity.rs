@@ -284,6 +284,8 @@ pub struct InstantRadiosityPass {
     pending: Option<Pending>,
     gbuffer: Option<GBuffer>,
     pub last: VplFrameStats,
+    /// The last frame's camera and size (the VPL view).
+    view: Option<(nrc_scene::Camera, u32, u32)>,
 }
 
 impl InstantRadiosityPass {
@@ -296,6 +298,7 @@ impl InstantRadiosityPass {
             pending: None,
             gbuffer: None,
             last: VplFrameStats::default(),
+            view: None,
         }
     }
 
@@ -811,7 +814,31 @@ impl RenderPass for InstantRadiosityPass {
         self.gbuffer = None;
     }
 
+    fn debug_views(&self) -> Vec<super::frame::PassView> {
+        let Some((camera, w, h)) = &self.view else {
+            return Vec::new();
+        };
+        // Each VPL in its power's colour, the brightest at 1.
+        let brightest = self
+            .vpls
+            .iter()
+            .map(|v| v.power.max_element())
+            .filter(|p| p.is_finite())
+            .fold(0.0f32, f32::max);
+        let scale = if brightest > 0.0 { 1.0 / brightest } else { 0.0 };
+        let radius = (*w.max(h) as f32 / 200.0).max(1.0);
+        vec![super::frame::PassView::points(
+            "vpls",
+            camera,
+            *w,
+            *h,
+            self.vpls.iter().map(|v| (v.position, v.power * scale)),
+            radius,
+        )]
+    }
+
     fn trace(&mut self, input: &FrameInput) -> Vec<RadianceQuery> {
+        self.view = Some((*input.camera, input.width, input.height));
         let seed = Stream::Vpls.seed(input.seed);
         self.gbuffer = Some(GBuffer::trace(
             input.scene,

@@ -53,7 +53,8 @@ pub use cache_terminated::{
 pub use ddgi_restir::{DdgiRestirPass, DdgiRestirSettings, SurfaceLight};
 pub use ddgi_terminated::{DdgiTerminatedPass, DdgiTerminatedSettings};
 pub use frame::{
-    FrameInput, PassOutput, PassStats, PhaseTimes, RenderPass, TerminationPoint, Warmth, run,
+    FrameInput, PassOutput, PassStats, PassView, PhaseTimes, RenderPass, TerminationPoint, Warmth,
+    run,
 };
 pub use instant_radiosity::{InstantRadiosityPass, IrSettings, VplMode};
 pub use path_traced::{PathTracedPass, PathTracedSettings};

@@ -360,6 +360,10 @@ impl RenderPass for RestirDiPass {
         self.history = None;
     }
 
+    fn debug_views(&self) -> Vec<super::frame::PassView> {
+        self.history.iter().map(|h| h.m_view()).collect()
+    }
+
     fn trace(&mut self, input: &FrameInput) -> Vec<RadianceQuery> {
         let scene = input.scene;
         let seed = input.seed;

@@ -646,6 +646,10 @@ impl RenderPass for RestirGiPass {
         self.history = None;
     }
 
+    fn debug_views(&self) -> Vec<super::frame::PassView> {
+        self.history.iter().map(|h| h.screen.m_view()).collect()
+    }
+
     fn trace(&mut self, input: &FrameInput) -> Vec<RadianceQuery> {
         let scene = input.scene;
         let t = Instant::now();

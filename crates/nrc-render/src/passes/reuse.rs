@@ -212,6 +212,27 @@ pub struct History<S> {
     pub res: Vec<Reservoir<S>>,
 }
 
+impl<S> History<S> {
+    /// The viewer's view of the reservoirs: each pixel's mean `M` (the candidates its final
+    /// reservoirs stand for, after the M cap), in red.
+    pub fn m_view(&self) -> super::frame::PassView {
+        let spp = self.g.spp.max(1) as usize;
+        let data = self
+            .res
+            .chunks(spp)
+            .map(|r| Vec3::new(r.iter().map(|r| r.m).sum::<f32>() / spp as f32, 0.0, 0.0))
+            .collect();
+        super::frame::PassView {
+            name: "reservoir-m",
+            scalar: true,
+            image: nrc_scene::Image::from_data(self.g.width as usize, self.g.height as usize, data)
+                .unwrap_or_else(|| {
+                    nrc_scene::Image::new(self.g.width as usize, self.g.height as usize)
+                }),
+        }
+    }
+}
+
 /// Temporal reuse: each receiver merges the previous frame's reservoir at its reprojected
 /// pixel sample (similar vertex, [`GBuffer::temporal_neighbour`]), `M` capped at `m_cap`.
 /// `recheck`: a sample taken from the history is shadow-tested at the receiver, so that a
