@@ -238,6 +238,16 @@ fn headless_viewport_is_the_online_loops_frame_and_every_view_renders() {
         "the UI screenshot has {} colours",
         distinct.len()
     );
+    // The viewport is in it, each texel a square of whole pixels.
+    let found = find_scaled((sw, sh, &ui), (48, 32, &raw));
+    assert!(found.is_some(), "the viewport is not in the UI screenshot");
+    let (_, _, scale) = found.unwrap();
+    assert!(
+        scale >= 2,
+        "the viewport is drawn at {scale} pixels a texel"
+    );
+    // Negative control: another frame is not found in it.
+    assert!(find_scaled((sw, sh, &ui), (48, 32, &frames[1].to_srgb8(0.0))).is_none());
 
     // A pass's own views: ReSTIR DI's reservoirs, DDGI resampling's probes, instant
     // radiosity's VPLs.
@@ -265,6 +275,35 @@ fn headless_viewport_is_the_online_loops_frame_and_every_view_renders() {
     v.extend(["--view".into(), "nonsense".into()]);
     let out = nrc_command().args(&v).output().unwrap();
     assert_error(&out, "no view called");
+}
+
+/// Where `small` (RGB, w × h) appears in `big` magnified by a whole factor (each texel a
+/// square of equal pixels): the offset and the factor.
+fn find_scaled(big: (u32, u32, &[u8]), small: (u32, u32, &[u8])) -> Option<(u32, u32, u32)> {
+    let (bw, bh, b) = big;
+    let (w, h, p) = small;
+    let at = |img: &[u8], width: u32, x: u32, y: u32| {
+        let i = 3 * (y * width + x) as usize;
+        [img[i], img[i + 1], img[i + 2]]
+    };
+    for s in 1..=(bw / w).min(bh / h) {
+        for oy in 0..=bh - h * s {
+            for ox in 0..=bw - w * s {
+                let all = (0..h).all(|y| {
+                    (0..w).all(|x| {
+                        let want = at(p, w, x, y);
+                        // A texel's first and last pixel.
+                        at(b, bw, ox + x * s, oy + y * s) == want
+                            && at(b, bw, ox + x * s + s - 1, oy + y * s + s - 1) == want
+                    })
+                });
+                if all {
+                    return Some((ox, oy, s));
+                }
+            }
+        }
+    }
+    None
 }
 
 /// Failed cleanly: exit status 1, no panic, an `error: ...` line naming `needle`.

@@ -1,6 +1,7 @@
 //! The UI as drawn, the same in the window and offscreen: the viewport texture filled by the
-//! display pass from the loop's last frame, egui's panels around it, painted by egui-wgpu into
-//! a target (the window's surface, or a texture read back for a screenshot).
+//! display pass from the loop's last frame, copied into the target where egui left room for it
+//! (`shaders/view_blit.wgsl`), and egui's panels around it, painted by egui-wgpu into the same
+//! target (the window's surface, or a texture read back for a screenshot).
 
 use crate::ViewError;
 use crate::display::{self, Display, Gpu};
@@ -11,7 +12,7 @@ pub struct Canvas {
     pub ctx: egui::Context,
     renderer: egui_wgpu::Renderer,
     pub display: Display,
-    viewport: egui::TextureId,
+    blit: Blit,
     /// The format of the targets the UI is painted into.
     format: wgpu::TextureFormat,
     /// The loop's generation last uploaded.
@@ -35,7 +36,7 @@ impl Canvas {
         height: u32,
         ui: UiState,
     ) -> Self {
-        let mut renderer = egui_wgpu::Renderer::new(
+        let renderer = egui_wgpu::Renderer::new(
             &gpu.device,
             format,
             egui_wgpu::RendererOptions {
@@ -44,16 +45,12 @@ impl Canvas {
             },
         );
         let display = Display::new(gpu, width, height);
-        let viewport = renderer.register_native_texture(
-            &gpu.device,
-            &display.target_view,
-            wgpu::FilterMode::Nearest,
-        );
+        let blit = Blit::new(gpu, format, &display);
         Self {
             ctx: egui::Context::default(),
             renderer,
             display,
-            viewport,
+            blit,
             format,
             generation: None,
             ui,
@@ -68,12 +65,7 @@ impl Canvas {
         self.generation = Some(p.generation);
         let (w, h) = (p.image.width as u32, p.image.height as u32);
         if self.display.resize(gpu, w, h) {
-            self.renderer.update_egui_texture_from_wgpu_texture(
-                &gpu.device,
-                &self.display.target_view,
-                wgpu::FilterMode::Nearest,
-                self.viewport,
-            );
+            self.blit.bind(gpu, &self.display);
         }
         self.display.upload(gpu, &p.image, p.aux.as_ref());
         self.display.draw(gpu, p.shade);
@@ -87,11 +79,10 @@ impl Canvas {
     ) -> (egui::FullOutput, Vec<Command>) {
         let mut commands = Vec::new();
         let size = [self.display.width, self.display.height];
-        let viewport = self.viewport;
         let ui_state = &mut self.ui;
-        let output = self.ctx.run_ui(input, |ui| {
-            ui_state.show(ui, p, viewport, size, &mut commands)
-        });
+        let output = self
+            .ctx
+            .run_ui(input, |ui| ui_state.show(ui, p, size, &mut commands));
         (output, commands)
     }
 
@@ -159,8 +150,13 @@ impl Canvas {
                 occlusion_query_set: None,
                 multiview_mask: None,
             });
-            self.renderer
-                .render(&mut pass.forget_lifetime(), &painted.jobs, &screen);
+            let mut pass = pass.forget_lifetime();
+            if let Some(rect) = self.ui.viewport_rect {
+                let rect = rect * painted.pixels_per_point;
+                self.blit
+                    .draw(gpu, &mut pass, rect, size, self.display.width);
+            }
+            self.renderer.render(&mut pass, &painted.jobs, &screen);
         }
         gpu.queue
             .submit(extra.into_iter().chain(std::iter::once(encoder.finish())));
@@ -210,5 +206,163 @@ pub fn offscreen_input(size: [u32; 2], time: f64) -> egui::RawInput {
         )),
         time: Some(time),
         ..Default::default()
+    }
+}
+
+/// The pass copying the viewport into the UI's target (`shaders/view_blit.wgsl`).
+struct Blit {
+    pipeline: wgpu::RenderPipeline,
+    layout: wgpu::BindGroupLayout,
+    params: wgpu::Buffer,
+    group: wgpu::BindGroup,
+    /// Whether the target encodes sRGB itself.
+    decode: bool,
+}
+
+/// The uniform block of `shaders/view_blit.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct BlitParams {
+    origin: [f32; 2],
+    scale: f32,
+    decode: u32,
+}
+
+impl Blit {
+    fn new(gpu: &Gpu, format: wgpu::TextureFormat, display: &Display) -> Self {
+        let device = &gpu.device;
+        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("view_blit.wgsl"),
+            source: wgpu::ShaderSource::Wgsl(
+                include_str!("../../../shaders/view_blit.wgsl").into(),
+            ),
+        });
+        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("blit"),
+            entries: &[
+                wgpu::BindGroupLayoutEntry {
+                    binding: 0,
+                    visibility: wgpu::ShaderStages::FRAGMENT,
+                    ty: wgpu::BindingType::Buffer {
+                        ty: wgpu::BufferBindingType::Uniform,
+                        has_dynamic_offset: false,
+                        min_binding_size: None,
+                    },
+                    count: None,
+                },
+                wgpu::BindGroupLayoutEntry {
+                    binding: 1,
+                    visibility: wgpu::ShaderStages::FRAGMENT,
+                    ty: wgpu::BindingType::Texture {
+                        multisampled: false,
+                        sample_type: wgpu::TextureSampleType::Float { filterable: false },
+                        view_dimension: wgpu::TextureViewDimension::D2,
+                    },
+                    count: None,
+                },
+            ],
+        });
+        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("blit"),
+            bind_group_layouts: &[Some(&layout)],
+            immediate_size: 0,
+        });
+        let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+            label: Some("blit"),
+            layout: Some(&pipeline_layout),
+            vertex: wgpu::VertexState {
+                module: &module,
+                entry_point: Some("vs_main"),
+                buffers: &[],
+                compilation_options: Default::default(),
+            },
+            primitive: wgpu::PrimitiveState::default(),
+            depth_stencil: None,
+            multisample: wgpu::MultisampleState::default(),
+            fragment: Some(wgpu::FragmentState {
+                module: &module,
+                entry_point: Some("fs_main"),
+                targets: &[Some(wgpu::ColorTargetState {
+                    format,
+                    blend: None,
+                    write_mask: wgpu::ColorWrites::ALL,
+                })],
+                compilation_options: Default::default(),
+            }),
+            multiview_mask: None,
+            cache: None,
+        });
+        let params = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("blit params"),
+            size: std::mem::size_of::<BlitParams>() as u64,
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let group = Self::group(gpu, &layout, &params, display);
+        Self {
+            pipeline,
+            layout,
+            params,
+            group,
+            decode: format.is_srgb(),
+        }
+    }
+
+    fn group(
+        gpu: &Gpu,
+        layout: &wgpu::BindGroupLayout,
+        params: &wgpu::Buffer,
+        display: &Display,
+    ) -> wgpu::BindGroup {
+        gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("blit"),
+            layout,
+            entries: &[
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: params.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: wgpu::BindingResource::TextureView(&display.target_view),
+                },
+            ],
+        })
+    }
+
+    /// Points at `display`'s (new) viewport texture.
+    fn bind(&mut self, gpu: &Gpu, display: &Display) {
+        self.group = Self::group(gpu, &self.layout, &self.params, display);
+    }
+
+    /// Copies the viewport (`texels` wide) into `rect` (target pixels) of a target of `size`.
+    fn draw(
+        &self,
+        gpu: &Gpu,
+        pass: &mut wgpu::RenderPass<'static>,
+        rect: egui::Rect,
+        size: [u32; 2],
+        texels: u32,
+    ) {
+        let (w, h) = (size[0] as f32, size[1] as f32);
+        let x0 = rect.min.x.clamp(0.0, w).round();
+        let y0 = rect.min.y.clamp(0.0, h).round();
+        let x1 = rect.max.x.clamp(x0, w).round();
+        let y1 = rect.max.y.clamp(y0, h).round();
+        if x1 - x0 < 1.0 || y1 - y0 < 1.0 {
+            return;
+        }
+        let params = BlitParams {
+            origin: [rect.min.x, rect.min.y],
+            scale: rect.width() / texels.max(1) as f32,
+            decode: u32::from(self.decode),
+        };
+        gpu.queue
+            .write_buffer(&self.params, 0, bytemuck::bytes_of(&params));
+        pass.set_viewport(0.0, 0.0, w, h, 0.0, 1.0);
+        pass.set_scissor_rect(x0 as u32, y0 as u32, (x1 - x0) as u32, (y1 - y0) as u32);
+        pass.set_pipeline(&self.pipeline);
+        pass.set_bind_group(0, &self.group, &[]);
+        pass.draw(0..3, 0..1);
     }
 }

@@ -109,6 +109,7 @@ pub fn run_headless(
         }
         let painted = painted.expect("three passes ran");
         let rgba = canvas.screenshot(&gpu, &painted, options.size)?;
+
         canvas.finish(painted);
         display::write_png(path, options.size[0], options.size[1], &rgba)?;
     }

@@ -5,7 +5,7 @@
 
 use std::collections::VecDeque;
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::mpsc::{Receiver, RecvTimeoutError, Sender};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
@@ -635,6 +635,8 @@ impl Session {
 pub struct Running {
     pub commands: Sender<Command>,
     pub shared: Arc<Mutex<Published>>,
+    /// The generation last published (a cheap check for a new frame).
+    pub generation: Arc<AtomicU64>,
     stop: Arc<AtomicBool>,
     thread: Option<std::thread::JoinHandle<()>>,
 }
@@ -658,23 +660,42 @@ impl Drop for Running {
     }
 }
 
-/// Starts `session` on a thread whose frames run on `pool`.
+/// Starts `session` on a thread whose frames run on `pool`. The loop's threads run at a lower
+/// priority than the UI's: they take every core the UI leaves, and the UI (whose frames on a
+/// software adapter cost tens of milliseconds of CPU) gets the cores when it draws.
 pub fn spawn(session: Session, pool: rayon::ThreadPool) -> Running {
     let (tx, rx) = std::sync::mpsc::channel();
     let shared = Arc::new(Mutex::new(session.publish()));
+    let generation = Arc::new(AtomicU64::new(0));
     let stop = Arc::new(AtomicBool::new(false));
     let thread = {
-        let (shared, stop) = (shared.clone(), stop.clone());
+        let (shared, generation, stop) = (shared.clone(), generation.clone(), stop.clone());
         std::thread::Builder::new()
             .name("nrc view loop".into())
-            .spawn(move || pool.install(move || run_loop(session, rx, &shared, &stop)))
+            .spawn(move || {
+                lower_priority();
+                pool.broadcast(|_| lower_priority());
+                pool.install(move || run_loop(session, rx, &shared, &generation, &stop))
+            })
             .expect("a thread can be started")
     };
     Running {
         commands: tx,
         shared,
+        generation,
         stop,
         thread: Some(thread),
+    }
+}
+
+/// Lowers the calling thread's scheduling priority (nice +10: about a tenth of the CPU share of
+/// a normal thread when both want a core).
+fn lower_priority() {
+    #[cfg(target_os = "linux")]
+    // SAFETY: setpriority on the calling thread's own id has no memory effects; a failure only
+    // leaves the priority as it was.
+    unsafe {
+        libc::setpriority(libc::PRIO_PROCESS, libc::gettid() as libc::id_t, 10);
     }
 }
 
@@ -682,6 +703,7 @@ fn run_loop(
     mut session: Session,
     commands: Receiver<Command>,
     shared: &Mutex<Published>,
+    generation: &AtomicU64,
     stop: &AtomicBool,
 ) {
     let mut failed = false;
@@ -709,8 +731,10 @@ fn run_loop(
             failed = true;
         }
         let published = session.publish();
+        let g = published.generation;
         if let Ok(mut s) = shared.lock() {
             *s = published;
         }
+        generation.store(g, Ordering::SeqCst);
     }
 }

@@ -1,6 +1,7 @@
 //! `nrc view` in a window: winit's event loop, a wgpu surface, egui's input through egui-winit.
-//! The UI redraws at up to [`UI_HZ`] frames a second whatever the loop's rate, showing the
-//! loop's last finished frame; closing the window (or Escape) stops the loop after the frame it
+//! The UI redraws when there is something new (a frame of the loop, input, a camera in motion,
+//! egui's own animations), at up to [`UI_HZ`] frames a second whatever the loop's rate, showing
+//! the loop's last finished frame; closing the window (or Escape) stops the loop after the frame it
 //! is in, so a snapshot being written is finished first.
 
 use std::path::PathBuf;
@@ -58,6 +59,10 @@ struct App {
     error: Option<ViewError>,
     next_frame: Instant,
     last_print: Instant,
+    /// Something new to draw: input, a new frame of the loop, or the UI asked for more.
+    dirty: bool,
+    /// The loop's generation last drawn.
+    drawn: u64,
 }
 
 /// Opens the window and runs the loop of `setup` on `pool` until the window closes.
@@ -78,6 +83,8 @@ pub fn run_window(
         error: None,
         next_frame: Instant::now(),
         last_print: Instant::now(),
+        dirty: true,
+        drawn: u64::MAX,
     };
     event_loop
         .run_app(&mut app)
@@ -186,7 +193,14 @@ impl App {
         };
         open.canvas.update_viewport(&open.gpu, &published);
         let input = open.input.take_egui_input(&open.window);
+        self.drawn = published.generation;
         let (output, commands) = open.canvas.run(input, &published);
+        // egui asks for another frame (an animation, a tooltip), or the camera is moving.
+        let again = output
+            .viewport_output
+            .get(&egui::ViewportId::ROOT)
+            .is_some_and(|v| v.repaint_delay.is_zero());
+        self.dirty |= again || open.canvas.ui.active;
         for c in commands {
             let _ = open.running.commands.send(c);
         }
@@ -252,6 +266,9 @@ impl ApplicationHandler for App {
             return;
         };
         let _ = open.input.on_window_event(&open.window, &event);
+        if !matches!(event, WindowEvent::RedrawRequested) {
+            self.dirty = true;
+        }
         match event {
             WindowEvent::CloseRequested => event_loop.exit(),
             WindowEvent::Resized(size) => {
@@ -270,13 +287,23 @@ impl ApplicationHandler for App {
 
     fn about_to_wait(&mut self, event_loop: &ActiveEventLoop) {
         let now = Instant::now();
-        if now >= self.next_frame {
-            if let Some(open) = &self.open {
+        if let Some(open) = &self.open {
+            let generation = open
+                .running
+                .generation
+                .load(std::sync::atomic::Ordering::SeqCst);
+            self.dirty |= generation != self.drawn;
+            if self.dirty && now >= self.next_frame {
+                self.dirty = false;
                 open.window.request_redraw();
+                self.next_frame = now + Duration::from_secs_f64(1.0 / UI_HZ);
             }
-            self.next_frame = now + Duration::from_secs_f64(1.0 / UI_HZ);
         }
-        event_loop.set_control_flow(ControlFlow::WaitUntil(self.next_frame));
+        // Wake at the UI's rate to look for a new frame of the loop.
+        let wake = self
+            .next_frame
+            .max(now + Duration::from_secs_f64(1.0 / UI_HZ));
+        event_loop.set_control_flow(ControlFlow::WaitUntil(wake));
     }
 
     fn exiting(&mut self, _event_loop: &ActiveEventLoop) {
