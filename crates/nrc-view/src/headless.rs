@@ -87,6 +87,7 @@ pub fn run_headless(
     ui.tonemap = options.tonemap;
     ui.view = view;
     ui.adapter = gpu.describe();
+    ui.headless = true;
     let mut canvas = Canvas::new(&gpu, display::FORMAT, w, h, ui);
     canvas.update_viewport(&gpu, &published);
     if let Some(path) = &options.viewport {

@@ -55,6 +55,8 @@ pub struct UiState {
     pub adapter: String,
     /// Set by Escape: the window closes.
     pub quit: bool,
+    /// Painted offscreen (no UI frame rate to show).
+    pub headless: bool,
     /// Where the viewport goes in the window (points), as the last frame laid it out.
     pub viewport_rect: Option<egui::Rect>,
     /// Whether the last frame moved the camera or had keys held: the window draws the next
@@ -89,6 +91,7 @@ impl UiState {
             synced: false,
             adapter: String::new(),
             quit: false,
+            headless: false,
             active: false,
             viewport_rect: None,
         }
@@ -274,12 +277,14 @@ impl UiState {
 
     fn controls(&mut self, ui: &mut egui::Ui, p: &Published, out: &mut Vec<Command>) {
         ui.heading("nrc view");
+        let ui_rate = if self.headless {
+            "UI headless".to_string()
+        } else {
+            format!("UI {:.0} frames/s", self.ui_fps())
+        };
         ui.label(format!(
-            "loop {:.1} frames/s · UI {:.0} frames/s\nframe {} · {} accumulated",
-            p.loop_fps,
-            self.ui_fps(),
-            p.frames,
-            p.accumulated
+            "loop {:.1} frames/s · {ui_rate}\nframe {} · {} accumulated",
+            p.loop_fps, p.frames, p.accumulated
         ));
         if !self.adapter.is_empty() {
             ui.small(format!("display: {}", self.adapter));
