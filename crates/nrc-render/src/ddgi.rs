@@ -791,22 +791,3 @@ impl RadianceSource for ProbeVolume {
             .collect()
     }
 }
-
-/// The viewer's view of a probe volume: each active probe where it is (relocation included), a
-/// disc in its mean irradiance, through `camera` in a `width × height` image.
-pub fn probe_view(
-    volume: &ProbeVolume,
-    camera: &nrc_scene::Camera,
-    width: u32,
-    height: u32,
-) -> crate::passes::PassView {
-    let radius = (width.max(height) as f32 / 160.0).max(1.5);
-    let probes = (0..volume.probe_count())
-        .filter(|&p| volume.probe_active(p))
-        .map(|p| {
-            let texels = volume.probe_irradiance(p);
-            let mean = texels.iter().copied().sum::<Vec3>() / texels.len().max(1) as f32;
-            (volume.probe_origin(p), mean)
-        });
-    crate::passes::PassView::points("probes", camera, width, height, probes, radius)
-}

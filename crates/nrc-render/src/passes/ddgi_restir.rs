@@ -732,7 +732,7 @@ impl RenderPass for DdgiRestirPass {
         };
         let mut views = vec![h.m_view()];
         if let Some(v) = &self.volume {
-            views.push(crate::ddgi::probe_view(v, &h.g.camera, h.g.width, h.g.height));
+            views.push(super::ddgi_terminated::probe_view(v, &h.g.camera, h.g.width, h.g.height));
         }
         views
     }

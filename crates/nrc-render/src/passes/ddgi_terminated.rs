@@ -202,7 +202,7 @@ impl RenderPass for DdgiTerminatedPass {
 
     fn debug_views(&self) -> Vec<super::frame::PassView> {
         match (&self.volume, &self.view) {
-            (Some(v), Some((camera, w, h))) => vec![crate::ddgi::probe_view(v, camera, *w, *h)],
+            (Some(v), Some((camera, w, h))) => vec![probe_view(v, camera, *w, *h)],
             _ => Vec::new(),
         }
     }
@@ -248,4 +248,23 @@ impl RenderPass for DdgiTerminatedPass {
         out.stats.phases.probes_ms = self.update_ms;
         out
     }
+}
+
+/// The viewer's view of a probe volume: each active probe where it is (relocation included), a
+/// disc in its mean irradiance, through `camera` in a `width × height` image.
+pub(super) fn probe_view(
+    volume: &ProbeVolume,
+    camera: &nrc_scene::Camera,
+    width: u32,
+    height: u32,
+) -> super::frame::PassView {
+    let radius = (width.max(height) as f32 / 160.0).max(1.5);
+    let probes = (0..volume.probe_count())
+        .filter(|&p| volume.probe_active(p))
+        .map(|p| {
+            let texels = volume.probe_irradiance(p);
+            let mean = texels.iter().copied().sum::<Vec3>() / texels.len().max(1) as f32;
+            (volume.probe_origin(p), mean)
+        });
+    super::frame::PassView::points("probes", camera, width, height, probes, radius)
 }
