@@ -4,7 +4,6 @@
 use std::path::PathBuf;
 
 use anyhow::{Context, Result, bail};
-use nrc_scene::image::Image;
 use nrc_train::QueryMaker;
 use nrc_view::display::ToneMap;
 
@@ -53,10 +52,14 @@ pub struct ViewArgs {
     #[arg(long, default_value = "aces", value_parser = parse_tonemap)]
     pub tonemap: ToneMap,
 
-    /// A reference image of the scene's camera at --width x --height (EXR, e.g. from nrc
-    /// reference) for the error view.
+    /// A reference for the error view: an EXR of the scene's camera at --width x --height, or
+    /// a stored reference's folder. Default: the stored reference (--cache-dir) made for this
+    /// scene, camera, size and depth with the most samples, if there is one.
     #[arg(long)]
     pub reference: Option<PathBuf>,
+
+    #[command(flatten)]
+    pub store: nrc_harness::options::CacheArgs,
 
     /// Start from this cache snapshot (trained on this scene) instead of an untrained cache.
     #[arg(long)]
@@ -117,24 +120,38 @@ pub fn run(args: &ViewArgs) -> Result<()> {
     for w in scene.warnings() {
         eprintln!("warning: {w}");
     }
+    let request = nrc_harness::reference::ReferenceRequest {
+        scene_path: &t.scene.scene,
+        scene: &scene,
+        width: t.width,
+        height: t.height,
+        spp: 2,
+        seed: 0,
+        tracer: t.tracer.tracer(),
+    };
     let reference = match &args.reference {
         Some(path) => {
-            let r = Image::read_exr(path)
-                .with_context(|| format!("cannot read the reference {}", path.display()))?;
-            if (r.width, r.height) != (t.width as usize, t.height as usize) {
-                bail!(
-                    "the reference {} is {}x{}, the view {}x{}",
-                    path.display(),
-                    r.width,
-                    r.height,
-                    t.width,
-                    t.height
-                );
-            }
+            let r = nrc_harness::reference::load_given(path, t.width, t.height)?;
+            nrc_harness::reference::check_given(&r, &request)?;
             Some(r)
         }
-        None => None,
+        None => nrc_harness::reference::find_stored(&request, &args.store.dir())?,
     };
+    match &reference {
+        Some(r) => eprintln!(
+            "error view: the reference {}{}",
+            r.location.display(),
+            r.meta
+                .as_ref()
+                .map(|m| format!(" ({} spp)", m.spp))
+                .unwrap_or_default()
+        ),
+        None => eprintln!(
+            "error view: no reference (none stored in {} for this scene, camera and size; nrc reference makes one)",
+            args.store.dir().display()
+        ),
+    }
+    let reference = reference.map(|r| r.mean);
     let settings = crate::train::cache_settings(t, &scene, true)?;
     let mut trainer = crate::train::trainer(t, &scene, false)?;
     let scene_box = QueryMaker::new(&scene.bounds()).scene_box;
@@ -179,6 +196,11 @@ pub fn run(args: &ViewArgs) -> Result<()> {
         (b.max - b.min).max_element()
     };
     let camera = scene.camera;
+    // A camera path plays over --frames frames from the start, as in `nrc train`.
+    let path = match &t.camera_path {
+        Some(p) => Some(nrc_harness::run::camera_path(Some(p), &camera, t.frames)?),
+        None => None,
+    };
     let setup = nrc_view::LoopSetup {
         scene,
         animation,
@@ -187,6 +209,7 @@ pub fn run(args: &ViewArgs) -> Result<()> {
         load_snapshot: Box::new(load_snapshot),
         scene_content: Some(content),
         camera,
+        path,
         width: t.width,
         height: t.height,
         train: !args.paused,

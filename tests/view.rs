@@ -269,6 +269,115 @@ fn headless_viewport_is_the_online_loops_frame_and_every_view_renders() {
         let distinct: std::collections::HashSet<&[u8]> = px.chunks_exact(3).collect();
         assert!(distinct.len() > 1, "{pass}'s {own} view is flat");
     }
+    // A camera path plays from the first frame as in `nrc train`: the raw view after 3 frames
+    // is train's third frame along the same path.
+    let path = p("path.json"); // the Cornell box's camera, then closer and turned
+    std::fs::write(
+        &path,
+        r#"[{"position": [0.278, 0.273, -0.8], "target": [0.278, 0.273, 0.2]},
+            {"position": [0.2, 0.3, -0.5], "target": [0.3, 0.25, 0.3]}]"#,
+    )
+    .unwrap();
+    let mut train = vec!["train".to_string()];
+    common(&mut train);
+    train.extend([
+        "--camera-path".into(),
+        path.clone(),
+        "--frames-out".into(),
+        p("path-frames"),
+    ]);
+    ok(
+        nrc_command().args(&train).output().unwrap(),
+        "nrc train --camera-path",
+    );
+    let along = Image::read_exr(&dir.path().join("path-frames/frame-00002.exr")).unwrap();
+    view("raw", &["--camera-path", &path]);
+    let (_, _, raw_path) = read_png(&dir.path().join("raw.png"));
+    assert!(
+        diff(&raw_path, &along.to_srgb8(0.0)).0 <= 1,
+        "the camera path's last frame differs"
+    );
+    assert!(
+        diff(&raw_path, &raw).0 > 8,
+        "the camera path changed nothing"
+    );
+
+    // An animated scene is posed at frame / fps, as `nrc train` poses it.
+    let moving = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("scenes/cornell-box-moving.gltf")
+        .to_str()
+        .unwrap()
+        .to_string();
+    let animated = |command: &str, extra: &[String]| {
+        let mut v = vec![command.to_string(), "--scene".into(), moving.clone()];
+        v.extend(
+            [
+                "--frames",
+                "3",
+                "--seed",
+                "5",
+                "--records",
+                "1024",
+                "--threads",
+                "2",
+                "--fps",
+                "4",
+            ]
+            .iter()
+            .chain(&SIZE)
+            .map(|s| s.to_string()),
+        );
+        v.extend(extra.iter().cloned());
+        ok(nrc_command().args(&v).output().unwrap(), command)
+    };
+    animated("train", &["--frames-out".into(), p("moving-frames")]);
+    animated(
+        "view",
+        &[
+            "--headless".into(),
+            "--view".into(),
+            "raw".into(),
+            "--viewport-png".into(),
+            p("moving.png"),
+        ],
+    );
+    let third = Image::read_exr(&dir.path().join("moving-frames/frame-00002.exr")).unwrap();
+    let (_, _, shown) = read_png(&dir.path().join("moving.png"));
+    assert!(
+        diff(&shown, &third.to_srgb8(0.0)).0 <= 1,
+        "the animated scene's frame differs"
+    );
+
+    // Without --reference, the error view takes the stored reference made for this scene,
+    // camera and size with the most samples; for another camera none is stored.
+    let store = p("store");
+    for spp in ["4", "8"] {
+        let mut r = vec![
+            "reference",
+            "--scene",
+            &scene,
+            "--spp",
+            spp,
+            "--cache-dir",
+            &store,
+        ];
+        r.extend(SIZE);
+        ok(nrc(&r), "nrc reference");
+    }
+    let stored = |extra: &[&str]| {
+        let mut v = vec!["view".to_string(), "--headless".into()];
+        common(&mut v);
+        v.extend(["--cache-dir".into(), store.clone()]);
+        v.extend(extra.iter().map(|s| s.to_string()));
+        text(&ok(nrc_command().args(&v).output().unwrap(), "nrc view").stderr)
+    };
+    let err = stored(&[]);
+    assert!(
+        err.contains("error view: the reference") && err.contains("(8 spp)"),
+        "{err}"
+    );
+    let err = stored(&["--camera-pos", "0.1,0.2,1.5", "--camera-target", "0,0.2,0"]);
+    assert!(err.contains("error view: no reference"), "{err}");
     // A view that does not exist is an error naming the views.
     let mut v = vec!["view".to_string(), "--headless".into()];
     common(&mut v);
@@ -350,8 +459,23 @@ struct Xvfb {
 
 impl Drop for Xvfb {
     fn drop(&mut self) {
-        let _ = self.child.kill();
+        // SIGTERM, so that the server removes its lock file and the display number is free again.
+        let _ = Command::new("kill")
+            .args(["-TERM", &self.child.id().to_string()])
+            .status();
         let _ = self.child.wait();
+    }
+}
+
+/// A child process killed if the test ends before it does.
+struct Guard(Option<Child>);
+
+impl Drop for Guard {
+    fn drop(&mut self) {
+        if let Some(c) = &mut self.0 {
+            let _ = c.kill();
+            let _ = c.wait();
+        }
     }
 }
 
@@ -435,32 +559,35 @@ fn window_under_xvfb_switches_views_moves_the_camera_and_saves_a_snapshot() {
     let shot: PathBuf = dir.path().join("shot.png");
     let snapshot = dir.path().join("snap.nrc");
     let scene = cornell();
-    let mut viewer = nrc_command()
-        .args([
-            "view",
-            "--scene",
-            &scene,
-            "--width",
-            "64",
-            "--height",
-            "48",
-            "--records",
-            "1024",
-            "--threads",
-            "1",
-            "--window-size",
-            "800x560",
-            "--print-rates",
-        ])
-        .arg("--screenshot")
-        .arg(&shot)
-        .arg("--snapshot")
-        .arg(&snapshot)
-        .env("DISPLAY", &x.display)
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
+    let mut guard = Guard(Some(
+        nrc_command()
+            .args([
+                "view",
+                "--scene",
+                &scene,
+                "--width",
+                "64",
+                "--height",
+                "48",
+                "--records",
+                "1024",
+                "--threads",
+                "1",
+                "--window-size",
+                "800x560",
+                "--print-rates",
+            ])
+            .arg("--screenshot")
+            .arg(&shot)
+            .arg("--snapshot")
+            .arg(&snapshot)
+            .env("DISPLAY", &x.display)
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap(),
+    ));
+    let viewer = guard.0.as_mut().unwrap();
     // The window appears and takes the keyboard.
     let start = Instant::now();
     let window = loop {
@@ -470,7 +597,7 @@ fn window_under_xvfb_switches_views_moves_the_camera_and_saves_a_snapshot() {
             break id;
         }
         if let Ok(Some(status)) = viewer.try_wait() {
-            let out = viewer.wait_with_output().unwrap();
+            let out = guard.0.take().unwrap().wait_with_output().unwrap();
             panic!("nrc view exited ({status}): {}", text(&out.stderr));
         }
         assert!(
@@ -487,29 +614,46 @@ fn window_under_xvfb_switches_views_moves_the_camera_and_saves_a_snapshot() {
     std::thread::sleep(Duration::from_millis(500));
     let a2 = screenshot(&x.display, &shot);
     let (_, still) = diff(&a, &a2);
+    let changed = |from: &[u8], what: &str| {
+        // Screenshots until the window differs from `from` by more than three times what the
+        // still view moved (the loop, at low priority, may take a while under a busy machine).
+        let bar = 3.0 * still.max(0.05);
+        let start = Instant::now();
+        loop {
+            let now = screenshot(&x.display, &shot);
+            let (_, d) = diff(from, &now);
+            if d > bar {
+                return now;
+            }
+            assert!(
+                start.elapsed() < Duration::from_secs(60),
+                "{what} changed the window by {d} only (still: {still})"
+            );
+            std::thread::sleep(Duration::from_millis(300));
+        }
+    };
     // View 4, the records' heat map: another picture.
     xdotool(&x.display, &["key", "4"]);
-    std::thread::sleep(Duration::from_secs(1));
-    let records = screenshot(&x.display, &shot);
-    let (_, switched) = diff(&a2, &records);
-    assert!(
-        switched > 3.0 * still.max(0.05),
-        "switching to the records view changed the window by {switched} (still: {still})"
-    );
-    // Back to the final view, then fly forward for a second: the view moves.
+    let records = changed(&a2, "switching to the records view");
+    // Back to the final view (polled until the window looks more like the final view than like
+    // the records), then fly forward for a second: the view moves.
     xdotool(&x.display, &["key", "1"]);
-    std::thread::sleep(Duration::from_secs(1));
-    let before = screenshot(&x.display, &shot);
+    let start = Instant::now();
+    let before = loop {
+        let now = screenshot(&x.display, &shot);
+        if diff(&a2, &now).1 < diff(&records, &now).1 {
+            break now;
+        }
+        assert!(
+            start.elapsed() < Duration::from_secs(60),
+            "key 1 did not bring the final view back"
+        );
+        std::thread::sleep(Duration::from_millis(300));
+    };
     xdotool(&x.display, &["keydown", "w"]);
     std::thread::sleep(Duration::from_millis(1200));
     xdotool(&x.display, &["keyup", "w"]);
-    std::thread::sleep(Duration::from_secs(2));
-    let moved = screenshot(&x.display, &shot);
-    let (_, flew) = diff(&before, &moved);
-    assert!(
-        flew > 3.0 * still.max(0.05),
-        "flying forward changed the window by {flew} (still: {still})"
-    );
+    changed(&before, "flying forward");
     // F5 saves the snapshot; it loads for rendering.
     xdotool(&x.display, &["key", "F5"]);
     assert!(wait_for(&snapshot, 30), "no snapshot after F5");
@@ -530,9 +674,12 @@ fn window_under_xvfb_switches_views_moves_the_camera_and_saves_a_snapshot() {
         dir.path().join("r.exr").to_str().unwrap(),
     ]);
     ok(render, "nrc render --cache (the viewer's snapshot)");
-    // Escape closes the window; the loop ends cleanly.
-    xdotool(&x.display, &["key", "Escape"]);
+    // F5 and Escape at once: the window closes, the loop ends cleanly, and the snapshot asked
+    // for before is written all the same.
+    std::fs::remove_file(&snapshot).unwrap();
+    xdotool(&x.display, &["key", "F5", "Escape"]);
     let start = Instant::now();
+    let viewer = guard.0.as_mut().unwrap();
     while viewer.try_wait().unwrap().is_none() {
         assert!(
             start.elapsed() < Duration::from_secs(30),
@@ -540,9 +687,29 @@ fn window_under_xvfb_switches_views_moves_the_camera_and_saves_a_snapshot() {
         );
         std::thread::sleep(Duration::from_millis(100));
     }
-    let out = viewer.wait_with_output().unwrap();
+    let out = guard.0.take().unwrap().wait_with_output().unwrap();
     let err = text(&out.stderr);
     assert!(out.status.success(), "{err}");
     assert!(!err.contains("panicked"), "{err}");
+    assert!(
+        snapshot.exists(),
+        "the snapshot asked for on closing was not written"
+    );
+    let render = nrc(&[
+        "render",
+        "--scene",
+        &scene,
+        "--cache",
+        snapshot.to_str().unwrap(),
+        "--width",
+        "16",
+        "--height",
+        "16",
+        "--spp",
+        "1",
+        "--out",
+        dir.path().join("r2.exr").to_str().unwrap(),
+    ]);
+    ok(render, "nrc render --cache (the snapshot saved on closing)");
     eprintln!("viewer's log:\n{err}");
 }

@@ -242,19 +242,18 @@ impl RadianceCache {
         self.layout.training_memory_bytes()
     }
 
-    /// A human-readable summary: encoding, network, sizes, device and path.
     /// Adam's learning rate.
     pub fn learning_rate(&self) -> f32 {
         self.adam.learning_rate
     }
 
     /// Sets Adam's learning rate from the next step on (the config, and so the snapshot's
-    /// description, follow); an error for one that is not finite and positive.
+    /// description, follow); an error outside (0, 1], the range a config accepts.
     pub fn set_learning_rate(&mut self, lr: f32) -> Result<(), CacheError> {
-        if !(lr.is_finite() && lr > 0.0) {
+        if !(lr.is_finite() && lr > 0.0 && lr <= 1.0) {
             return Err(CacheError::Config {
                 field: "optimizer.learning_rate".into(),
-                message: format!("must be finite and > 0, got {lr}"),
+                message: format!("must be in (0, 1], got {lr}"),
             });
         }
         self.config.optimizer.set_learning_rate(lr);
@@ -262,6 +261,7 @@ impl RadianceCache {
         Ok(())
     }
 
+    /// A human-readable summary: encoding, network, sizes, device and path.
     pub fn describe(&self) -> String {
         let mut s = String::new();
         let enc = &self.layout.encoding;

@@ -117,7 +117,13 @@ pub fn write_false_color_png(
         });
     }
     let rgb = false_color_rgb8(map, colors, scale)?;
-    atomic_write(path, &encode_png_rgb8(path, map.width, map.height, &rgb)?)
+    write_rgb8_png(path, map.width, map.height, &rgb)
+}
+
+/// Writes 8-bit RGB pixels (row-major, already encoded for display) as a PNG at `path`
+/// (atomically).
+pub fn write_rgb8_png(path: &Path, width: usize, height: usize, rgb: &[u8]) -> Result<()> {
+    atomic_write(path, &encode_png_rgb8(path, width, height, rgb)?)
 }
 
 /// Writes a linear HDR image as an sRGB PNG for viewing: scaled by 2^`exposure`, clamped to

@@ -493,6 +493,41 @@ pub fn check_given(r: &Reference, req: &ReferenceRequest<'_>) -> Result<()> {
     Ok(())
 }
 
+/// The stored reference in `cache_dir` (as `nrc reference` and `nrc compare` store them) that
+/// was made for `req`'s scene content, camera, size, environment and depth limits, whatever its
+/// samples and seed: the one with the most samples; `None` where there is none (or no folder).
+/// Entries that cannot be read are passed over.
+pub fn find_stored(req: &ReferenceRequest<'_>, cache_dir: &Path) -> Result<Option<Reference>> {
+    let Ok(entries) = std::fs::read_dir(cache_dir) else {
+        return Ok(None);
+    };
+    let scene_content = scene_content_hash(req.scene_path)?;
+    let mut best: Option<(u32, PathBuf)> = None;
+    for dir in entries.flatten().map(|e| e.path()) {
+        let Ok(text) = std::fs::read_to_string(dir.join(META_FILE)) else {
+            continue;
+        };
+        let Ok(meta) = serde_json::from_str::<ReferenceMeta>(&text) else {
+            continue;
+        };
+        let made_for = |meta: &ReferenceMeta| {
+            let same = ReferenceRequest {
+                spp: meta.spp,
+                seed: meta.seed,
+                ..req.clone()
+            };
+            meta.format == FORMAT
+                && (meta.width, meta.height) == (req.width, req.height)
+                && meta.scene_content == scene_content
+                && meta.key == request_key(&same, &scene_content)
+        };
+        if made_for(&meta) && best.as_ref().is_none_or(|(spp, _)| meta.spp > *spp) {
+            best = Some((meta.spp, dir));
+        }
+    }
+    best.map(|(_, dir)| load_entry(&dir)).transpose()
+}
+
 /// A reference given by the user: a cache entry folder, or a bare EXR file (no variance).
 /// Its size must be `width × height`.
 pub fn load_given(path: &Path, width: u32, height: u32) -> Result<Reference> {

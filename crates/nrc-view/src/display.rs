@@ -4,7 +4,6 @@
 
 use std::path::Path;
 
-use glam::Vec3;
 use nrc_scene::image::Image;
 
 use crate::ViewError;
@@ -61,6 +60,17 @@ impl Gpu {
     /// Without a window: any adapter.
     pub fn headless() -> Result<Self, ViewError> {
         Self::new(instance(), None)
+    }
+
+    /// Refuses a `width × height` image larger than the adapter's textures can be.
+    pub fn check_size(&self, what: &str, width: u32, height: u32) -> Result<(), ViewError> {
+        let max = self.device.limits().max_texture_dimension_2d;
+        if width > max || height > max {
+            return Err(ViewError::Option(format!(
+                "{what} {width}x{height} is larger than the adapter's textures ({max} pixels a side)"
+            )));
+        }
+        Ok(())
     }
 
     /// The adapter in words: its name and driver.
@@ -513,35 +523,12 @@ pub fn read_rgba8(gpu: &Gpu, texture: &wgpu::Texture) -> Result<Vec<u8>, ViewErr
     Ok(out)
 }
 
-/// Writes RGBA pixels as an 8-bit RGB PNG (sRGB), atomically.
+/// Writes RGBA pixels as an 8-bit RGB PNG, atomically.
 pub fn write_png(path: &Path, width: u32, height: u32, rgba: &[u8]) -> Result<(), ViewError> {
     let rgb: Vec<u8> = rgba
         .chunks_exact(4)
         .flat_map(|p| [p[0], p[1], p[2]])
         .collect();
-    let mut bytes = Vec::new();
-    {
-        let mut encoder = png::Encoder::new(&mut bytes, width, height);
-        encoder.set_color(png::ColorType::Rgb);
-        encoder.set_depth(png::BitDepth::Eight);
-        encoder.set_source_srgb(png::SrgbRenderingIntent::Perceptual);
-        let mut writer = encoder
-            .write_header()
-            .map_err(|e| ViewError::Output(path.display().to_string(), e.to_string()))?;
-        writer
-            .write_image_data(&rgb)
-            .map_err(|e| ViewError::Output(path.display().to_string(), e.to_string()))?;
-    }
-    nrc_scene::image::write_atomic(path, &bytes)
+    nrc_eval::png_output::write_rgb8_png(path, width as usize, height as usize, &rgb)
         .map_err(|e| ViewError::Output(path.display().to_string(), e.to_string()))
-}
-
-/// An image of `width × height` whose pixels are all `v` (a view with nothing to show yet).
-pub fn flat(width: u32, height: u32, v: Vec3) -> Image {
-    Image::from_data(
-        width as usize,
-        height as usize,
-        vec![v; width as usize * height as usize],
-    )
-    .expect("sizes match")
 }

@@ -52,6 +52,8 @@ pub fn run_headless(
     pool: &rayon::ThreadPool,
 ) -> Result<HeadlessReport, ViewError> {
     let gpu = Gpu::headless()?;
+    gpu.check_size("the image", setup.width, setup.height)?;
+    gpu.check_size("the window", options.size[0], options.size[1])?;
     let camera = setup.camera;
     let mut session = Session::new(setup);
     session.apply(Command::Tone {

@@ -19,10 +19,13 @@ use nrc_scene::image::Image;
 use nrc_scene::{Camera, Scene};
 use nrc_train::{CacheSource, OnlineTrainer, ProducerSpec};
 
-use crate::display::{Shade, ToneMap, flat};
+use crate::display::{Shade, ToneMap};
 
 /// Frames of statistics the plots show.
 pub const HISTORY: usize = 240;
+
+/// Mixed into the seed of frames rendered without training.
+const RENDER_ONLY_SEED: u64 = 0x7265_6e64_6572_6f6e;
 
 /// The scene's animation: its length and the scene posed at a time.
 pub struct Animation {
@@ -46,6 +49,9 @@ pub struct LoopSetup {
     /// The scene's content hash, stored in saved snapshots (as `nrc train --snapshot` does).
     pub scene_content: Option<String>,
     pub camera: Camera,
+    /// A camera path to play from the first frame (one camera a frame), as `nrc train
+    /// --camera-path` does.
+    pub path: Option<Vec<Camera>>,
     pub width: u32,
     pub height: u32,
     /// Whether training runs from the start (else only the pass renders, from the cache).
@@ -260,8 +266,12 @@ impl Session {
             fresh_cache: setup.fresh_cache,
             load_snapshot: setup.load_snapshot,
             scene_content: setup.scene_content,
-            camera: setup.camera,
-            path: None,
+            camera: setup
+                .path
+                .as_ref()
+                .and_then(|p| p.first().copied())
+                .unwrap_or(setup.camera),
+            path: setup.path.filter(|p| !p.is_empty()).map(|p| (p, 0)),
             width: w,
             height: h,
             train: setup.train,
@@ -281,14 +291,14 @@ impl Session {
             render_only_frames: 0,
             sum: vec![Vec3::ZERO; (w * h) as usize],
             accumulated: 0,
-            raw: flat(w, h, Vec3::ZERO),
+            raw: Image::new(w as usize, h as usize),
             pass_views: Vec::new(),
             history: VecDeque::new(),
             message: None,
             frames: 0,
             generation: 0,
             frame_times: VecDeque::new(),
-            shown: (flat(w, h, Vec3::ZERO), None, Shade::RelError),
+            shown: (Image::new(w as usize, h as usize), None, Shade::RelError),
         }
     }
 
@@ -436,12 +446,11 @@ impl Session {
                 self.restart_accumulation();
             }
         }
-        if self.playing
-            && let Some(a) = &self.animation
-            && a.duration > 0.0
-        {
-            let t = (self.time + 1.0 / a.fps) % a.duration;
-            self.seek(t)?;
+        // An animated scene is posed at the frame's time (frame / fps from the start, as
+        // `nrc train` poses it), looping at its end.
+        let playing = self.playing && self.animation.is_some();
+        if playing {
+            self.seek(self.time)?;
         }
         let (w, h) = (self.width, self.height);
         let mut line = FrameLine {
@@ -463,7 +472,10 @@ impl Session {
             out.ok_or("the loop rendered no frame")?
         } else {
             let s = &self.trainer.settings;
-            let seed = pass_seed(s.seed, self.render_only_frames as u32);
+            // Frames without training draw from their own seeds: reusing the training frames'
+            // (pass_seed of the frame index) would average identical noise when training
+            // resumes.
+            let seed = pass_seed(s.seed ^ RENDER_ONLY_SEED, self.render_only_frames as u32);
             let input = FrameInput {
                 scene: &self.scene,
                 camera: &self.camera,
@@ -498,6 +510,14 @@ impl Session {
         while self.history.len() > HISTORY {
             self.history.pop_front();
         }
+        if playing && let Some(a) = &self.animation {
+            let t = self.time + 1.0 / a.fps;
+            self.time = if a.duration > 0.0 && t > a.duration {
+                0.0
+            } else {
+                t
+            };
+        }
         self.frames += 1;
         self.generation += 1;
         let now = Instant::now();
@@ -527,7 +547,7 @@ impl Session {
     /// nothing to show (no reference, a pass view the pass lacks) is black.
     pub fn compute_view(&mut self, view: View) -> (Image, Option<Image>, Shade) {
         let (w, h) = (self.width, self.height);
-        let black = || flat(w, h, Vec3::ZERO);
+        let black = || Image::new(w as usize, h as usize);
         match view {
             View::Final => (self.accumulated(), None, self.tone),
             View::Raw => (self.raw.clone(), None, self.tone),
@@ -545,7 +565,12 @@ impl Session {
                 (out.image, None, self.tone)
             }
             View::Records => {
-                let counts = self.record_counts();
+                // Paused, no records land: the last trained frame's are not shown as this one's.
+                let counts = if self.train {
+                    self.record_counts()
+                } else {
+                    black()
+                };
                 let max = counts.data.iter().map(|c| c.x).fold(0.0, f32::max);
                 (black(), Some(counts), Shade::Heat { max })
             }
@@ -578,7 +603,7 @@ impl Session {
     /// through the camera.
     fn record_counts(&self) -> Image {
         let (w, h) = (self.width, self.height);
-        let mut counts = flat(w, h, Vec3::ZERO);
+        let mut counts = Image::new(w as usize, h as usize);
         let b = self.trainer.settings.queries.scene_box;
         let (min, max) = (Vec3::from(b.min), Vec3::from(b.max));
         for p in self.trainer.record_positions() {
@@ -707,7 +732,14 @@ fn run_loop(
     stop: &AtomicBool,
 ) {
     let mut failed = false;
-    while !stop.load(Ordering::SeqCst) {
+    loop {
+        if stop.load(Ordering::SeqCst) {
+            // Commands sent before the window closed (a snapshot to save) are carried out.
+            while let Ok(c) = commands.try_recv() {
+                session.apply(c);
+            }
+            return;
+        }
         // After a failed frame, wait for a command (one that may fix it) instead of spinning.
         if failed {
             match commands.recv_timeout(Duration::from_millis(100)) {
@@ -726,8 +758,22 @@ fn run_loop(
                 Err(std::sync::mpsc::TryRecvError::Disconnected) => return,
             }
         }
-        if let Err(e) = session.step() {
+        let stepped = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| session.step()));
+        let error = match stepped {
+            Ok(Ok(())) => None,
+            Ok(Err(e)) => Some(e),
+            Err(panic) => Some(format!(
+                "the loop failed: {}",
+                panic
+                    .downcast_ref::<String>()
+                    .map(String::as_str)
+                    .or_else(|| panic.downcast_ref::<&str>().copied())
+                    .unwrap_or("a panic")
+            )),
+        };
+        if let Some(e) = error {
             session.message = Some(format!("error: {e}"));
+            session.generation += 1;
             failed = true;
         }
         let published = session.publish();

@@ -34,6 +34,8 @@ pub struct UiState {
     pass: String,
     producer: String,
     termination: String,
+    /// NEE in the cache pass the termination field builds.
+    nee: bool,
     records: usize,
     budget_on: bool,
     budget_ms: f64,
@@ -49,8 +51,11 @@ pub struct UiState {
     message: Option<String>,
     ui_frames: VecDeque<Instant>,
     last: Option<Instant>,
-    /// Whether the fields were filled from the loop's settings yet.
-    synced: bool,
+    /// The fields are filled from the loop's settings once its state is newer than this
+    /// generation (at the start, and after each command that changes them).
+    resync_after: Option<u64>,
+    /// The loop's generation seen last.
+    seen: u64,
     /// The adapter the UI draws with.
     pub adapter: String,
     /// Set by Escape: the window closes.
@@ -75,6 +80,7 @@ impl UiState {
             pass: String::new(),
             producer: String::new(),
             termination: "spread".into(),
+            nee: true,
             records: 0,
             budget_on: false,
             budget_ms: 10.0,
@@ -88,13 +94,19 @@ impl UiState {
             message: None,
             ui_frames: VecDeque::new(),
             last: None,
-            synced: false,
+            resync_after: Some(0),
+            seen: 0,
             adapter: String::new(),
             quit: false,
             headless: false,
             active: false,
             viewport_rect: None,
         }
+    }
+
+    /// Shows `message` in the panel (until the next command).
+    pub fn say(&mut self, message: String) {
+        self.message = Some(message);
     }
 
     /// UI frames per second over the last second.
@@ -133,15 +145,21 @@ impl UiState {
         {
             self.ui_frames.pop_front();
         }
-        if !self.synced {
+        self.seen = p.generation;
+        if self
+            .resync_after
+            .is_some_and(|g| p.generation > g || g == 0)
+        {
             self.pass = p.pass.clone();
+            self.nee = !p.pass.ends_with("-nonee");
             self.producer = p.producer.clone();
             self.records = p.records;
             self.budget_on = p.budget_ms.is_some();
             self.budget_ms = p.budget_ms.unwrap_or(self.budget_ms);
             self.learning_rate = p.learning_rate.unwrap_or(self.learning_rate);
-            self.synced = true;
+            self.resync_after = None;
         }
+        let sent = out.len();
         if p.on_path {
             self.fly.camera = p.camera;
         }
@@ -162,6 +180,16 @@ impl UiState {
             .frame(bare)
             .show(ui, |ui| plots(ui, p));
         egui::CentralPanel::no_frame().show(ui, |ui| self.viewport(ui, size, out));
+        // A command sent: its outcome is the loop's message, and the fields follow the loop.
+        if out[sent..].iter().any(|c| {
+            !matches!(
+                c,
+                Command::Camera(_) | Command::Tone { .. } | Command::View(_)
+            )
+        }) {
+            self.message = None;
+            self.resync_after = Some(self.seen);
+        }
     }
 
     fn keys(&mut self, ui: &mut egui::Ui, p: &Published, dt: f32, out: &mut Vec<Command>) {
@@ -289,15 +317,18 @@ impl UiState {
         if !self.adapter.is_empty() {
             ui.small(format!("display: {}", self.adapter));
         }
-        if let Some(m) = self.message.as_ref().or(p.message.as_ref()) {
-            ui.colored_label(
-                if m.starts_with("error") {
-                    egui::Color32::LIGHT_RED
-                } else {
-                    egui::Color32::LIGHT_GREEN
-                },
-                m,
-            );
+        // The UI's own message (a field it could not parse), then the loop's (what the last
+        // command did, or why it failed).
+        for m in [self.message.as_ref(), p.message.as_ref()]
+            .into_iter()
+            .flatten()
+        {
+            let colour = if m.starts_with("error") {
+                egui::Color32::LIGHT_RED
+            } else {
+                egui::Color32::LIGHT_GREEN
+            };
+            ui.colored_label(colour, m);
         }
         ui.separator();
 
@@ -357,16 +388,17 @@ impl UiState {
         });
         ui.horizontal(|ui| {
             ui.label("termination");
-            ui.add(egui::TextEdit::singleline(&mut self.termination).desired_width(90.0))
+            ui.add(egui::TextEdit::singleline(&mut self.termination).desired_width(70.0))
                 .on_hover_text(
                     "first, diffuse[:R], spread[:C], bth[:K]: the cache pass ending there",
                 );
+            ui.checkbox(&mut self.nee, "NEE");
             if ui.button("apply").clicked() {
                 match self.termination.parse::<Termination>() {
                     Ok(termination) => {
                         let spec = PassSpec::from(CacheTerminatedSettings {
                             termination,
-                            nee: true,
+                            nee: self.nee,
                         });
                         self.pass = spec.to_string();
                         out.push(Command::Pass(spec));

@@ -119,19 +119,23 @@ impl App {
         let gpu = Gpu::new(instance, Some(&surface))?;
         let size = window.inner_size();
         let caps = surface.get_capabilities(&gpu.adapter);
-        // egui paints in gamma space: a plain 8-bit format where the surface offers one.
-        let format = caps
-            .formats
-            .iter()
-            .copied()
-            .find(|f| {
-                matches!(
-                    f,
-                    wgpu::TextureFormat::Bgra8Unorm | wgpu::TextureFormat::Rgba8Unorm
-                )
-            })
-            .or_else(|| caps.formats.first().copied())
-            .ok_or_else(|| ViewError::NoAdapter("the window's surface offers no format".into()))?;
+        // egui paints in gamma space: a plain 8-bit format where the surface offers one, else
+        // an 8-bit sRGB one (egui and the viewport copy encode for it); screenshots read 8 bits.
+        use wgpu::TextureFormat as F;
+        let format = [
+            F::Bgra8Unorm,
+            F::Rgba8Unorm,
+            F::Bgra8UnormSrgb,
+            F::Rgba8UnormSrgb,
+        ]
+        .into_iter()
+        .find(|f| caps.formats.contains(f))
+        .ok_or_else(|| {
+            ViewError::NoAdapter(format!(
+                "the window's surface offers no 8-bit format (it offers {:?})",
+                caps.formats
+            ))
+        })?;
         let mut config = surface
             .get_default_config(&gpu.adapter, size.width.max(1), size.height.max(1))
             .ok_or_else(|| {
@@ -141,6 +145,12 @@ impl App {
         config.present_mode = wgpu::PresentMode::AutoNoVsync;
         surface.configure(&gpu.device, &config);
 
+        let published = session.publish();
+        gpu.check_size(
+            "the image",
+            published.image.width as u32,
+            published.image.height as u32,
+        )?;
         let camera = session.camera();
         let mut ui = UiState::new(camera, o.extent, o.snapshot.clone(), o.screenshot.clone());
         ui.exposure = o.exposure;
@@ -148,7 +158,6 @@ impl App {
         ui.adapter = gpu.describe();
         ui.view = o.view;
         let tone = ui.tone();
-        let published = session.publish();
         let canvas = Canvas::new(
             &gpu,
             format,
@@ -228,9 +237,20 @@ impl App {
             open.canvas.ui.take_screenshot = false;
             let size = [open.config.width, open.config.height];
             let path = open.canvas.ui.screenshot.clone();
-            let rgba = open.canvas.screenshot(&open.gpu, &painted, size)?;
-            display::write_png(&path, size[0], size[1], &rgba)?;
-            eprintln!("nrc view: screenshot written to {}", path.display());
+            // A screenshot that cannot be written is said in the panel; the session goes on.
+            let written = open
+                .canvas
+                .screenshot(&open.gpu, &painted, size)
+                .and_then(|rgba| display::write_png(&path, size[0], size[1], &rgba));
+            // (A success is said on stderr only: a line in the panel would make the next
+            // screenshot differ from this one.)
+            match written {
+                Ok(()) => eprintln!("nrc view: screenshot written to {}", path.display()),
+                Err(e) => {
+                    eprintln!("nrc view: error: screenshot: {e}");
+                    open.canvas.ui.say(format!("error: screenshot: {e}"));
+                }
+            }
         }
         open.canvas.finish(painted);
         if open.canvas.ui.quit {
@@ -272,9 +292,13 @@ impl ApplicationHandler for App {
         match event {
             WindowEvent::CloseRequested => event_loop.exit(),
             WindowEvent::Resized(size) => {
-                open.config.width = size.width.max(1);
-                open.config.height = size.height.max(1);
-                open.surface.configure(&open.gpu.device, &open.config);
+                // A minimised window has no size to draw at: keep the surface as it was.
+                let max = open.gpu.device.limits().max_texture_dimension_2d;
+                if size.width > 0 && size.height > 0 {
+                    open.config.width = size.width.min(max);
+                    open.config.height = size.height.min(max);
+                    open.surface.configure(&open.gpu.device, &open.config);
+                }
             }
             WindowEvent::RedrawRequested => {
                 if let Err(e) = self.redraw(event_loop) {
