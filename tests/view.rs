@@ -658,22 +658,15 @@ fn window_under_xvfb_switches_views_moves_the_camera_and_saves_a_snapshot() {
     xdotool(&x.display, &["key", "F5"]);
     assert!(wait_for(&snapshot, 30), "no snapshot after F5");
     std::thread::sleep(Duration::from_millis(500));
-    let render = nrc(&[
-        "render",
-        "--scene",
-        &scene,
-        "--cache",
-        snapshot.to_str().unwrap(),
-        "--width",
-        "16",
-        "--height",
-        "16",
-        "--spp",
-        "1",
-        "--out",
-        dir.path().join("r.exr").to_str().unwrap(),
-    ]);
-    ok(render, "nrc render --cache (the viewer's snapshot)");
+    // The snapshot renders with `nrc render --cache`.
+    let renders = |what: &str| {
+        let out = dir.path().join("r.exr");
+        let mut a = vec!["render", "--scene", &scene, "--spp", "1", "--width", "16"];
+        a.extend(["--height", "16", "--cache", snapshot.to_str().unwrap()]);
+        a.extend(["--out", out.to_str().unwrap()]);
+        ok(nrc(&a), what);
+    };
+    renders("nrc render --cache (the viewer's snapshot)");
     // F5 and Escape at once: the window closes, the loop ends cleanly, and the snapshot asked
     // for before is written all the same.
     std::fs::remove_file(&snapshot).unwrap();
@@ -695,21 +688,6 @@ fn window_under_xvfb_switches_views_moves_the_camera_and_saves_a_snapshot() {
         snapshot.exists(),
         "the snapshot asked for on closing was not written"
     );
-    let render = nrc(&[
-        "render",
-        "--scene",
-        &scene,
-        "--cache",
-        snapshot.to_str().unwrap(),
-        "--width",
-        "16",
-        "--height",
-        "16",
-        "--spp",
-        "1",
-        "--out",
-        dir.path().join("r2.exr").to_str().unwrap(),
-    ]);
-    ok(render, "nrc render --cache (the snapshot saved on closing)");
+    renders("nrc render --cache (the snapshot saved on closing)");
     eprintln!("viewer's log:\n{err}");
 }
