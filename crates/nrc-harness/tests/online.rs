@@ -773,19 +773,24 @@ impl nrc_render::RadianceSource for Recording<'_> {
     }
 }
 
-/// The hash cache's relative error against path-traced radiance at the Cornell box's primary
-/// hits (32 × 32), after 16 frames of records whose targets are 64-spp path-traced estimates
-/// at those points (an unbiased, nearly exact source), for a finest cell of `cell` of the box.
-fn hash_cache_error_against_exact(cell: f32) -> f64 {
-    let scene = scene("cornell-box.gltf");
-    let input = FrameInput {
-        scene: &scene,
+/// A 32 × 32 frame of `scene` from its camera, one sample a pixel, seed 3.
+fn small_frame(scene: &Scene) -> FrameInput<'_> {
+    FrameInput {
+        scene,
         camera: &scene.camera,
         width: 32,
         height: 32,
         spp: 1,
         seed: 3,
-    };
+    }
+}
+
+/// The hash cache's relative error against path-traced radiance at the Cornell box's primary
+/// hits (32 × 32), after 16 frames of records whose targets are 64-spp path-traced estimates
+/// at those points (an unbiased, nearly exact source), for a finest cell of `cell` of the box.
+fn hash_cache_error_against_exact(cell: f32) -> f64 {
+    let scene = scene("cornell-box.gltf");
+    let input = small_frame(&scene);
     let queries = queries_of(&"cache-first".parse().unwrap(), &input);
     let maker = nrc_train::QueryMaker::new(&scene.bounds());
     let config = nrc_cache::HashCacheConfig {
@@ -845,14 +850,7 @@ fn every_pass_reading_the_hash_cache_renders_as_with_the_field_it_was_fed() {
     const BOUND: f64 = 0.06;
     let scene = scene("cornell-box.gltf");
     let maker = nrc_train::QueryMaker::new(&scene.bounds());
-    let input = FrameInput {
-        scene: &scene,
-        camera: &scene.camera,
-        width: 32,
-        height: 32,
-        spp: 1,
-        seed: 3,
-    };
+    let input = small_frame(&scene);
     let lum = |v: glam::Vec3| f64::from(nrc_scene::sampling::luminance(v));
     let field = |samples, seed| nrc_render::source::PathTracedSource {
         scene: &scene,
