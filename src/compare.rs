@@ -37,6 +37,13 @@ pub struct CompareArgs {
     #[arg(long, required = true)]
     pub methods: Vec<MethodList>,
 
+    /// The cache the cache methods train: `neural` (the network), or `hash` (the spatial-hash
+    /// baseline, as `nrc train --cache-kind hash`: `nrc-pt-sl` runs as `hash-pt-sl`,
+    /// `restir-gi-nrc` as `restir-gi-nrc@1spp+hash:pt-sl`). Methods named for the hash cache
+    /// keep it either way.
+    #[arg(long, default_value = "neural")]
+    pub cache_kind: nrc_cache::CacheKind,
+
     /// Equal time: each frame renders passes of its method until this many milliseconds are
     /// used (the frame ends within one pass of the budget, typically half a pass).
     #[arg(long)]
@@ -183,6 +190,12 @@ impl CompareArgs {
         self.methods
             .iter()
             .flat_map(|l| l.0.iter().cloned())
+            .map(|mut m| {
+                if m.producer.is_some() && self.cache_kind == nrc_cache::CacheKind::Hash {
+                    m.cache = nrc_cache::CacheKind::Hash;
+                }
+                m
+            })
             .collect()
     }
 }

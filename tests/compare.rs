@@ -785,3 +785,58 @@ fn stateful_methods_start_every_run_warm() {
         assert_eq!(rec.warm_frames, None, "{}", rec.method);
     }
 }
+
+/// `--cache-kind hash` makes the cache methods train the spatial-hash cache: `nrc-pt-sl` runs
+/// (and is reported) as `hash-pt-sl`, and renders what `hash-pt-sl` renders; without it the
+/// same name is the network.
+#[test]
+fn cache_kind_switches_the_cache_methods_to_the_hash_cache() {
+    let dir = tempfile::tempdir().unwrap();
+    let store = dir.path().join("store").to_str().unwrap().to_string();
+    let scene = cornell();
+    // (method, MSE) of each row of a comparison of `methods` with `extra` flags.
+    let run = |name: &str, methods: &str, extra: &[&str]| {
+        let out = dir.path().join(name).to_str().unwrap().to_string();
+        let mut args = vec![
+            "compare",
+            "--scene",
+            &scene,
+            "--methods",
+            methods,
+            "--equal-spp",
+            "1",
+            "--width",
+            "16",
+            "--height",
+            "16",
+            "--reference-spp",
+            "4",
+            "--train-frames",
+            "2",
+            "--runs",
+            "1",
+            "--no-flip",
+            "--out",
+            &out,
+            "--cache-dir",
+            &store,
+        ];
+        args.extend(extra);
+        assert_ok(&nrc(&args));
+        let report =
+            nrc_eval::report::read_report_json(&Path::new(&out).join("report.json")).unwrap();
+        report
+            .rows
+            .iter()
+            .map(|r| (r.method.clone(), r.metrics.mse))
+            .collect::<Vec<_>>()
+    };
+    let hash = run("hash", "pt-1spp,nrc-pt-sl", &["--cache-kind", "hash"]);
+    let neural = run("neural", "pt-1spp,nrc-pt-sl", &[]);
+    let named = run("named", "pt-1spp,hash-pt-sl", &[]);
+    assert_eq!(hash[1].0, "hash-pt-sl", "{hash:?}");
+    assert_eq!(neural[1].0, "nrc-pt-sl", "{neural:?}");
+    // The switch and the name are one method: the same errors, bit for bit.
+    assert_eq!(hash[1].1, named[1].1);
+    assert_ne!(hash[1].1, neural[1].1, "the switch changed nothing");
+}
