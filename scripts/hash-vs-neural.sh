@@ -19,5 +19,5 @@ done
 for scene in "${scenes[@]}"; do
   "$nrc" compare --scene "scenes/$scene.gltf" --methods "$methods" --equal-time 150 --runs 2 \
     --width 96 --height 96 --train-frames 100 --reference-spp 2048 \
-    --out "out/hash-vs-neural-all/$scene" --no-flip
+    --out "out/hash-vs-neural-all/$scene"
 done

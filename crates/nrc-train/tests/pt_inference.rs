@@ -514,3 +514,152 @@ fn terminations_through_delta_vertices_reproduce_the_reference() {
         &[true],
     );
 }
+
+/// A closed sphere of radius 1 (64 rings, 128 segments, flat facets wound inward) whose inside
+/// emits `LE` and reflects `RHO`: the same exact field as [`enclosure`], but with no edges, so
+/// next-event connections between its walls have bounded weight (`cos θ cos θ′ / d² =
+/// 1/(4R²)` on a sphere) and path-traced targets have finite variance. The camera at the
+/// centre looks along −z with a 60° field of view.
+fn spherical_enclosure() -> Scene {
+    let mut sphere = Mesh::sphere(Vec3::ZERO, 1.0, 64, 128);
+    for t in sphere.indices.chunks_mut(3) {
+        t.swap(1, 2);
+    }
+    for n in &mut sphere.normals {
+        *n = -*n;
+    }
+    let mut b = SceneBuilder::new();
+    let m = b.material(mat::emissive(Vec3::splat(RHO), Vec3::splat(LE), false));
+    b.mesh(&sphere, m, false)
+        .camera(Vec3::ZERO, Vec3::NEG_Z, 60.0);
+    b.build()
+}
+
+/// The spatial-hash cache (issue 34) learns an exact field, cell by cell, from the `pt`
+/// producer's records (4,096 paths a frame from the camera; default settings: finest cells
+/// 1/128 of the box, levels of detail by distance, running means of up to 256 samples), in the
+/// spherical enclosure. Probes: the first hits of a 60 × 60 grid of camera rays, each with the
+/// query the cache-terminated pass would make there (3,600 probes 1.1 finest cells apart on
+/// the sphere, level of detail 0: nearly every probe in its own cell).
+///
+/// 1. With the exact source's targets (`ρ Le / (1 − ρ)` at every record, at the producer's
+///    positions, normals and directions), every probed cell answers the field to float
+///    precision: no probe misses, and no cell mixes with another or answers for a wrong one.
+/// 2. With the producer's own 1-spp targets (unbiased, standard deviation 2.6× the field, 1 %
+///    of them above 11×), after `FRAMES` frames, the median probed cell is within
+///    `MEDIAN_BOUND` of the field, 99 % of them within `P99_BOUND` and every one within
+///    `MAX_BOUND`; the cells' mean within 1 %. Measured: 0.074, 0.53, 2.74 and 1.0003.
+///    Negative controls, the same records: a running mean that keeps only the last frame
+///    (`max_samples` 1; measured 99 % within 2.69, the worst 20.8× off) and eviction of every
+///    cell a frame has not updated (`stale_frames` 1: a cell answers from the records of its
+///    current life; 2.50, 23.1) must each fail a bound.
+///
+/// In the cube (`enclosure`) the same targets have infinite variance near the edges (the
+/// `1/d²` of connections across an edge), and the running mean of a cell there holds its
+/// largest record for as long as the mean keeps it: 1,024 frames left cells 18–52× the field.
+#[test]
+fn the_hash_cache_learns_an_exact_field_in_every_cell() {
+    use nrc_cache::{HashCache, HashCacheConfig};
+    const FRAMES: u64 = 512;
+    const MEDIAN_BOUND: f32 = 0.15;
+    const P99_BOUND: f32 = 1.0;
+    const MAX_BOUND: f32 = 5.0;
+    let scene = spherical_enclosure();
+    let maker = QueryMaker::new(&scene.bounds());
+    let batches: Vec<TrainingBatch> = (0..FRAMES)
+        .map(|f| {
+            produce(
+                &scene,
+                &mut PathProducer::new(false),
+                &ZeroSource,
+                4096,
+                500 + f,
+            )
+        })
+        .collect();
+    let probes: Vec<_> = (0..60 * 60)
+        .map(|k| {
+            let film = glam::Vec2::new((k % 60) as f32 + 0.5, (k / 60) as f32 + 0.5);
+            let ray = scene.camera.generate_ray(film, 60, 60);
+            let hit = scene.intersect(&ray).expect("the sphere is closed");
+            let si = scene.interaction(&ray, &hit);
+            let bsdf = nrc_scene::bsdf::Bsdf::from_pbr(&scene.pbr(&si));
+            maker.cache_query(&RadianceQuery::at(&si, &bsdf, -ray.d))
+        })
+        .collect();
+    // Each probed cell's error (the worst channel's, relative to the field), sorted; the
+    // cells' mean; the probes that found no cell.
+    let errors = |config: HashCacheConfig, exact_targets: bool| {
+        let mut cache = HashCache::new(config, maker.scene_box).unwrap();
+        cache.set_camera(scene.camera.position.to_array());
+        for batch in &batches {
+            let mut batch = batch.clone();
+            if exact_targets {
+                batch.targets.fill([EXACT; 3]);
+            }
+            cache.train(&batch).unwrap();
+        }
+        let answers = cache.infer(&probes);
+        let mut e: Vec<f32> = answers
+            .iter()
+            .map(|v| {
+                v.iter()
+                    .map(|v| (v - EXACT).abs() / EXACT)
+                    .fold(0.0, f32::max)
+            })
+            .collect();
+        e.sort_by(f32::total_cmp);
+        let mean = answers.iter().flatten().map(|&v| f64::from(v)).sum::<f64>()
+            / (3 * answers.len()) as f64;
+        (e, mean, cache.misses())
+    };
+    let (e, _, misses) = errors(HashCacheConfig::default(), true);
+    println!(
+        "exact targets: worst cell {:.2e} off, {misses} misses",
+        e[e.len() - 1]
+    );
+    assert_eq!(misses, 0, "a probe found no cell");
+    assert!(
+        e[e.len() - 1] < 1e-5,
+        "a cell answered {} off the field",
+        e[e.len() - 1]
+    );
+    let quantiles = |e: &[f32]| (e[e.len() / 2], e[e.len() * 99 / 100], e[e.len() - 1]);
+    let (e, mean, misses) = errors(HashCacheConfig::default(), false);
+    let (median, p99, max) = quantiles(&e);
+    println!(
+        "pt targets: cells off the field by {median:.3} (median), {p99:.3} (99 %), {max:.3} (worst); mean {mean:.4} (exact {EXACT}); {misses} misses"
+    );
+    assert_eq!(misses, 0, "a probe found no cell");
+    assert!(
+        median < MEDIAN_BOUND && p99 < P99_BOUND && max < MAX_BOUND,
+        "{median} {p99} {max}"
+    );
+    assert!((mean / f64::from(EXACT) - 1.0).abs() < 0.01, "mean {mean}");
+    for (name, config) in [
+        (
+            "max_samples 1",
+            HashCacheConfig {
+                max_samples: 1.0,
+                ..Default::default()
+            },
+        ),
+        (
+            "stale_frames 1",
+            HashCacheConfig {
+                stale_frames: 1,
+                ..Default::default()
+            },
+        ),
+    ] {
+        let (e, mean, misses) = errors(config, false);
+        let (median, p99, max) = quantiles(&e);
+        println!(
+            "{name}: median {median:.3}, 99 % {p99:.3}, worst {max:.3}, mean {mean:.4}, {misses} misses"
+        );
+        assert!(
+            median >= MEDIAN_BOUND || p99 >= P99_BOUND || max >= MAX_BOUND || misses > 0,
+            "{name} passed ({median}, {p99}, {max})"
+        );
+    }
+}
