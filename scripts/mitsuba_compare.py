@@ -262,6 +262,8 @@ def main():
     ap.add_argument("--camera-up", type=vec3)
     ap.add_argument("--fov-y", type=float)
     ap.add_argument("--nrc", default="target/release/nrc", help="path of the nrc binary")
+    ap.add_argument("--light-sampler", choices=["power", "tree"], default="power",
+                    help="nrc's light sampler (`nrc render --light-sampler`)")
     ap.add_argument("--keep", help="folder to keep both EXRs in")
     ap.add_argument("--env", help="environment map (.exr/.hdr), as `nrc render --env`")
     ap.add_argument("--env-intensity", type=float, default=1.0)
@@ -349,7 +351,8 @@ def main():
            "--spp", str(args.spp), "--max-depth", str(args.max_depth), "--rr-depth", str(args.rr_depth),
            "--threads", str(args.threads), "--seed", str(args.seed), "--out", ours,
            "--camera-pos", ",".join(map(str, pos)), "--camera-target", ",".join(map(str, target)),
-           "--camera-up", ",".join(map(str, up)), "--fov-y", str(fov)]
+           "--camera-up", ",".join(map(str, up)), "--fov-y", str(fov),
+           "--light-sampler", args.light_sampler]
     if args.env:
         cmd += ["--env", env_file, "--env-intensity", str(args.env_intensity), "--env-rotate", str(args.env_rotate)]
     ours_var = os.path.join(work, "nrc-variance.exr")

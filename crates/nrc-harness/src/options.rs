@@ -166,6 +166,13 @@ pub struct SceneArgs {
         allow_hyphen_values = true
     )]
     pub env_rotate: f32,
+
+    /// How next-event estimation and the resampling passes' light candidates choose a light
+    /// for a shading point: `power` (in proportion to power, the same everywhere) or `tree` (a
+    /// light tree weighing each light's power by its distance and orientation to the point:
+    /// for scenes with many lights). Light paths start by power either way.
+    #[arg(long, default_value_t = nrc_scene::LightSamplerKind::Power)]
+    pub light_sampler: nrc_scene::LightSamplerKind,
 }
 
 impl SceneArgs {
@@ -206,6 +213,9 @@ impl SceneArgs {
                 eprintln!("warning: {w}");
             }
             scene.set_environment(env);
+        }
+        if scene.light_sampler() != self.light_sampler {
+            scene.set_light_sampler(self.light_sampler);
         }
         Ok(())
     }

@@ -328,7 +328,7 @@ impl Scene {
 impl Scene {
     /// Loads a glTF scene. Keyword options are `nrc info`'s flags (`camera_pos=(x, y, z)`,
     /// `camera_target`, `camera_up`, `fov_y`, `background`, `env`, `env_intensity`,
-    /// `env_rotate`).
+    /// `env_rotate`, `light_sampler="power"|"tree"`).
     #[staticmethod]
     #[pyo3(signature = (path, **options))]
     fn load(py: Python<'_>, path: PathBuf, options: Option<&Bound<'_, PyDict>>) -> PyResult<Self> {

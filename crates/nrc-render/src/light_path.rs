@@ -99,7 +99,7 @@ pub fn trace_light_path(
     let u_point = sampler.next_2d();
     let u_side = sampler.next_1d();
     let u_dir = sampler.next_2d();
-    let Some(ls) = scene.sample_light(u_light, u_point) else {
+    let Some(ls) = scene.sample_light_by_power(u_light, u_point) else {
         return path;
     };
     path.origin = Some(ls);

@@ -4,7 +4,7 @@
 
 use glam::Vec3;
 use nrc_scene::{
-    Scene, SurfaceInteraction,
+    LightContext, Scene, SurfaceInteraction,
     bsdf::Bsdf,
     sampling::{Frame, power_heuristic},
 };
@@ -13,13 +13,14 @@ use crate::sampler::PixelSampler;
 use crate::tracer::PathStats;
 
 /// The MIS weight (power heuristic) of emission found at `si` by a ray of length `dist` that
-/// BSDF sampling at the previous vertex chose with solid-angle density `prev_pdf`, against NEE
+/// BSDF sampling at the previous vertex `from` chose with solid-angle density `prev_pdf`, against NEE
 /// (`light_samples` light samples there) choosing the same point. `force_one`: the previous
 /// event could not have been light-sampled (a camera ray, delta scattering, or NEE off), so
 /// the emission counts fully.
 #[inline]
 pub fn emission_mis_weight(
     scene: &Scene,
+    from: &LightContext,
     si: &SurfaceInteraction,
     dist: f32,
     prev_pdf: f32,
@@ -27,7 +28,7 @@ pub fn emission_mis_weight(
     force_one: bool,
 ) -> f32 {
     // Area density with which NEE picks this point (0: NEE cannot reach it).
-    let pdf_area = scene.light_pdf_area(si.tri);
+    let pdf_area = scene.light_pdf_area(from, si.tri);
     if force_one || pdf_area == 0.0 {
         return 1.0;
     }
@@ -45,19 +46,21 @@ pub fn emission_mis_weight(
 #[inline]
 pub fn environment_mis_weight(
     scene: &Scene,
+    from: &LightContext,
     d: Vec3,
     prev_pdf: f32,
     light_samples: f32,
     force_one: bool,
 ) -> f32 {
-    let pdf_light = scene.environment_light_pdf(d);
+    let pdf_light = scene.environment_light_pdf(from, d);
     if force_one || pdf_light == 0.0 {
         return 1.0;
     }
     power_heuristic(1.0, prev_pdf, light_samples, pdf_light)
 }
 
-/// Next-event estimation at a non-delta vertex: one light sample chosen by power (a point on
+/// Next-event estimation at a non-delta vertex: one light sample chosen by the scene's light
+/// sampler for this point (a point on
 /// an emissive triangle, a punctual light, or an environment direction), its unoccluded
 /// contribution `f · L_i · |cos| / pdf`, weighted against BSDF sampling by the power heuristic
 /// when `mis` (else weight 1; delta lights always have weight 1, BSDF sampling cannot find
@@ -77,7 +80,8 @@ pub fn next_event(
 ) -> Vec3 {
     let u_light = sampler.next_1d();
     let u_point = sampler.next_2d();
-    let Some(ls) = scene.sample_light(u_light, u_point) else {
+    let at = LightContext::new(si.p, si.ns);
+    let Some(ls) = scene.sample_light(&at, u_light, u_point) else {
         return Vec3::ZERO;
     };
     let Some(inc) = ls.incident(si.p) else {

@@ -17,7 +17,7 @@
 
 use glam::Vec3;
 use nrc_scene::bsdf::{Bsdf, BsdfSample};
-use nrc_scene::{Ray, Scene, SurfaceInteraction, sampling::Frame, spawn_ray};
+use nrc_scene::{LightContext, Ray, Scene, SurfaceInteraction, sampling::Frame, spawn_ray};
 
 use crate::nee::{emission_mis_weight, environment_mis_weight, next_event};
 use crate::query::RadianceQuery;
@@ -105,6 +105,8 @@ pub struct PathWalk {
     throughput: Vec3,
     prev_pdf: f32,
     prev_delta: bool,
+    /// The previous scattering vertex, for the light sampler's density there.
+    prev_at: LightContext,
     /// Segments used, including the one in flight.
     segments: u32,
     /// Light samples NEE takes at each vertex (their MIS against BSDF sampling counts them).
@@ -126,6 +128,7 @@ impl PathWalk {
             throughput: Vec3::ONE,
             prev_pdf: 0.0,
             prev_delta: true,
+            prev_at: LightContext::new(Vec3::ZERO, Vec3::ZERO),
             segments: 1,
             light_samples: 1,
             limit: tracer.segment_limit(),
@@ -169,12 +172,13 @@ impl PathWalk {
             } else if self.tracer.strategy == LightStrategy::LightOnly
                 && self.use_nee
                 && !self.prev_delta
-                && scene.environment_light_pdf(d) > 0.0
+                && scene.environment_light_pdf(&self.prev_at, d) > 0.0
             {
                 0.0
             } else {
                 environment_mis_weight(
                     scene,
+                    &self.prev_at,
                     d,
                     self.prev_pdf,
                     self.light_samples as f32,
@@ -193,13 +197,14 @@ impl PathWalk {
         } else if self.tracer.strategy == LightStrategy::LightOnly
             && self.use_nee
             && !self.prev_delta
-            && scene.light_pdf_area(si.tri) > 0.0
+            && scene.light_pdf_area(&self.prev_at, si.tri) > 0.0
         {
             // NEE alone accounts for emitters it can reach after non-delta scattering.
             0.0
         } else {
             emission_mis_weight(
                 scene,
+                &self.prev_at,
                 &si,
                 dist,
                 self.prev_pdf,
@@ -273,6 +278,7 @@ impl PathWalk {
         self.segments += 1;
         self.prev_pdf = bs.pdf;
         self.prev_delta = bs.delta;
+        self.prev_at = LightContext::new(v.si.p, v.si.ns);
     }
 
     /// Samples the BSDF at `v` for the next segment, updates the throughput and applies

@@ -42,6 +42,7 @@ pub mod gltf_load;
 pub mod image;
 pub mod interaction;
 pub mod light;
+pub mod light_tree;
 pub mod material;
 pub mod sampling;
 pub mod scene;
@@ -59,9 +60,10 @@ pub use geometry::{Aabb, Ray, offset_ray_origin, spawn_ray, spawn_ray_between, s
 pub use image::Image;
 pub use interaction::SurfaceInteraction;
 pub use light::{
-    Incident, LightSample, LightSampler, LightSource, PunctualKind, PunctualLight,
-    SurfaceLightSample,
+    Incident, LightContext, LightSample, LightSampler, LightSamplerKind, LightSource, PunctualKind,
+    PunctualLight, SurfaceLightSample,
 };
+pub use light_tree::{LightBounds, LightTree};
 pub use material::{AlphaMode, Material};
 pub use scene::{Scene, SceneDescription, SceneSummary};
 pub use texture::{Texture, TextureRef, WrapMode};

@@ -414,8 +414,53 @@ impl LightSample {
     }
 }
 
+/// The point a light is chosen for: its position and unit shading normal (zero where there is
+/// no surface). The light tree ([`crate::light_tree`]) chooses by it; the power sampler ignores it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LightContext {
+    pub p: Vec3,
+    pub n: Vec3,
+}
+
+impl LightContext {
+    /// A shading point `p` with shading normal `n`.
+    pub fn new(p: Vec3, n: Vec3) -> Self {
+        Self { p, n }
+    }
+}
+
+/// How next-event estimation and the resampling passes' light candidates choose a light.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum LightSamplerKind {
+    /// In proportion to power, the same everywhere.
+    #[default]
+    Power,
+    /// By the light tree: power, distance and orientation toward the shading point.
+    Tree,
+}
+
+impl std::str::FromStr for LightSamplerKind {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "power" => Ok(Self::Power),
+            "tree" => Ok(Self::Tree),
+            _ => Err(format!("unknown light sampler `{s}` (power or tree)")),
+        }
+    }
+}
+
+impl std::fmt::Display for LightSamplerKind {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Self::Power => "power",
+            Self::Tree => "tree",
+        })
+    }
+}
+
 /// What a [`LightSampler`] entry stands for.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum LightSource {
     /// An emissive scene triangle.
     Triangle(u32),

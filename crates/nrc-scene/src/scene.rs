@@ -13,7 +13,11 @@ use crate::environment::Environment;
 use crate::error::{Result, SceneError};
 use crate::geometry::{Aabb, Ray};
 use crate::interaction::SurfaceInteraction;
-use crate::light::{LightSample, LightSampler, LightSource, PunctualLight, SurfaceLightSample};
+use crate::light::{
+    LightContext, LightSample, LightSampler, LightSamplerKind, LightSource, PunctualKind,
+    PunctualLight, SurfaceLightSample,
+};
+use crate::light_tree::{LightBounds, LightTree};
 use crate::material::Material;
 use crate::sampling::{luminance, sample_uniform_triangle};
 use crate::texture::Texture;
@@ -83,6 +87,8 @@ pub struct Scene {
     materials: Vec<Material>,
     textures: Vec<Texture>,
     lights: LightSampler,
+    /// The light tree, when next-event estimation chooses lights by it.
+    tree: Option<LightTree>,
     punctual: Vec<PunctualLight>,
     environment: Environment,
     /// Whether some material cuts surfaces away (rays then test alpha at every hit).
@@ -347,6 +353,7 @@ impl Scene {
             materials,
             textures,
             lights: LightSampler::default(),
+            tree: None,
             punctual,
             environment,
             has_cutouts,
@@ -367,6 +374,95 @@ impl Scene {
 
     /// The light sampler over the emissive triangles, punctual lights and environment, by power.
     fn build_lights(&self) -> LightSampler {
+        let emitters: Vec<(u32, f32, f32)> = self
+            .emitters()
+            .iter()
+            .map(|&(i, area, power)| (i, area, power))
+            .collect();
+        let r = self.sphere.1;
+        let punctual: Vec<f32> = self.punctual.iter().map(|l| l.power(r)).collect();
+        LightSampler::new(
+            self.tris.len(),
+            &emitters,
+            &punctual,
+            self.environment_power(),
+        )
+    }
+
+    /// The environment's power in the light sampler's units.
+    fn environment_power(&self) -> f32 {
+        let r = self.sphere.1;
+        (r as f64 * r as f64 * self.environment.luminance_integral() / std::f64::consts::PI) as f32
+    }
+
+    /// The light tree over the emissive triangles and the punctual lights, with the
+    /// environment and directional lights at infinity.
+    fn build_tree(&self) -> LightTree {
+        let (bounded, infinity) = self.light_tree_inputs();
+        LightTree::new(bounded, infinity)
+    }
+
+    /// What the light tree is built from: each bounded light (emissive triangles, point and
+    /// spot lights) with its bounds, in the power sampler's units, and the lights at infinity
+    /// (directional lights, the environment).
+    pub fn light_tree_inputs(&self) -> (Vec<(LightSource, LightBounds)>, Vec<LightSource>) {
+        let r = self.sphere.1;
+        let mut bounded: Vec<(LightSource, LightBounds)> = self
+            .emitters()
+            .into_iter()
+            .map(|(i, _, power)| {
+                let [a, b, c] = self.triangle_vertices(i);
+                let rec = &self.tris[i as usize];
+                let two_sided = self.materials[rec.material as usize].double_sided;
+                (
+                    LightSource::Triangle(i),
+                    LightBounds::surface(
+                        a.min(b).min(c),
+                        a.max(b).max(c),
+                        rec.ng,
+                        power,
+                        two_sided,
+                    ),
+                )
+            })
+            .collect();
+        let mut infinity = Vec::new();
+        for (i, l) in self.punctual.iter().enumerate() {
+            let source = LightSource::Punctual(i as u32);
+            let power = l.power(r);
+            if !(power > 0.0 && power.is_finite()) {
+                continue;
+            }
+            match l.kind {
+                PunctualKind::Point => {
+                    bounded.push((source, LightBounds::point(l.position, power)))
+                }
+                PunctualKind::Spot {
+                    cos_inner,
+                    cos_outer,
+                } => bounded.push((
+                    source,
+                    LightBounds::spot(l.position, l.direction, power, cos_inner, cos_outer),
+                )),
+                PunctualKind::Directional => infinity.push(source),
+            }
+        }
+        let env = self.environment_power();
+        if env > 0.0 && env.is_finite() {
+            infinity.push(LightSource::Environment);
+        }
+        (bounded, infinity)
+    }
+
+    /// Samples lights for shading points by `tree`, which must have been built over this
+    /// scene's lights ([`Scene::light_tree_inputs`], perhaps altered: tests use it to check
+    /// that a wrong bound is caught).
+    pub fn set_light_tree(&mut self, tree: LightTree) {
+        self.tree = Some(tree);
+    }
+
+    /// The emissive triangles as `(index, area, power)`, power in the light sampler's units.
+    fn emitters(&self) -> Vec<(u32, f32, f32)> {
         // Barycentrics (b1, b2) at which a textured emitter's radiance is averaged: the
         // centroid, the three vertices and three interior points.
         const PROBES: [(f32, f32); 7] = [
@@ -397,11 +493,27 @@ impl Scene {
             let sides = if m.double_sided { 2.0 } else { 1.0 };
             emitters.push((i as u32, area, luminance(le_mean) * area * sides));
         }
-        let r = self.sphere.1;
-        let punctual: Vec<f32> = self.punctual.iter().map(|l| l.power(r)).collect();
-        let environment = (r as f64 * r as f64 * self.environment.luminance_integral()
-            / std::f64::consts::PI) as f32;
-        LightSampler::new(self.tris.len(), &emitters, &punctual, environment)
+        emitters
+    }
+
+    /// Chooses how lights are sampled for shading points (building the light tree for
+    /// [`LightSamplerKind::Tree`]). Light paths always start by power.
+    pub fn set_light_sampler(&mut self, kind: LightSamplerKind) {
+        self.tree = (kind == LightSamplerKind::Tree).then(|| self.build_tree());
+    }
+
+    /// How lights are sampled for shading points.
+    pub fn light_sampler(&self) -> LightSamplerKind {
+        if self.tree.is_some() {
+            LightSamplerKind::Tree
+        } else {
+            LightSamplerKind::Power
+        }
+    }
+
+    /// The light tree, when lights are sampled by it.
+    pub fn light_tree(&self) -> Option<&LightTree> {
+        self.tree.as_ref()
     }
 
     /// Both texture coordinate sets at barycentrics `(b1, b2)` of triangle `tri`.
@@ -540,12 +652,30 @@ impl Scene {
         }
     }
 
-    /// A sample of the lights: a light chosen in proportion to power with `u_select`, then
-    /// with `u`: a uniform point on an emissive triangle, or a direction from the environment's
-    /// distribution (punctual lights use no number). `None` when nothing lights the scene.
+    /// A sample of the lights for the shading point `at`: a light chosen with `u_select` (by
+    /// the scene's light sampler: in proportion to power, or by the light tree), then with
+    /// `u`: a uniform point on an emissive triangle, or a direction from the environment's
+    /// distribution (punctual lights use no number). `None` when no light can reach `at`.
     #[inline]
-    pub fn sample_light(&self, u_select: f32, u: Vec2) -> Option<LightSample> {
+    pub fn sample_light(&self, at: &LightContext, u_select: f32, u: Vec2) -> Option<LightSample> {
+        let (source, pmf) = match &self.tree {
+            Some(tree) => tree.sample(at.p, at.n, u_select)?,
+            None => self.lights.select(u_select)?,
+        };
+        self.light_sample_of(source, pmf, u)
+    }
+
+    /// A sample of the lights chosen in proportion to power, wherever it is used from: where
+    /// light paths start.
+    #[inline]
+    pub fn sample_light_by_power(&self, u_select: f32, u: Vec2) -> Option<LightSample> {
         let (source, pmf) = self.lights.select(u_select)?;
+        self.light_sample_of(source, pmf, u)
+    }
+
+    /// The sample of light `source`, chosen with probability `pmf`, drawn with `u`.
+    #[inline]
+    fn light_sample_of(&self, source: LightSource, pmf: f32, u: Vec2) -> Option<LightSample> {
         match source {
             LightSource::Triangle(tri) => {
                 let (b1, b2) = sample_uniform_triangle(u);
@@ -559,7 +689,11 @@ impl Scene {
                     uv: uv[0],
                     le: m.emission(&self.textures, &uv),
                     two_sided: m.double_sided,
-                    pdf_area: self.lights.pdf_area(tri),
+                    pdf_area: if self.tree.is_some() {
+                        pmf / self.triangle_area(tri)
+                    } else {
+                        self.lights.pdf_area(tri)
+                    },
                     tri,
                 }))
             }
@@ -579,10 +713,14 @@ impl Scene {
         }
     }
 
-    /// The emitter point `si` (reached by a ray) as the light sample [`Scene::sample_light`]
-    /// could have drawn there: a BSDF-sampled emitter hit as a resampling candidate. `None` on
-    /// surfaces that do not emit.
-    pub fn light_sample_at(&self, si: &SurfaceInteraction) -> Option<LightSample> {
+    /// The emitter point `si` (reached by a ray from `at`) as the light sample
+    /// [`Scene::sample_light`] could have drawn there for `at`: a BSDF-sampled emitter hit as a
+    /// resampling candidate. `None` on surfaces that do not emit.
+    pub fn light_sample_at(
+        &self,
+        at: &LightContext,
+        si: &SurfaceInteraction,
+    ) -> Option<LightSample> {
         let m = &self.materials[si.material as usize];
         if !m.is_emissive() {
             return None;
@@ -593,27 +731,30 @@ impl Scene {
             uv: si.uv[0],
             le: m.emission(&self.textures, &si.uv),
             two_sided: m.double_sided,
-            pdf_area: self.lights.pdf_area(si.tri),
+            pdf_area: self.light_pdf_area(at, si.tri),
             tri: si.tri,
         }))
     }
 
     /// The environment seen along unit direction `d` as a light sample (`None` where it is
     /// black).
-    pub fn environment_sample(&self, d: Vec3) -> Option<LightSample> {
+    pub fn environment_sample(&self, at: &LightContext, d: Vec3) -> Option<LightSample> {
         let le = self.environment.radiance(d);
         (le != Vec3::ZERO).then_some(LightSample::Environment {
             dir: d,
             le,
-            pdf: self.environment_light_pdf(d),
+            pdf: self.environment_light_pdf(at, d),
         })
     }
 
     /// Solid-angle density with which [`Scene::sample_light`] produces environment direction
-    /// `d` (zero when the environment is not among the lights).
+    /// `d` for `at` (zero when the environment is not among the lights).
     #[inline]
-    pub fn environment_light_pdf(&self, d: Vec3) -> f32 {
-        let pmf = self.lights.environment_pmf();
+    pub fn environment_light_pdf(&self, at: &LightContext, d: Vec3) -> f32 {
+        let pmf = match &self.tree {
+            Some(tree) => tree.pmf(at.p, at.n, LightSource::Environment),
+            None => self.lights.environment_pmf(),
+        };
         if pmf > 0.0 {
             pmf * self.environment.pdf(d)
         } else {
@@ -630,6 +771,9 @@ impl Scene {
     pub fn set_environment(&mut self, environment: Environment) {
         self.environment = environment;
         self.lights = self.build_lights();
+        if self.tree.is_some() {
+            self.tree = Some(self.build_tree());
+        }
     }
 
     /// The punctual lights.
@@ -643,12 +787,21 @@ impl Scene {
         self.sphere
     }
 
-    /// Area density of [`Scene::sample_light`] producing a point on triangle `tri` (zero
-    /// when the triangle is not a light: then only BSDF sampling can find its emission,
-    /// which multiple importance sampling must weight by 1).
+    /// Area density of [`Scene::sample_light`] producing a point on triangle `tri` for `at`
+    /// (zero when the triangle is not a light, or the light tree finds that it cannot light
+    /// `at`: then only BSDF sampling can find its emission, which multiple importance sampling
+    /// must weight by 1).
     #[inline]
-    pub fn light_pdf_area(&self, tri: u32) -> f32 {
-        self.lights.pdf_area(tri)
+    pub fn light_pdf_area(&self, at: &LightContext, tri: u32) -> f32 {
+        match &self.tree {
+            Some(tree) => {
+                if self.lights.pdf_area(tri) == 0.0 {
+                    return 0.0;
+                }
+                tree.pmf(at.p, at.n, LightSource::Triangle(tri)) / self.triangle_area(tri)
+            }
+            None => self.lights.pdf_area(tri),
+        }
     }
 
     /// The light sampler.

@@ -23,7 +23,7 @@ fn light_centre(scene: &Scene) -> Vec3 {
             (i % 8) as f32 / 8.0 + 1.0 / 16.0,
             (i / 8) as f32 / 8.0 + 1.0 / 16.0,
         );
-        match scene.sample_light((i as f32 + 0.5) / n as f32, u) {
+        match scene.sample_light_by_power((i as f32 + 0.5) / n as f32, u) {
             Some(LightSample::Surface(s)) => sum += s.p,
             other => panic!("the box's only light is its lamp, got {other:?}"),
         }

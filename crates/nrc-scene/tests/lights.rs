@@ -85,7 +85,7 @@ fn selection_frequencies_follow_power() {
     let mut counts = vec![0u64; lights.len()];
     for _ in 0..200_000 {
         let s = scene
-            .sample_light(rng.random(), Vec2::new(rng.random(), rng.random()))
+            .sample_light_by_power(rng.random(), Vec2::new(rng.random(), rng.random()))
             .and_then(|s| s.surface().copied())
             .unwrap();
         let k = lights.iter().position(|&t| t == s.tri).unwrap();
@@ -104,7 +104,7 @@ fn points_are_uniform_on_the_triangle() {
     let mut n = 0;
     while n < 100_000 {
         let s = scene
-            .sample_light(rng.random(), Vec2::new(rng.random(), rng.random()))
+            .sample_light_by_power(rng.random(), Vec2::new(rng.random(), rng.random()))
             .and_then(|s| s.surface().copied())
             .unwrap();
         if s.tri != scene.lights().triangles()[5] {
@@ -151,13 +151,25 @@ fn area_densities_are_consistent() {
         .lights()
         .triangles()
         .iter()
-        .map(|&t| scene.light_pdf_area(t) as f64 * scene.triangle_area(t) as f64)
+        .map(|&t| {
+            scene.light_pdf_area(
+                &nrc_scene::LightContext::new(glam::Vec3::ZERO, glam::Vec3::ZERO),
+                t,
+            ) as f64
+                * scene.triangle_area(t) as f64
+        })
         .sum();
     assert!((sum - 1.0).abs() < 1e-5, "{sum}");
     let floor = (0..scene.triangle_count() as u32)
         .find(|&t| !scene.lights().triangles().contains(&t))
         .unwrap();
-    assert_eq!(scene.light_pdf_area(floor), 0.0);
+    assert_eq!(
+        scene.light_pdf_area(
+            &nrc_scene::LightContext::new(glam::Vec3::ZERO, glam::Vec3::ZERO),
+            floor
+        ),
+        0.0
+    );
     // Monte Carlo estimate of the emitted luminance integral ∫ L dA (both faces of
     // two-sided lights counted once, as radiance is per face): E[L / pdf_area].
     let exact: f64 = scene
@@ -174,10 +186,16 @@ fn area_densities_are_consistent() {
     let (mut sum, mut sum2) = (0.0f64, 0.0f64);
     for _ in 0..n {
         let s = scene
-            .sample_light(rng.random(), Vec2::new(rng.random(), rng.random()))
+            .sample_light_by_power(rng.random(), Vec2::new(rng.random(), rng.random()))
             .and_then(|s| s.surface().copied())
             .unwrap();
-        assert_eq!(s.pdf_area, scene.light_pdf_area(s.tri));
+        assert_eq!(
+            s.pdf_area,
+            scene.light_pdf_area(
+                &nrc_scene::LightContext::new(glam::Vec3::ZERO, glam::Vec3::ZERO),
+                s.tri
+            )
+        );
         let x = luminance(s.le) as f64 / s.pdf_area as f64;
         sum += x;
         sum2 += x * x;
@@ -196,7 +214,7 @@ fn one_sided_lights_emit_from_the_front_only() {
     let mut rng = Pcg64Mcg::seed_from_u64(2);
     for _ in 0..1000 {
         let s = scene
-            .sample_light(rng.random(), Vec2::new(rng.random(), rng.random()))
+            .sample_light_by_power(rng.random(), Vec2::new(rng.random(), rng.random()))
             .and_then(|s| s.surface().copied())
             .unwrap();
         assert_eq!(s.le_toward(s.n), s.le);

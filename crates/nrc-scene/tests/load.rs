@@ -81,12 +81,18 @@ fn cornell_box_glb() {
     );
     // Sampled light points lie on their triangles and face into the box.
     let s = *scene
-        .sample_light(0.5, Vec2::new(0.3, 0.6))
+        .sample_light_by_power(0.5, Vec2::new(0.3, 0.6))
         .unwrap()
         .surface()
         .unwrap();
     assert!(s.pdf_area > 0.0 && s.le.max_element() > 0.0);
-    assert_eq!(scene.light_pdf_area(s.tri), s.pdf_area);
+    assert_eq!(
+        scene.light_pdf_area(
+            &nrc_scene::LightContext::new(glam::Vec3::ZERO, glam::Vec3::ZERO),
+            s.tri
+        ),
+        s.pdf_area
+    );
     let probe = Ray::new(s.p - s.n * 1e-2, s.n);
     let _ = scene.intersect(&probe);
 }

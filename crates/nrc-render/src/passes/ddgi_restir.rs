@@ -476,6 +476,7 @@ impl DdgiRestirPass {
     fn candidates(&self, scene: &Scene, v: &Vertex, s: &mut PixelSampler) -> Traced {
         let set = &self.settings;
         let mut t = Traced::default();
+        let from = nrc_scene::LightContext::new(v.si.p, v.si.ns);
         let surface = |si: &nrc_scene::SurfaceInteraction, at: Vertex| {
             let m = &scene.materials()[si.material as usize];
             let emits = m.is_emissive();
@@ -492,7 +493,7 @@ impl DdgiRestirPass {
                 side: si.ng.dot(si.wo).signum(),
                 tri: si.tri,
                 pdf_light: if emits {
-                    scene.light_pdf_area(si.tri)
+                    scene.light_pdf_area(&from, si.tri)
                 } else {
                     0.0
                 },
@@ -506,7 +507,7 @@ impl DdgiRestirPass {
         for _ in 0..set.light_candidates {
             let u_select = s.next_1d();
             let u_point = s.next_2d();
-            let c = match scene.sample_light(u_select, u_point) {
+            let c = match scene.sample_light(&from, u_select, u_point) {
                 Some(LightSample::Surface(ls)) => {
                     let wo = (v.si.p - ls.p).normalize_or_zero();
                     let si = scene.interaction_at(ls.tri, ls.p, wo);
@@ -545,7 +546,7 @@ impl DdgiRestirPass {
                     })
                 }
                 None => scene
-                    .environment_sample(ray.d.normalize())
+                    .environment_sample(&from, ray.d.normalize())
                     .map(|ls| Candidate {
                         y: DdgiSample::Light(ls),
                         at: None,

@@ -1,8 +1,8 @@
 //! Writes the scenes the project ships: `scenes/<name>.gltf` with its `.bin` buffer and PNG
 //! textures, for `cornell-box` (and `cornell-box-moving` and `cornell-box-jump`, its light
 //! animated, linearly and in steps), `caustics`,
-//! `ajar`, `glossy` and `sun-spot-env` (with the
-//! HDR sky `sky.exr` it is rendered under), then checks each file
+//! `ajar`, `glossy`, `sun-spot-env` (with the
+//! HDR sky `sky.exr` it is rendered under) and `many-lights`, then checks each file
 //! against the glTF 2.0 rules (see `check.rs`), loads it with the project's own loader
 //! (`nrc_scene::Scene::load`), checks that the loader sees what was written (triangles,
 //! lights, emitted power, the camera, no warnings), and prints the figures.
@@ -19,6 +19,7 @@ mod check;
 mod cornell_box;
 mod glossy;
 mod gltf_doc;
+mod many_lights;
 mod mesh;
 mod sun_spot_env;
 mod textures;
@@ -29,7 +30,7 @@ use std::process::ExitCode;
 /// Builds one scene's document.
 type Builder = fn() -> gltf_doc::Document;
 
-const SCENES: [(&str, Builder); 7] = [
+const SCENES: [(&str, Builder); 8] = [
     ("cornell-box", cornell_box::build),
     ("cornell-box-moving", cornell_box::build_moving),
     ("cornell-box-jump", cornell_box::build_jump),
@@ -37,6 +38,7 @@ const SCENES: [(&str, Builder); 7] = [
     ("ajar", ajar::build),
     ("glossy", glossy::build),
     ("sun-spot-env", sun_spot_env::build),
+    ("many-lights", many_lights::build),
 ];
 
 fn main() -> ExitCode {
