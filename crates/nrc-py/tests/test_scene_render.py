@@ -81,3 +81,22 @@ def test_passes_by_name(cornell, trained):
         assert img.shape == (16, 16, 3) and np.isfinite(img).all()
     img = nrc.render(cornell, pass_="cache-first", width=16, height=16, cache=trained)
     assert np.isfinite(img).all() and img.mean() > 0
+
+
+def test_light_tree_renders_as_the_program(tmp_path):
+    """`light_sampler="tree"` loads the scene with the light tree: the same bits as
+    `nrc render --light-sampler tree`, another image than the power sampler's; a wrong name is
+    refused."""
+    hall = SCENES / "many-lights.gltf"
+    out = tmp_path / "tree.exr"
+    nrc.cli([
+        "render", "--scene", str(hall), "--light-sampler", "tree", "--spp", "2",
+        "--width", "24", "--height", "16", "--seed", "3", "--out", str(out),
+    ])
+    tree = nrc.Scene.load(hall, light_sampler="tree")
+    image = nrc.render(tree, spp=2, width=24, height=16, seed=3)
+    assert np.array_equal(image, nrc.read_exr(out))
+    power = nrc.render(nrc.Scene.load(hall), spp=2, width=24, height=16, seed=3)
+    assert not np.array_equal(image, power)
+    with pytest.raises(ValueError, match="light sampler `bvh`"):
+        nrc.Scene.load(hall, light_sampler="bvh")
