@@ -54,7 +54,7 @@ use std::f32::consts::PI;
 use std::time::Instant;
 
 use glam::Vec3;
-use nrc_scene::{LightSample, Scene, sampling::luminance, spawn_ray};
+use nrc_scene::{Hit, LightSample, Ray, Scene, sampling::luminance, spawn_ray};
 
 use crate::error::SettingsError;
 use super::restir_di;
@@ -411,8 +411,40 @@ fn sees(scene: &Scene, v: &Vertex, y: &DdgiSample, stats: &mut PathStats) -> boo
 #[derive(Clone, Copy, Debug)]
 struct Candidate {
     y: DdgiSample,
-    at: Option<Vertex>,
+    at: Option<At>,
     from_bsdf: bool,
+}
+
+/// Where a surface candidate lies, for the source to answer the radiance it reflects: kept
+/// small, since a frame holds every pixel's candidates until the source answers them all (whole
+/// shading vertices, 9 a pixel, took 4.4 GiB at 1280 × 720: BENCHMARKS.md), and its vertex
+/// rebuilt, with the same bits, when it is asked.
+#[derive(Clone, Copy, Debug)]
+enum At {
+    /// A light sample's point `p` on triangle `tri`, seen from `wo`.
+    Point { tri: u32, p: Vec3, wo: Vec3 },
+    /// A BSDF ray's hit, seen from the ray.
+    Hit { ray: Ray, hit: Hit },
+}
+
+impl At {
+    /// The direction the radiance is asked toward (world space, unit).
+    fn wo(&self) -> Vec3 {
+        match *self {
+            At::Point { wo, .. } => wo,
+            At::Hit { ray, .. } => -ray.d.normalize(),
+        }
+    }
+
+    fn vertex(&self, scene: &Scene) -> Vertex {
+        match *self {
+            At::Point { tri, p, wo } => Vertex::new(scene, &scene.interaction_at(tri, p, wo), wo),
+            At::Hit { ray, hit } => {
+                let si = scene.interaction(&ray, &hit);
+                Vertex::new(scene, &si, si.wo)
+            }
+        }
+    }
 }
 
 /// The first BSDF candidate's own estimate: its weight `f cos / p` and whether it was a delta
@@ -438,9 +470,9 @@ struct Frame {
     traced: Vec<Traced>,
     /// `ddgi-nrc-restir`: the probe rays waiting for the source.
     rays: Option<ProbeRays>,
-    /// The history's surface samples to refresh: reservoir index and the vertex at the
-    /// sample, asked toward the reservoir's owner.
-    refresh: Vec<(usize, Vertex)>,
+    /// The history's surface samples to refresh: reservoir index and where the sample is,
+    /// asked toward the reservoir's owner.
+    refresh: Vec<(usize, At)>,
     trace_ms: f64,
 }
 
@@ -503,7 +535,7 @@ impl DdgiRestirPass {
         // The vertex at a surface candidate, for the source to answer the radiance it
         // reflects; none where its BSDF is black (the converted scenes' emitters): that
         // radiance is exactly zero, and asking costs a cache query or a probe lookup.
-        let reflecting = |at: Vertex| (!at.bsdf.is_black()).then_some(at);
+        let reflecting = |at: Vertex, place: At| (!at.bsdf.is_black()).then_some(place);
         for _ in 0..set.light_candidates {
             let u_select = s.next_1d();
             let u_point = s.next_2d();
@@ -512,9 +544,14 @@ impl DdgiRestirPass {
                     let wo = (v.si.p - ls.p).normalize_or_zero();
                     let si = scene.interaction_at(ls.tri, ls.p, wo);
                     let at = Vertex::new(scene, &si, wo);
+                    let place = At::Point {
+                        tri: ls.tri,
+                        p: ls.p,
+                        wo,
+                    };
                     Some(Candidate {
                         y: surface(&si, at),
-                        at: reflecting(at),
+                        at: reflecting(at, place),
                         from_bsdf: false,
                     })
                 }
@@ -541,7 +578,7 @@ impl DdgiRestirPass {
                     let at = Vertex::new(scene, &si, si.wo);
                     Some(Candidate {
                         y: surface(&si, at),
-                        at: reflecting(at),
+                        at: reflecting(at, At::Hit { ray, hit }),
                         from_bsdf: true,
                     })
                 }
@@ -784,7 +821,11 @@ impl RenderPass for DdgiRestirPass {
             SurfaceLight::Probes => {}
             SurfaceLight::Cache => {
                 for t in &traced {
-                    queries.extend(t.candidates.iter().filter_map(|c| c.at.map(|a| a.query())));
+                    queries.extend(
+                        t.candidates
+                            .iter()
+                            .filter_map(|c| c.at.map(|a| a.vertex(scene).query())),
+                    );
                 }
             }
             SurfaceLight::CacheProbes => {
@@ -802,7 +843,7 @@ impl RenderPass for DdgiRestirPass {
         // again toward its owner. (The paper's §3.7 reuse assumes a static source: without
         // this, a converging source leaves the image dark by the stale values, -1.7 % in the
         // enclosure test.)
-        let refresh: Vec<(usize, Vertex)> =
+        let refresh: Vec<(usize, At)> =
             match self.history.as_ref().filter(|_| self.settings.temporal) {
                 Some(h) => h
                     .res
@@ -814,14 +855,13 @@ impl RenderPass for DdgiRestirPass {
                         };
                         let owner = h.g.primary[j].as_ref()?.v.si.p;
                         let wo = (owner - y.x).normalize_or_zero();
-                        let si = scene.interaction_at(y.tri, y.x, wo);
-                        Some((j, Vertex::new(scene, &si, wo)))
+                        Some((j, At::Point { tri: y.tri, p: y.x, wo }))
                     })
                     .collect(),
                 None => Vec::new(),
             };
         if self.settings.light == SurfaceLight::Cache {
-            queries.extend(refresh.iter().map(|(_, v)| v.query()));
+            queries.extend(refresh.iter().map(|(_, at)| at.vertex(scene).query()));
         }
         self.frame = Some(Frame {
             g,
@@ -895,7 +935,8 @@ impl RenderPass for DdgiRestirPass {
                 let mut s = stream(seed, i, Phase::SourceLookup);
                 for c in &mut tr.candidates {
                     if let (DdgiSample::Surface(y), Some(at)) = (&mut c.y, &c.at) {
-                        y.l = self.probe_radiance(scene, vol, eye, None, at, &mut s).0;
+                        let at = at.vertex(scene);
+                        y.l = self.probe_radiance(scene, vol, eye, None, &at, &mut s).0;
                     }
                 }
             });
@@ -905,7 +946,8 @@ impl RenderPass for DdgiRestirPass {
                     .par_iter()
                     .map(|(j, at)| {
                         let mut s = stream(seed, *j, Phase::HistoryRefresh);
-                        self.probe_radiance(scene, vol, hg.camera.position, None, at, &mut s)
+                        let at = at.vertex(scene);
+                        self.probe_radiance(scene, vol, hg.camera.position, None, &at, &mut s)
                             .0
                     })
                     .collect();
@@ -1094,12 +1136,12 @@ impl Resampling for DdgiFrame<'_> {
 }
 
 /// Puts the source's current radiance `fresh` into the history's surface samples listed in
-/// `refresh` (reservoir index, vertex at the sample asked toward the reservoir's owner).
-fn refresh_history(h: &mut History<DdgiSample>, refresh: &[(usize, Vertex)], fresh: &[Vec3]) {
+/// `refresh` (reservoir index, the sample asked toward the reservoir's owner).
+fn refresh_history(h: &mut History<DdgiSample>, refresh: &[(usize, At)], fresh: &[Vec3]) {
     for (&(j, at), l) in refresh.iter().zip(fresh) {
         if let Some(DdgiSample::Surface(y)) = &mut h.res[j].sample {
             y.l = usable_answer(*l);
-            y.side = y.ng.dot(at.wo_world).signum();
+            y.side = y.ng.dot(at.wo()).signum();
         }
     }
 }
