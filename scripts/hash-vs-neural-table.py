@@ -33,7 +33,8 @@ def cell(r):
 
 def main():
     dirs = [Path(d) for d in sys.argv[1:]] or sorted(Path("out/hash-vs-neural-all").iterdir())
-    order = ["cornell-box", "ajar", "glossy", "caustics", "sun-spot-env", "kitchen"]
+    order = ["cornell-box", "ajar", "glossy", "caustics", "sun-spot-env", "hwrt-cornell-box",
+             "photon-nrc-ajar-caustic", "kajiya-roughness-scale", "kitchen"]
     dirs.sort(key=lambda d: order.index(d.name) if d.name in order else len(order))
     print(
         "| scene | pass | path tracing MSE · FLIP | neural: MSE · relMSE · MAPE · FLIP · bias² (frames) "
