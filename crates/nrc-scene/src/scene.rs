@@ -112,6 +112,8 @@ pub struct SceneSummary {
     pub textures: usize,
     /// Emissive triangles, punctual lights, environment (0 or 1) in the light sampler.
     pub lights: (usize, usize, usize),
+    /// With `--light-sampler tree`: the light tree's node count and depth.
+    pub light_tree: Option<(usize, usize)>,
     pub bounds: Aabb,
     pub camera: Camera,
     /// Whether the camera came from the file (otherwise it frames the bounds).
@@ -140,6 +142,9 @@ impl fmt::Display for SceneSummary {
             "lights:     {} emissive triangles, {} punctual, {} environment",
             self.lights.0, self.lights.1, self.lights.2
         )?;
+        if let Some((nodes, depth)) = self.light_tree {
+            writeln!(f, "light tree: {nodes} nodes, depth {depth}")?;
+        }
         writeln!(
             f,
             "bounds:     min {} max {}",
@@ -878,6 +883,7 @@ impl Scene {
             materials: self.materials.len(),
             textures: self.textures.len(),
             lights: self.lights.counts(),
+            light_tree: self.tree.as_ref().map(|t| (t.node_count(), t.depth())),
             bounds: self.bounds,
             camera: self.camera,
             camera_from_file: self.camera_from_file,

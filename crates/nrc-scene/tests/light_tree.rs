@@ -152,6 +152,21 @@ fn tree_sampling_follows_its_probabilities_and_a_wrong_bound_fails() {
     assert_eq!(bounded.len(), 300 + 3);
     assert_eq!(infinity.len(), 2);
     let tree = scene.light_tree().expect("the tree was asked for");
+    // `nrc info` says so: a binary tree over the 303 bounded lights.
+    let info = scene.summary().to_string();
+    assert!(
+        info.contains(&format!(
+            "light tree: {} nodes, depth {}",
+            2 * 303 - 1,
+            tree.depth()
+        )),
+        "{info}"
+    );
+    assert!(
+        tree.depth() >= 9 && tree.depth() < 303,
+        "depth {}",
+        tree.depth()
+    );
     let lights: Vec<LightSource> = bounded
         .iter()
         .map(|b| b.0)
