@@ -102,6 +102,16 @@ fn nee_with_the_tree_matches_the_power_sampler_per_pixel_and_a_wrong_bound_fails
     );
 
     let broken = spot_blind();
+    // A tree over another scene's lights is refused, not followed out of bounds.
+    let foreign = LightTree::new(
+        vec![(
+            LightSource::Triangle(0),
+            LightBounds::point(glam::Vec3::ZERO, 1.0),
+        )],
+        vec![],
+    );
+    let err = hall().set_light_tree(foreign).unwrap_err();
+    assert!(err.contains("Triangle(4294967295)"), "{err}");
     let with_broken = reference_at_centres(&broken, &direct(), W, H, n_tree);
     let (count, worst) = beyond(&with_broken, n_tree, &reference, n_power);
     println!("spots' bounds reversed: worst |z| {worst:.2}, {count} beyond");
@@ -130,7 +140,9 @@ fn spot_blind() -> Scene {
             _ => (l, b),
         })
         .collect();
-    scene.set_light_tree(LightTree::new(wrong, infinity));
+    scene
+        .set_light_tree(LightTree::new(wrong, infinity))
+        .unwrap();
     scene
 }
 

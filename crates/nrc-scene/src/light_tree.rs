@@ -415,6 +415,11 @@ impl LightTree {
         self.len() == 0
     }
 
+    /// Every light the tree can choose: its bounded lights, then those at infinity.
+    pub fn lights(&self) -> impl Iterator<Item = LightSource> + '_ {
+        self.lights.iter().chain(&self.infinite).copied()
+    }
+
     /// Nodes of the tree.
     pub fn node_count(&self) -> usize {
         self.nodes.len()

@@ -459,11 +459,23 @@ impl Scene {
         (bounded, infinity)
     }
 
-    /// Samples lights for shading points by `tree`, which must have been built over this
-    /// scene's lights ([`Scene::light_tree_inputs`], perhaps altered: tests use it to check
-    /// that a wrong bound is caught).
-    pub fn set_light_tree(&mut self, tree: LightTree) {
+    /// Samples lights for shading points by `tree`, built over this scene's lights
+    /// ([`Scene::light_tree_inputs`], perhaps altered: tests use it to check that a wrong bound
+    /// is caught). A tree naming a light this scene does not have (an emissive triangle, a
+    /// punctual light, the environment) is refused, naming it.
+    pub fn set_light_tree(&mut self, tree: LightTree) -> std::result::Result<(), String> {
+        let env = self.lights.environment_pmf() > 0.0;
+        if let Some(l) = tree.lights().find(|&l| match l {
+            LightSource::Triangle(t) => self.lights.pdf_area(t) == 0.0,
+            LightSource::Punctual(i) => i as usize >= self.punctual.len(),
+            LightSource::Environment => !env,
+        }) {
+            return Err(format!(
+                "the light tree names {l:?}, which this scene does not light with"
+            ));
+        }
         self.tree = Some(tree);
+        Ok(())
     }
 
     /// The emissive triangles as `(index, area, power)`, power in the light sampler's units.
