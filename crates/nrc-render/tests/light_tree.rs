@@ -105,7 +105,7 @@ fn nee_with_the_tree_matches_the_power_sampler_per_pixel_and_a_wrong_bound_fails
     // A tree over another scene's lights is refused, not followed out of bounds.
     let foreign = LightTree::new(
         vec![(
-            LightSource::Triangle(0),
+            LightSource::Triangle(u32::MAX),
             LightBounds::point(glam::Vec3::ZERO, 1.0),
         )],
         vec![],
