@@ -145,6 +145,9 @@ pub struct CompareArgs {
     #[arg(long)]
     pub exclude_emitters: bool,
 
+    #[command(flatten)]
+    pub emitters: nrc_harness::options::EmitterArgs,
+
     /// Cache methods: frames of online training before measurement (untimed).
     #[arg(long, default_value_t = 64)]
     pub train_frames: u32,
@@ -387,6 +390,7 @@ pub(crate) fn comparison(
         seed: args.seed,
         exposure: args.exposure,
         exclude_emitters: args.exclude_emitters,
+        emitter_samples: args.emitters.emitter_samples,
         tracer: args.depth.tracer(),
         cache: cache_settings,
         scene_name: args

@@ -59,6 +59,9 @@ pub struct RenderArgs {
     #[command(flatten)]
     pub tracer: TracerArgs,
 
+    #[command(flatten)]
+    pub emitters: nrc_harness::options::EmitterArgs,
+
     /// Render from a saved cache (a snapshot written by `nrc train --snapshot`): camera
     /// paths end in the cache by --termination instead of being traced to the end.
     #[arg(long)]
@@ -141,6 +144,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
             height: args.height,
             spp: args.spp,
             seed: args.seed,
+            emitter_samples: args.emitters.emitter_samples,
             variance: args.variance.is_some(),
             progress: Some(Box::new(move |n| counter.inc(n))),
         })

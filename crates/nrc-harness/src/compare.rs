@@ -62,6 +62,9 @@ pub struct Comparison {
     pub exposure: f32,
     /// Leave the pixels that see an emitter (and their neighbours) out of the errors.
     pub exclude_emitters: bool,
+    /// Extra camera rays at the outline of emitters, every method alike
+    /// ([`nrc_render::emitters::supersample`]; 0: none).
+    pub emitter_samples: u32,
     /// Depth limit and Russian roulette shared by every method and the reference.
     pub tracer: PathTracer,
     /// How cache methods are set up.
@@ -234,7 +237,7 @@ fn mean_metrics(ms: &[ErrorMetrics]) -> ErrorMetrics {
 /// another size would leave a stateful pass's history cold).
 pub fn ready_method(c: &Comparison, scene: &Scene, spec: &MethodSpec) -> Result<Box<dyn Method>> {
     let (w, h) = (c.width, c.height);
-    let mut method = spec.build(&c.tracer, &c.cache);
+    let mut method = spec.build(&c.tracer, &c.cache, c.emitter_samples);
     method
         .prepare(scene, &scene.camera, w, h)
         .map_err(|e| anyhow::anyhow!("{spec}: {e}"))?;

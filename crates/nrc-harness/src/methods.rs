@@ -360,11 +360,19 @@ impl MethodSpec {
 
     /// The method's state, ready to prepare and render; `tracer`: the depth limit and Russian
     /// roulette every method of a comparison shares (the light strategy is the pass's own).
-    pub fn build(&self, tracer: &PathTracer, cache: &CacheMethodSettings) -> Box<dyn Method> {
+    /// The method, its frames taking `emitter_samples` extra camera rays at the outline of
+    /// emitters ([`nrc_render::emitters::supersample`]).
+    pub fn build(
+        &self,
+        tracer: &PathTracer,
+        cache: &CacheMethodSettings,
+        emitter_samples: u32,
+    ) -> Box<dyn Method> {
         match &self.producer {
             None => Box::new(PassMethod {
                 name: self.to_string(),
                 spp: self.spp,
+                emitter_samples,
                 pass: self.pass.build(tracer),
                 warm_up: if self.pass.is_stateful() {
                     cache.train_frames
@@ -385,6 +393,7 @@ impl MethodSpec {
                 base_seed: cache.seed,
                 tracer: *tracer,
                 trainer: None,
+                emitter_samples,
             }),
         }
     }
@@ -395,6 +404,7 @@ impl MethodSpec {
 struct PassMethod {
     name: String,
     spp: u32,
+    emitter_samples: u32,
     pass: Box<dyn RenderPass>,
     /// Untimed frames before each run (stateful passes: as many as cache methods train).
     warm_up: u32,
@@ -449,6 +459,7 @@ impl Method for PassMethod {
             height,
             spp: self.spp,
             seed,
+            emitter_samples: self.emitter_samples,
         };
         let warm = self.warmth.count(&input);
         let out = passes::run(self.pass.as_mut(), &input, &ZeroSource);
@@ -470,6 +481,7 @@ struct CacheMethod {
     base_seed: u64,
     tracer: PathTracer,
     trainer: Option<OnlineTrainer>,
+    emitter_samples: u32,
 }
 
 /// Pixels a cell of the finest level spans at the camera's typical distance: two, the
@@ -667,6 +679,7 @@ impl Method for CacheMethod {
         let online = self.settings.online;
         let name = self.name.clone();
         let spp = self.spec.spp;
+        let emitter_samples = self.emitter_samples;
         let stateful = self.spec.pass.is_stateful();
         let trainer = match self.trainer(scene, camera, width, height) {
             Ok(t) => t,
@@ -695,6 +708,7 @@ impl Method for CacheMethod {
             height,
             spp,
             seed,
+            emitter_samples,
         });
         Estimate {
             image: out.image,

@@ -43,6 +43,16 @@ impl DepthArgs {
     }
 }
 
+/// The emitters' anti-aliasing (`render`, `compare`): see [`nrc_render::emitters::supersample`].
+#[derive(clap::Args, Debug, Clone, Copy, Default)]
+pub struct EmitterArgs {
+    /// Extra camera rays, their emission only, at each pixel on the outline of an emitter the
+    /// camera sees (where the pixel's neighbours disagree about it), averaged with the pass's
+    /// own camera rays: unbiased, and cheap (one ray each, no shading); 0: none. At most 256
+    #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u32).range(0..=256))]
+    pub emitter_samples: u32,
+}
+
 /// Direct-illumination estimators, as named on the command line.
 #[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Strategy {

@@ -188,6 +188,8 @@ pub struct RenderJob<'a> {
     pub height: u32,
     pub spp: u32,
     pub seed: u64,
+    /// Extra camera rays at the outline of emitters ([`nrc_render::emitters::supersample`]).
+    pub emitter_samples: u32,
     /// The path tracer's per-pixel variance (pt passes only).
     pub variance: bool,
     /// Told of the pixels done as the path tracer's tiles finish (pt passes only).
@@ -207,6 +209,12 @@ pub struct Rendered {
 pub fn render(job: RenderJob) -> Result<Rendered> {
     if job.variance && job.pass.get::<PathTracedSettings>().is_none() {
         bail!("--variance is only available with the pt passes");
+    }
+    if job.variance && job.emitter_samples > 0 {
+        bail!(
+            "--variance is the variance of the pass's own samples, which --emitter-samples \
+             changes: give one of them"
+        );
     }
     let mut pass: Box<dyn RenderPass> = match job.pass.get::<PathTracedSettings>() {
         Some(&PathTracedSettings { strategy }) => {
@@ -235,6 +243,7 @@ pub fn render(job: RenderJob) -> Result<Rendered> {
             } else {
                 nrc_render::pass_seed(job.seed, f as u32)
             },
+            emitter_samples: job.emitter_samples,
         };
         out = Some(match job.cache {
             Some(c) => passes::run(pass.as_mut(), &input, &nrc_train::CacheSource::new(c)),

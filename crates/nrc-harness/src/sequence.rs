@@ -127,7 +127,7 @@ pub fn compare_sequence(
     }
     let mut runs = Vec::new();
     for spec in &c.methods {
-        let mut method = spec.build(&c.tracer, &c.cache);
+        let mut method = spec.build(&c.tracer, &c.cache, c.emitter_samples);
         let cam = camera_at(0, &first);
         method
             .prepare(&first, &cam, w, h)

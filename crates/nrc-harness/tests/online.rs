@@ -66,6 +66,7 @@ fn online_loop_is_deterministic_and_snapshots_render_identically() {
         height: 16,
         spp: 2,
         seed: 99,
+        emitter_samples: 0,
     };
     let before = a.render(&input).image;
     let mut pass = a.settings.pass.build(&a.settings.tracer);
@@ -240,6 +241,7 @@ fn long_run(
         height: h,
         spp: 4,
         seed: 17,
+        emitter_samples: 0,
     };
     let error = |t: &mut OnlineTrainer| {
         let image = t.render(&input).image;
@@ -474,6 +476,7 @@ fn errors_with(scene: &Scene, producer: &str, mut s: CacheMethodSettings) -> [f6
         height: h,
         spp: 4,
         seed: 17,
+        emitter_samples: 0,
     };
     let mut errors = [0.0; 2];
     for f in 1..=100 {
@@ -639,6 +642,7 @@ fn drift_study() {
         height: 32,
         spp: 4,
         seed: 17,
+        emitter_samples: 0,
     };
     let lum = |p: &glam::Vec3| nrc_scene::sampling::luminance(*p) as f64;
     let first = PassSpec::from(nrc_render::passes::CacheTerminatedSettings {
@@ -782,6 +786,7 @@ fn small_frame(scene: &Scene) -> FrameInput<'_> {
         height: 32,
         spp: 1,
         seed: 3,
+        emitter_samples: 0,
     }
 }
 

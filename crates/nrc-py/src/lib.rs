@@ -774,6 +774,8 @@ fn device_of(device: &str) -> PyResult<nrc_cache::CacheDevice> {
 struct RenderOptions {
     #[command(flatten)]
     tracer: TracerArgs,
+    #[command(flatten)]
+    emitters: nrc_harness::options::EmitterArgs,
     #[arg(long, default_value = "spread", value_parser = nrc_harness::options::parse_termination)]
     termination: Termination,
     #[arg(long)]
@@ -788,6 +790,7 @@ struct RenderCall {
     height: u32,
     spp: u32,
     seed: u64,
+    emitter_samples: u32,
 }
 
 impl RenderCall {
@@ -807,6 +810,7 @@ impl RenderCall {
             height: self.height,
             spp: self.spp,
             seed: self.seed,
+            emitter_samples: self.emitter_samples,
             variance: false,
             progress: None,
         })?;
@@ -861,6 +865,7 @@ fn render_call(
             height,
             spp,
             seed,
+            emitter_samples: parsed.emitters.emitter_samples,
         },
         parsed,
     ))
@@ -870,7 +875,7 @@ fn render_call(
 /// and seed): the path tracer, or with `cache` the cache-terminated pass (`termination=`), or
 /// the pass `pass_` names. Returns an `(height, width, 3)` float32 array of linear radiance.
 /// Other keyword options: `max_depth`, `rr_depth`, `strategy`, `termination`,
-/// `allow_other_scene`.
+/// `emitter_samples` (extra camera rays at the outline of emitters), `allow_other_scene`.
 #[pyfunction]
 #[pyo3(signature = (scene, pass_=None, spp=1, width=128, height=128, cache=None, seed=1, **options))]
 #[allow(clippy::too_many_arguments)]

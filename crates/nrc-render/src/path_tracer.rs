@@ -34,12 +34,28 @@ impl PathTracer {
         sampler: &mut PixelSampler,
         stats: &mut PathStats,
     ) -> Vec3 {
+        self.camera_sample(scene, ray, sampler, stats).0
+    }
+
+    /// [`PathTracer::radiance`], and the part of it that the camera ray saw directly (the
+    /// emission of its first hit, or the environment where it escaped), for the emitters'
+    /// anti-aliasing ([`crate::emitters::supersample`]).
+    pub fn camera_sample(
+        &self,
+        scene: &Scene,
+        ray: Ray,
+        sampler: &mut PixelSampler,
+        stats: &mut PathStats,
+    ) -> (Vec3, Vec3) {
         let mut walk = PathWalk::from_ray(scene, self, ray);
         match walk.arrive(scene, stats) {
-            Arrival::Escaped { le, mis } => le * mis,
+            Arrival::Escaped { le, mis } => (le * mis, le * mis),
             // Emission seen by the camera ray counts fully (no light sample could produce
             // it); accumulated first, so sums come out in the same order as along any path.
-            Arrival::Hit(h) => continue_path(scene, walk, h.vertex, h.le, sampler, stats),
+            Arrival::Hit(h) => (
+                continue_path(scene, walk, h.vertex, h.le, sampler, stats),
+                h.le,
+            ),
         }
     }
 

@@ -53,6 +53,8 @@ pub struct RenderStats {
 struct PixelResult {
     mean: [f64; 3],
     m2: [f64; 3],
+    /// Mean of what the camera rays saw directly (the emitters' anti-aliasing).
+    seen: Vec3,
     rays: PathStats,
     invalid: u64,
 }
@@ -145,8 +147,20 @@ pub fn render(
     settings: &RenderSettings,
     progress: &(dyn Fn(u64) + Sync),
 ) -> RenderOutput {
+    render_seen(scene, camera, tracer, settings, progress).0
+}
+
+/// [`render`], and each pixel's mean of what its camera rays saw directly (row-major), for
+/// the emitters' anti-aliasing ([`crate::emitters::supersample`]).
+pub fn render_seen(
+    scene: &Scene,
+    camera: &Camera,
+    tracer: &PathTracer,
+    settings: &RenderSettings,
+    progress: &(dyn Fn(u64) + Sync),
+) -> (RenderOutput, Vec<Vec3>) {
     let spp = settings.spp.max(1);
-    let (moments, stats) = render_moments(
+    let (moments, stats, seen) = trace_pixels(
         scene,
         camera,
         tracer,
@@ -155,7 +169,7 @@ pub fn render(
         0..spp,
         progress,
     );
-    RenderOutput {
+    let out = RenderOutput {
         mean: moments.mean_image(),
         variance: if settings.variance {
             moments.variance_image()
@@ -163,7 +177,8 @@ pub fn render(
             None
         },
         stats,
-    }
+    };
+    (out, seen)
 }
 
 /// The moments of the samples with indices in `samples` (each pixel's sample `s` as in a
@@ -177,6 +192,20 @@ pub fn render_moments(
     samples: std::ops::Range<u32>,
     progress: &(dyn Fn(u64) + Sync),
 ) -> (Moments, RenderStats) {
+    let (moments, stats, _) = trace_pixels(scene, camera, tracer, (w, h), seed, samples, progress);
+    (moments, stats)
+}
+
+/// [`render_moments`] and each pixel's mean of what its camera rays saw directly.
+fn trace_pixels(
+    scene: &Scene,
+    camera: &Camera,
+    tracer: &PathTracer,
+    (w, h): (u32, u32),
+    seed: u64,
+    samples: std::ops::Range<u32>,
+    progress: &(dyn Fn(u64) + Sync),
+) -> (Moments, RenderStats, Vec<Vec3>) {
     let start = Instant::now();
     let first = samples.start;
     let pixels = map_pixels(
@@ -189,12 +218,15 @@ pub fn render_moments(
                 let mut sampler = PixelSampler::new(seed, index, s as u64);
                 let film = Vec2::new(x as f32, y as f32) + sampler.next_2d();
                 let ray = camera.generate_ray(film, w, h);
-                let mut l = tracer.radiance(scene, ray, &mut sampler, &mut acc.rays);
+                let (mut l, mut seen) =
+                    tracer.camera_sample(scene, ray, &mut sampler, &mut acc.rays);
                 if !l.is_finite() {
+                    // The sample counts as black, what it saw directly included.
                     acc.invalid += 1;
-                    l = Vec3::ZERO;
+                    (l, seen) = (Vec3::ZERO, Vec3::ZERO);
                 }
                 let n = (s - first + 1) as f64;
+                acc.seen += (seen - acc.seen) / n as f32;
                 for c in 0..3 {
                     let v = l[c] as f64;
                     let delta = v - acc.mean[c];
@@ -224,5 +256,6 @@ pub fn render_moments(
         m2: pixels.iter().map(|p| p.m2).collect(),
         invalid_samples: stats.invalid_samples,
     };
-    (moments, stats)
+    let seen = pixels.iter().map(|p| p.seen).collect();
+    (moments, stats, seen)
 }

@@ -242,6 +242,7 @@ fn render_frames(
             height: h,
             spp: 4,
             seed: nrc_render::pass_seed(7, f),
+            emitter_samples: 0,
         };
         last = Some(nrc_render::passes::run(p.as_mut(), &input, &nrc_render::ZeroSource).image);
     }

@@ -45,6 +45,7 @@ fn ir_means(scene: &Scene, vpls: u32, clamp: f32, residual: bool, runs: u32) -> 
                 height: 4,
                 spp: 1,
                 seed: 1000 + r as u64,
+                emitter_samples: 0,
             };
             let img = passes::run(&mut pass, &input, &ZeroSource).image;
             img.data.iter().map(|p| f64::from(p.x)).sum::<f64>() / img.data.len() as f64
@@ -195,6 +196,7 @@ fn vpl_changes_per_frame(m_max: u32) -> Vec<usize> {
             height: 16,
             spp: 1,
             seed: f,
+            emitter_samples: 0,
         };
         let out = passes::run(&mut pass, &input, &ZeroSource);
         assert!(out.image.data.iter().all(|p| p.is_finite()));
@@ -236,6 +238,7 @@ fn a_fixed_vpl_set_renders_a_static_scene_identically() {
         height: 16,
         spp: 1,
         seed: 3,
+        emitter_samples: 0,
     };
     let first = passes::run(&mut pass, &input, &ZeroSource).image;
     assert!(

@@ -433,6 +433,7 @@ impl OnlineTrainer {
                 height,
                 spp: s.spp,
                 seed: Stream::TrainingRender.seed(seed),
+                emitter_samples: 0,
             };
             let source = CacheSource {
                 cache: &self.cache,

@@ -102,6 +102,7 @@ fn cache_pass(
         height: h,
         spp,
         seed,
+        emitter_samples: 0,
     };
     passes::run(pass.as_mut(), &input, source)
 }

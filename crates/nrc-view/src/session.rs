@@ -483,6 +483,7 @@ impl Session {
                 height: h,
                 spp: s.spp,
                 seed: Stream::TrainingRender.seed(seed),
+                emitter_samples: 0,
             };
             self.render_only_frames += 1;
             let t = Instant::now();
@@ -559,6 +560,7 @@ impl Session {
                     height: h,
                     spp: 1,
                     seed: pass_seed(0x5eed, 0),
+                    emitter_samples: 0,
                 };
                 let source = CacheSource::new(&self.trainer.cache);
                 let out = passes::run(self.cache_pass.as_mut(), &input, &source);

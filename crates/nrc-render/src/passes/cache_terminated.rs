@@ -211,6 +211,8 @@ impl PassConfig for CacheTerminatedSettings {
 #[derive(Clone, Copy, Debug)]
 struct SamplePath {
     prefix: Vec3,
+    /// The part of `prefix` the camera ray saw directly (the emitters' anti-aliasing).
+    seen: Vec3,
     throughput: Vec3,
     end: Option<(RadianceQuery, TerminationPoint)>,
     rays: u64,
@@ -294,6 +296,7 @@ impl CacheTerminatedPass {
         let mut stats = PathStats::default();
         let mut out = SamplePath {
             prefix: Vec3::ZERO,
+            seen: Vec3::ZERO,
             throughput: Vec3::ONE,
             end: None,
             rays: 0,
@@ -310,12 +313,18 @@ impl CacheTerminatedPass {
             let h = match walk.arrive(scene, &mut stats) {
                 Arrival::Escaped { le, mis } => {
                     out.prefix += walk.throughput() * le * mis;
+                    if vertex == 1 {
+                        out.seen = le * mis;
+                    }
                     break;
                 }
                 Arrival::Hit(h) => h,
             };
             if h.le != Vec3::ZERO {
                 out.prefix += walk.throughput() * h.le * h.mis;
+                if vertex == 1 {
+                    out.seen = h.le * h.mis;
+                }
             }
             let v = &h.vertex;
             let arrival = spread
@@ -388,6 +397,7 @@ impl RenderPass for CacheTerminatedPass {
         };
         let mut terminations = Vec::new();
         let mut data = vec![Vec3::ZERO; width as usize * height as usize];
+        let mut seen = data.clone();
         let inv = 1.0 / spp as f32;
         for (i, s) in samples.iter().enumerate() {
             stats.rays += s.rays;
@@ -396,15 +406,32 @@ impl RenderPass for CacheTerminatedPass {
                 l += s.throughput * *answers.next().expect("one answer per query");
                 terminations.push(point);
             }
-            if !l.is_finite() {
+            if l.is_finite() {
+                seen[i / spp as usize] += s.seen * inv;
+            } else {
                 stats.invalid_samples += 1;
                 l = Vec3::ZERO;
             }
             data[i / spp as usize] += l * inv;
         }
+        let mut image =
+            Image::from_data(width as usize, height as usize, data).expect("one value per pixel");
+        if input.emitter_samples > 0 {
+            let aa = crate::emitters::supersample(
+                input.scene,
+                input.camera,
+                (width, height),
+                input.seed,
+                spp,
+                input.emitter_samples,
+                &seen,
+                None,
+            );
+            crate::emitters::apply(&mut image, &aa);
+            stats.rays += aa.rays;
+        }
         PassOutput {
-            image: Image::from_data(width as usize, height as usize, data)
-                .expect("one value per pixel"),
+            image,
             variance: None,
             terminations,
             stats,

@@ -28,6 +28,10 @@ pub struct FrameInput<'a> {
     /// Seed of the frame's random streams: the image is a function of it alone, whatever the
     /// thread count.
     pub seed: u64,
+    /// Extra camera rays, their emission only, at each pixel on the outline of an emitter the
+    /// camera sees ([`crate::emitters::supersample`]; 0: none). Passes whose camera rays go
+    /// through pixel centres (tests at fixed primary rays) take none.
+    pub emitter_samples: u32,
 }
 
 /// What a pass counted in a frame.

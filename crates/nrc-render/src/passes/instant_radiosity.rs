@@ -840,15 +840,16 @@ impl RenderPass for InstantRadiosityPass {
     fn trace(&mut self, input: &FrameInput) -> Vec<RadianceQuery> {
         self.view = Some((*input.camera, input.width, input.height));
         let seed = Stream::Vpls.seed(input.seed);
-        self.gbuffer = Some(GBuffer::trace(
-            input.scene,
-            input.camera,
-            input.width,
-            input.height,
-            input.spp,
-            input.seed,
-            true,
-        ));
+        // `indirect=1` leaves the emission out: no extra camera rays for it.
+        let input = &FrameInput {
+            emitter_samples: if self.settings.indirect {
+                0
+            } else {
+                input.emitter_samples
+            },
+            ..*input
+        };
+        self.gbuffer = Some(GBuffer::trace(input, input.seed, true));
         let mut queries = Vec::new();
         match self.settings.mode {
             VplMode::Classic => {

@@ -8,7 +8,7 @@ use super::params::{self, Params};
 use super::spec::{PassConfig, PassKind};
 use super::frame::{FrameInput, PassOutput, PassStats, RenderPass};
 use crate::path_tracer::{LightStrategy, PathTracer};
-use crate::render::{RenderOutput, RenderSettings, render};
+use crate::render::{RenderOutput, RenderSettings, render_seen};
 use crate::source::RadianceQuery;
 
 pub const KIND: PassKind = PassKind {
@@ -110,13 +110,30 @@ impl RenderPass for PathTracedPass {
                 p(n);
             }
         };
-        self.traced = Some(render(
+        let (mut out, seen) = render_seen(
             input.scene,
             input.camera,
             &self.tracer,
             &settings,
             &progress,
-        ));
+        );
+        if input.emitter_samples > 0 {
+            let aa = crate::emitters::supersample(
+                input.scene,
+                input.camera,
+                (input.width, input.height),
+                input.seed,
+                settings.spp.max(1),
+                input.emitter_samples,
+                &seen,
+                None,
+            );
+            crate::emitters::apply(&mut out.mean, &aa);
+            out.stats.rays.closest_rays += aa.rays;
+            // The sample variance is that of the pass's own samples, not of the new mean.
+            out.variance = None;
+        }
+        self.traced = Some(out);
         Vec::new()
     }
 

@@ -497,8 +497,11 @@ impl RestirGiPass {
             query: None,
             query_index: None,
         };
-        // The initial candidate: one BSDF sample (indirect light needs one more segment).
-        if segments + 1 < limit {
+        // The BSDF sample: the emission it finds completes the direct light's MIS (within the
+        // depth limit whenever NEE is: without it, NEE's weight alone would darken the direct
+        // light at the last vertex a depth limit allows); the initial candidate where one
+        // more segment is left for the indirect light beyond it.
+        if segments < limit {
             let mut sc = stream(seed, i, Phase::Candidates);
             let u_lobe = sc.next_1d();
             let u_dir = sc.next_2d();
@@ -514,7 +517,7 @@ impl RestirGiPass {
                         Some(h.vertex)
                     }
                 };
-                if let Some(y) = y {
+                if let Some(y) = y.filter(|_| segments + 1 < limit) {
                     let mut sample = GiSample {
                         x: y.si.p,
                         n: y.si.ng,
@@ -653,15 +656,7 @@ impl RenderPass for RestirGiPass {
     fn trace(&mut self, input: &FrameInput) -> Vec<RadianceQuery> {
         let scene = input.scene;
         let t = Instant::now();
-        let g = GBuffer::trace(
-            scene,
-            input.camera,
-            input.width,
-            input.height,
-            input.spp,
-            input.seed,
-            self.settings.jitter,
-        );
+        let g = GBuffer::trace(input, input.seed, self.settings.jitter);
         let mut traced: Vec<Traced> = par_map(g.len(), |i| {
             self.trace_one(scene, input.seed, i, g.primary[i].as_ref(), g.emitted[i])
         });

@@ -79,19 +79,16 @@ pub struct GBuffer {
 }
 
 impl GBuffer {
-    /// Traces the camera rays of a `width × height × spp` frame: jittered in the pixel with
-    /// the [`Phase::Camera`] stream, or through pixel centres without `jitter` (tests against
-    /// a reference at fixed primary rays).
-    pub fn trace(
-        scene: &Scene,
-        camera: &Camera,
-        width: u32,
-        height: u32,
-        spp: u32,
-        seed: u64,
-        jitter: bool,
-    ) -> Self {
-        let spp = spp.max(1);
+    /// Traces the camera rays of `input`'s frame (`width × height × spp`, seeded `seed`):
+    /// jittered in the pixel with the [`Phase::Camera`] stream, or through pixel centres
+    /// without `jitter` (tests against a reference at fixed primary rays). With jitter, the
+    /// emission seen at the outline of emitters gets `input.emitter_samples` more camera rays
+    /// a pixel ([`crate::emitters::supersample`]), each of the pixel's samples shifted by the
+    /// same amount so that their mean is the supersampled one.
+    pub fn trace(input: &FrameInput, seed: u64, jitter: bool) -> Self {
+        let (scene, camera) = (input.scene, input.camera);
+        let (width, height) = (input.width, input.height);
+        let spp = input.spp.max(1);
         let n = width as usize * height as usize * spp as usize;
         let hits: Vec<(Option<Primary>, Vec3)> = (0..n)
             .into_par_iter()
@@ -110,7 +107,29 @@ impl GBuffer {
                 primary_hit(scene, &ray)
             })
             .collect();
-        let (primary, emitted) = hits.into_iter().unzip();
+        let (primary, mut emitted): (Vec<_>, Vec<Vec3>) = hits.into_iter().unzip();
+        let mut rays = n as u64;
+        if jitter && input.emitter_samples > 0 {
+            // Non-finite values are a pass's invalid samples, counted as black in the image.
+            let means: Vec<Vec3> = emitted
+                .chunks(spp as usize)
+                .map(|c| c.iter().filter(|l| l.is_finite()).sum::<Vec3>() / spp as f32)
+                .collect();
+            let aa = crate::emitters::supersample(
+                scene,
+                camera,
+                (width, height),
+                seed,
+                spp,
+                input.emitter_samples,
+                &means,
+                None,
+            );
+            for (i, e) in emitted.iter_mut().enumerate() {
+                *e += aa.delta[i / spp as usize];
+            }
+            rays += aa.rays;
+        }
         Self {
             camera: *camera,
             width,
@@ -118,7 +137,7 @@ impl GBuffer {
             spp,
             primary,
             emitted,
-            rays: n as u64,
+            rays,
         }
     }
 

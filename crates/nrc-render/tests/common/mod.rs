@@ -388,6 +388,7 @@ pub fn accumulate_frames(
             height: h,
             spp: 1,
             seed: nrc_render::pass_seed(seed, f),
+            emitter_samples: 0,
         };
         let img = passes::run(pass, &input, source).image;
         for (s, p) in sum.iter_mut().zip(&img.data) {
@@ -408,6 +409,20 @@ pub fn per_pixel_z(
     ref_var: &Image,
     ref_spp: u32,
 ) -> (f64, usize, f64) {
+    per_pixel_z_floored(runs, reference, ref_var, ref_spp, f64::INFINITY)
+}
+
+/// [`per_pixel_z`] with a run's variance estimated from the runs but never below the
+/// reference's per-sample variance over `floor`: where a pixel's value is a rare event (an
+/// emitter's edge that barely crosses it, hit by a few runs or missed by a few), the runs
+/// alone understate its variance (none hit it: zero).
+pub fn per_pixel_z_floored(
+    runs: &[Image],
+    reference: &Image,
+    ref_var: &Image,
+    ref_spp: u32,
+    floor: f64,
+) -> (f64, usize, f64) {
     let n = runs.len() as f64;
     let cells = reference.data.len() * 3;
     let bound = z_two_sided(1e-3 / cells as f64);
@@ -417,7 +432,8 @@ pub fn per_pixel_z(
             let xs: Vec<f64> = runs.iter().map(|r| r.data[p][c] as f64).collect();
             let mean = xs.iter().sum::<f64>() / n;
             let var = xs.iter().map(|x| (x - mean) * (x - mean)).sum::<f64>() / (n - 1.0);
-            let se2 = var / n + ref_var.data[p][c] as f64 / ref_spp as f64;
+            let rv = ref_var.data[p][c] as f64;
+            let se2 = var.max(rv / floor) / n + rv / ref_spp as f64;
             if se2 <= 0.0 {
                 assert!(
                     (mean - reference.data[p][c] as f64).abs() < 1e-6,
