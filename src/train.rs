@@ -25,6 +25,9 @@ pub struct TrainArgs {
     #[command(flatten)]
     pub scene: SceneArgs,
 
+    #[command(flatten)]
+    pub emitters: nrc_harness::options::EmitterArgs,
+
     /// Training-data producer: pt, pt-sl, bt, lt, sppc, or mix:NAME=SHARE,... (e.g.
     /// mix:pt-sl=0.5,sppc=0.5).
     #[arg(long, default_value = "pt-sl")]
@@ -129,6 +132,7 @@ pub fn trainer(args: &TrainArgs, scene: &Scene, print: bool) -> Result<OnlineTra
         nrc_harness::methods::scene_trainer(scene, args.producer.clone(), pass, &settings, tracer)
             .map_err(anyhow::Error::msg)?;
     trainer.settings.spp = args.spp;
+    trainer.settings.emitter_samples = args.emitters.emitter_samples;
     trainer.settings.from_terminations = args.from_terminations;
     Ok(trainer)
 }

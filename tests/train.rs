@@ -272,11 +272,50 @@ fn bad_training_options_are_clear_errors() {
         (vec!["--env", "/nonexistent/sky.hdr"], "nonexistent"),
         (vec!["--env", "/nonexistent/sky.png"], "nonexistent"),
         (vec!["--background=-1"], "--background"),
+        (vec!["--emitter-samples", "300"], "--emitter-samples"),
     ] {
         let mut all = vec!["train", "--scene", s, "--width", "8", "--height", "8"];
         all.extend(args.iter());
         assert_error(&nrc(&all), needle);
     }
+}
+
+/// `--emitter-samples` reaches the online loop's render: the Cornell box's frame changes (its
+/// light's outline gets the extra rays), and the same settings give the same bits.
+#[test]
+fn emitter_samples_reach_the_online_frames() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = cornell();
+    let frame = |name: &str, k: &str| {
+        let out = dir.path().join(name);
+        let o = nrc(&[
+            "train",
+            "--scene",
+            scene.to_str().unwrap(),
+            "--frames",
+            "1",
+            "--width",
+            "24",
+            "--height",
+            "24",
+            "--records",
+            "1024",
+            "--batch",
+            "1024",
+            "--emitter-samples",
+            k,
+            "--frames-out",
+            out.to_str().unwrap(),
+            "--every",
+            "1",
+        ]);
+        assert!(o.status.success(), "{}", text(&o.stderr));
+        std::fs::read(out.join("frame-00000.exr")).unwrap()
+    };
+    let plain = frame("plain", "0");
+    let aa = frame("aa", "8");
+    assert_ne!(plain, aa, "the extra rays changed nothing");
+    assert_eq!(aa, frame("aa2", "8"));
 }
 
 /// `--pass` chooses the inference pass of `nrc train` and `nrc render`; a pass that ends paths

@@ -47,6 +47,9 @@ pub struct OnlineSettings {
     pub queries: QueryMaker,
     /// Samples per pixel of the inference pass.
     pub spp: u32,
+    /// Extra camera rays, their emission only, at each pixel on the outline of an emitter the
+    /// camera sees (`nrc_render::emitters::supersample`; 0: none).
+    pub emitter_samples: u32,
     pub seed: u64,
     /// Watch for changes in the scene and recover from them ([`crate::schedule`]): after a
     /// change the cache infers from its training weights and takes `recovery_steps` steps
@@ -82,6 +85,7 @@ impl OnlineSettings {
             pass: PassSpec::default(),
             queries: QueryMaker::new(&scene.bounds()),
             spp: 1,
+            emitter_samples: 0,
             seed: 0,
             recover: true,
             recovery_steps: 1,
@@ -433,7 +437,7 @@ impl OnlineTrainer {
                 height,
                 spp: s.spp,
                 seed: Stream::TrainingRender.seed(seed),
-                emitter_samples: 0,
+                emitter_samples: s.emitter_samples,
             };
             let source = CacheSource {
                 cache: &self.cache,

@@ -483,7 +483,7 @@ impl Session {
                 height: h,
                 spp: s.spp,
                 seed: Stream::TrainingRender.seed(seed),
-                emitter_samples: 0,
+                emitter_samples: s.emitter_samples,
             };
             self.render_only_frames += 1;
             let t = Instant::now();
