@@ -143,10 +143,12 @@ pub fn supersample(
     }
 }
 
-/// Adds [`Supersampled::delta`] to `image`.
-pub fn apply(image: &mut Image, s: &Supersampled) {
-    for (p, d) in image.data.iter_mut().zip(&s.delta) {
-        *p += *d;
+impl Supersampled {
+    /// Adds [`Supersampled::delta`] to `image`.
+    pub fn apply(&self, image: &mut Image) {
+        for (p, d) in image.data.iter_mut().zip(&self.delta) {
+            *p += *d;
+        }
     }
 }
 

@@ -128,7 +128,7 @@ fn manual_runs(scene: &Scene, flags: Option<fn(&[Vec3]) -> Vec<bool>>) -> Vec<Im
                 &seen,
                 own.as_deref(),
             );
-            nrc_render::emitters::apply(&mut out.mean, &aa);
+            aa.apply(&mut out.mean);
             out.mean
         })
         .collect()

@@ -416,18 +416,8 @@ impl RenderPass for CacheTerminatedPass {
         }
         let mut image =
             Image::from_data(width as usize, height as usize, data).expect("one value per pixel");
-        if input.emitter_samples > 0 {
-            let aa = crate::emitters::supersample(
-                input.scene,
-                input.camera,
-                (width, height),
-                input.seed,
-                spp,
-                input.emitter_samples,
-                &seen,
-                None,
-            );
-            crate::emitters::apply(&mut image, &aa);
+        if let Some(aa) = input.supersample_emitters(spp, &seen) {
+            aa.apply(&mut image);
             stats.rays += aa.rays;
         }
         PassOutput {

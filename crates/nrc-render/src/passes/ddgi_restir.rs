@@ -800,7 +800,7 @@ impl RenderPass for DdgiRestirPass {
         let scene = input.scene;
         let seed = input.seed;
         let t = Instant::now();
-        let g = GBuffer::trace(input, seed, self.settings.jitter);
+        let g = GBuffer::trace(input, self.settings.jitter);
         let traced: Vec<Traced> = par_map(g.len(), |i| {
             match usable(&g.primary[i], self.settings.smooth) {
                 Some(p) => self.candidates(scene, &p.v, &mut stream(seed, i, Phase::Candidates)),

@@ -6,6 +6,7 @@ use std::time::Instant;
 use glam::Vec3;
 use nrc_scene::{Camera, Image, Scene};
 
+use crate::emitters::Supersampled;
 use crate::source::{RadianceQuery, RadianceSource};
 
 /// Where an inference path ended in the source: the vertex and the point the segment reaching
@@ -32,6 +33,26 @@ pub struct FrameInput<'a> {
     /// camera sees ([`crate::emitters::supersample`]; 0: none). Passes whose camera rays go
     /// through pixel centres (tests at fixed primary rays) take none.
     pub emitter_samples: u32,
+}
+
+impl FrameInput<'_> {
+    /// The emitters' anti-aliasing of this frame ([`crate::emitters::supersample`] with its
+    /// `emitter_samples` and seed) for a pass whose `taken` camera rays a pixel saw `seen`
+    /// directly (pixel means, row-major); `None` when the frame takes no extra rays.
+    pub fn supersample_emitters(&self, taken: u32, seen: &[Vec3]) -> Option<Supersampled> {
+        (self.emitter_samples > 0).then(|| {
+            crate::emitters::supersample(
+                self.scene,
+                self.camera,
+                (self.width, self.height),
+                self.seed,
+                taken,
+                self.emitter_samples,
+                seen,
+                None,
+            )
+        })
+    }
 }
 
 /// What a pass counted in a frame.

@@ -849,7 +849,7 @@ impl RenderPass for InstantRadiosityPass {
             },
             ..*input
         };
-        self.gbuffer = Some(GBuffer::trace(input, input.seed, true));
+        self.gbuffer = Some(GBuffer::trace(input, true));
         let mut queries = Vec::new();
         match self.settings.mode {
             VplMode::Classic => {

@@ -117,18 +117,8 @@ impl RenderPass for PathTracedPass {
             &settings,
             &progress,
         );
-        if input.emitter_samples > 0 {
-            let aa = crate::emitters::supersample(
-                input.scene,
-                input.camera,
-                (input.width, input.height),
-                input.seed,
-                settings.spp.max(1),
-                input.emitter_samples,
-                &seen,
-                None,
-            );
-            crate::emitters::apply(&mut out.mean, &aa);
+        if let Some(aa) = input.supersample_emitters(settings.spp.max(1), &seen) {
+            aa.apply(&mut out.mean);
             out.stats.rays.closest_rays += aa.rays;
             // The sample variance is that of the pass's own samples, not of the new mean.
             out.variance = None;

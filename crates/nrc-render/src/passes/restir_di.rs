@@ -393,7 +393,7 @@ impl RenderPass for RestirDiPass {
         let seed = input.seed;
         let mut times = PhaseTimes::default();
         let t = Instant::now();
-        let g = GBuffer::trace(input, seed, self.settings.jitter);
+        let g = GBuffer::trace(input, self.settings.jitter);
         let n = g.len();
         let frame = DiFrame {
             scene,

@@ -656,7 +656,7 @@ impl RenderPass for RestirGiPass {
     fn trace(&mut self, input: &FrameInput) -> Vec<RadianceQuery> {
         let scene = input.scene;
         let t = Instant::now();
-        let g = GBuffer::trace(input, input.seed, self.settings.jitter);
+        let g = GBuffer::trace(input, self.settings.jitter);
         let mut traced: Vec<Traced> = par_map(g.len(), |i| {
             self.trace_one(scene, input.seed, i, g.primary[i].as_ref(), g.emitted[i])
         });

@@ -79,14 +79,14 @@ pub struct GBuffer {
 }
 
 impl GBuffer {
-    /// Traces the camera rays of `input`'s frame (`width × height × spp`, seeded `seed`):
+    /// Traces the camera rays of `input`'s frame (`width × height × spp`, its seed):
     /// jittered in the pixel with the [`Phase::Camera`] stream, or through pixel centres
     /// without `jitter` (tests against a reference at fixed primary rays). With jitter, the
     /// emission seen at the outline of emitters gets `input.emitter_samples` more camera rays
     /// a pixel ([`crate::emitters::supersample`]), each of the pixel's samples shifted by the
     /// same amount so that their mean is the supersampled one.
-    pub fn trace(input: &FrameInput, seed: u64, jitter: bool) -> Self {
-        let (scene, camera) = (input.scene, input.camera);
+    pub fn trace(input: &FrameInput, jitter: bool) -> Self {
+        let (scene, camera, seed) = (input.scene, input.camera, input.seed);
         let (width, height) = (input.width, input.height);
         let spp = input.spp.max(1);
         let n = width as usize * height as usize * spp as usize;
@@ -115,16 +115,9 @@ impl GBuffer {
                 .chunks(spp as usize)
                 .map(|c| c.iter().filter(|l| l.is_finite()).sum::<Vec3>() / spp as f32)
                 .collect();
-            let aa = crate::emitters::supersample(
-                scene,
-                camera,
-                (width, height),
-                seed,
-                spp,
-                input.emitter_samples,
-                &means,
-                None,
-            );
+            let aa = input
+                .supersample_emitters(spp, &means)
+                .expect("emitter samples asked");
             for (i, e) in emitted.iter_mut().enumerate() {
                 *e += aa.delta[i / spp as usize];
             }
