@@ -1,12 +1,13 @@
 #!/usr/bin/env python3
 """Cross-check `nrc render` against Mitsuba 3's `path` integrator (variant `scalar_rgb`).
 
-Loads a glTF scene of diffuse materials and area lights (the Cornell box), rebuilds it in
-Mitsuba (geometry exported to PLY, same camera, box pixel filter, same max_depth and
-Russian-roulette start depth), renders it with both programs at equal resolution, depth and
+Loads a glTF scene (the Cornell boxes, the many-light hall, the Country Kitchen), rebuilds it
+in Mitsuba (geometry exported to PLY with normals and texture coordinates, same camera, box
+pixel filter, same max_depth and Russian-roulette start depth), renders it with both programs at equal resolution, depth and
 samples per pixel, and reports:
 
-* the render times of both (Mitsuba's `mi.render` call; nrc's closing line),
+* the render times of both (Mitsuba's `mi.render` call; nrc's closing line), and each one's
+  CPU time of rendering alone (loading excluded on both sides): samples per CPU-second,
 * whether the two images' mean radiance agrees within noise. Under the hypothesis that both
   renderers are unbiased for the same pixel values, the per-pixel differences d_i have mean
   0 and are independent across pixels, so mean(d) has standard error sqrt(sum d_i^2) / N;
@@ -18,10 +19,11 @@ Usage (from the repository root, after `cargo build --release`):
     python3 scripts/mitsuba_compare.py --scene scenes/cornell-box.gltf \
         --width 256 --height 256 --spp 64 --max-depth 8 --threads 2
 
-Translated: meshes under node transforms; base colour factors (Lambertian when metallic is 0
-and KHR_materials_specular's factor 0); metallic 1 as Mitsuba's `principled` with metallic 1
-(Schlick Fresnel from the base colour, GGX with alpha = roughness^2, as nrc; Mitsuba's Smith
-shadowing is the separable form, nrc's the height-correlated one); emissive factor times
+Translated: meshes under node transforms (instances included); materials as `material_of`
+says (Lambertian when metallic is 0 and KHR_materials_specular's factor 0; metallic 1 as
+Mitsuba's `principled` with metallic 1: Schlick Fresnel from the base colour, GGX with alpha =
+roughness^2, as nrc; Mitsuba's Smith shadowing is the separable form, nrc's the
+height-correlated one; glass; the default specular layer approximately; base colour textures); emissive factor times
 KHR_materials_emissive_strength (area lights); KHR_lights_punctual lights (point -> `point`,
 directional -> `directional`, spot -> `spot`, each with colour x intensity as RGB radiant
 intensity or irradiance, no 683 factor, as nrc reads them); `--env` (Mitsuba `envmap`, with
@@ -117,10 +119,10 @@ def accessor(doc, buffers, i):
     n = WIDTH[a["type"]]
     stride = v.get("byteStride", dt.itemsize * n)
     base = v.get("byteOffset", 0) + a.get("byteOffset", 0)
-    raw = buffers[v["buffer"]]
-    out = np.empty((a["count"], n), dtype=dt)
-    for k in range(a["count"]):
-        out[k] = np.frombuffer(raw, dtype=dt, count=n, offset=base + k * stride)
+    out = np.ndarray((a["count"], n), dtype=dt, buffer=buffers[v["buffer"]], offset=base,
+                     strides=(stride, dt.itemsize)).copy()
+    if a.get("normalized", False):
+        out = out.astype(np.float64) / np.iinfo(dt).max
     return out
 
 
@@ -133,7 +135,8 @@ def walk(doc, roots, parent=np.eye(4)):
 
 
 def gather(doc, buffers):
-    """World-space triangles grouped by material, and the first camera (pos, target, up, fov_y)."""
+    """World-space triangles grouped by material (corners, shading normals, texture
+    coordinates), and the first camera (pos, target, up, fov_y)."""
     groups = {}
     camera = None
     scene = doc.get("scenes", [{"nodes": list(range(len(doc.get("nodes", []))))}])[doc.get("scene", 0)]
@@ -158,6 +161,9 @@ def gather(doc, buffers):
             if np.linalg.det(m[:3, :3]) < 0:
                 idx = idx[:, ::-1]
             t = p[idx]
+            # Zero-area triangles are dropped, as nrc drops them (their normals are undefined).
+            keep = np.linalg.norm(np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]), axis=1) > 0
+            idx, t = idx[keep], t[keep]
             if "NORMAL" in prim["attributes"]:
                 nv = accessor(doc, buffers, prim["attributes"]["NORMAL"]).astype(np.float64)
                 nv = nv @ np.linalg.inv(m[:3, :3])  # rows times the inverse transpose
@@ -167,17 +173,23 @@ def gather(doc, buffers):
                 fn = np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])
                 fn /= np.linalg.norm(fn, axis=1, keepdims=True)
                 nt = np.repeat(fn[:, None, :], 3, axis=1)
-            groups.setdefault(prim.get("material", -1), []).append((t, nt))
-    return {k: (np.concatenate([a for a, _ in v]), np.concatenate([b for _, b in v])) for k, v in groups.items()}, camera
+            if "TEXCOORD_0" in prim["attributes"]:
+                uv = accessor(doc, buffers, prim["attributes"]["TEXCOORD_0"]).astype(np.float64)[idx]
+            else:
+                uv = np.zeros((len(idx), 3, 2))
+            groups.setdefault(prim.get("material", -1), []).append((t, nt, uv))
+    return {k: tuple(np.concatenate([g[j] for g in v]) for j in range(3)) for k, v in groups.items()}, camera
 
 
-def write_ply(path, tris, normals):
-    """Triangles (N, 3, 3) with per-corner shading normals (N, 3, 3): flat meshes carry their
-    face normal at every corner, smooth ones their NORMAL attribute."""
-    v = np.concatenate([tris.reshape(-1, 3), normals.reshape(-1, 3)], axis=1).astype(np.float32)
+def write_ply(path, tris, normals, uvs):
+    """Triangles (N, 3, 3) with per-corner shading normals (N, 3, 3) and texture coordinates
+    (N, 3, 2): flat meshes carry their face normal at every corner, smooth ones their NORMAL
+    attribute. glTF's v runs down the image from its top row, as Mitsuba's bitmap lookup."""
+    v = np.concatenate([tris.reshape(-1, 3), normals.reshape(-1, 3), uvs.reshape(-1, 2)], axis=1).astype(np.float32)
     with open(path, "wb") as f:
         f.write(("ply\nformat binary_little_endian 1.0\nelement vertex %d\nproperty float x\nproperty float y\n"
                  "property float z\nproperty float nx\nproperty float ny\nproperty float nz\n"
+                 "property float u\nproperty float v\n"
                  "element face %d\nproperty list uchar int vertex_indices\nend_header\n"
                  % (len(v), len(tris))).encode())
         f.write(v.tobytes())
@@ -187,25 +199,60 @@ def write_ply(path, tris, normals):
         f.write(faces.tobytes())
 
 
-def material_of(doc, i):
-    """(base colour, emitted radiance, double-sided, metallic, roughness) of glTF material i,
-    with a warning for materials translated only approximately."""
+def material_of(doc, i, scene_dir):
+    """(Mitsuba BSDF, emitted radiance, double-sided) of glTF material i. Translated as nrc
+    reads it (`Bsdf::from_pbr`): metallic 0 with KHR_materials_specular 0 -> `diffuse`;
+    metallic 1 -> `principled` metallic 1; KHR_materials_transmission 1 -> `dielectric`
+    (`roughdielectric`, GGX, alpha = roughness^2, when rough) with the base colour as its
+    transmittance; any other (glTF's default dielectric specular layer, F0 0.04, over the base
+    colour) -> `principled` with metallic 0 and specular 0.5 (F0 0.04), an approximation: its
+    diffuse lobe is Disney's (retro-reflection at grazing angles), nrc's a Lambertian weighted
+    by the layer's albedo. A base colour texture becomes a `bitmap` (sRGB, bilinear), used as is
+    where the base colour factor is 1 (a factor other than 1 on a texture is dropped, with a
+    warning)."""
     if i < 0:
-        return np.ones(3), np.zeros(3), False, 0.0, 1.0
+        return {"type": "diffuse", "reflectance": {"type": "rgb", "value": [1, 1, 1]}}, np.zeros(3), False
     m = doc["materials"][i]
+    name = m.get("name", i)
     pbr = m.get("pbrMetallicRoughness", {})
     ext = m.get("extensions", {})
-    base = np.array(pbr.get("baseColorFactor", [1, 1, 1, 1])[:3])
+    base = np.array(pbr.get("baseColorFactor", [1, 1, 1, 1])[:3], dtype=np.float64)
     le = np.array(m.get("emissiveFactor", [0, 0, 0])) * ext.get("KHR_materials_emissive_strength", {}).get("emissiveStrength", 1.0)
     spec = ext.get("KHR_materials_specular", {}).get("specularFactor", 1.0)
     metallic = pbr.get("metallicFactor", 1.0)
     rough = pbr.get("roughnessFactor", 1.0)
-    textured = any(k in pbr for k in ("baseColorTexture", "metallicRoughnessTexture"))
-    if metallic == 1 and not textured and "KHR_materials_transmission" not in ext:
-        return base, le, bool(m.get("doubleSided", False)), 1.0, rough
-    if metallic != 0 or spec != 0 or textured or "KHR_materials_transmission" in ext:
-        print("warning: material %r is neither a plain diffuse colour nor an untextured metal; Mitsuba gets a Lambertian of its base colour" % m.get("name", i), file=sys.stderr)
-    return base, le, bool(m.get("doubleSided", False)), 0.0, rough
+    transmission = ext.get("KHR_materials_transmission", {}).get("transmissionFactor", 0.0)
+    ior = ext.get("KHR_materials_ior", {}).get("ior", 1.5)
+    double_sided = bool(m.get("doubleSided", False))
+    colour = {"type": "rgb", "value": list(base)}
+    if "baseColorTexture" in pbr:
+        tex = doc["textures"][pbr["baseColorTexture"]["index"]]
+        uri = doc["images"][tex["source"]]["uri"]
+        if pbr["baseColorTexture"].get("texCoord", 0) != 0:
+            print("warning: material %r reads its texture through TEXCOORD_1; Mitsuba gets TEXCOORD_0" % name, file=sys.stderr)
+        if not np.allclose(base, 1.0):
+            print("warning: material %r multiplies its texture by %s; Mitsuba gets the texture alone" % (name, base), file=sys.stderr)
+        colour = {"type": "bitmap", "filename": os.path.join(scene_dir, uri), "raw": False}
+    if "metallicRoughnessTexture" in pbr or "normalTexture" in m:
+        print("warning: material %r has a metallic-roughness or normal texture; Mitsuba gets the factors" % name, file=sys.stderr)
+    if transmission == 1 and metallic == 0:
+        bsdf = {"type": "dielectric", "int_ior": ior, "ext_ior": 1.0, "specular_transmittance": colour}
+        if rough > 0:
+            bsdf = {"type": "roughdielectric", "distribution": "ggx", "alpha": rough * rough,
+                    "int_ior": ior, "ext_ior": 1.0, "specular_transmittance": colour}
+        return bsdf, le, double_sided
+    if transmission != 0:
+        print("warning: material %r is partly transmissive; Mitsuba gets it opaque" % name, file=sys.stderr)
+    if metallic == 1:
+        inner = {"type": "principled", "base_color": colour, "metallic": 1.0, "roughness": rough}
+    elif metallic == 0 and spec == 0:
+        inner = {"type": "diffuse", "reflectance": colour}
+    else:
+        if metallic != 0 or spec != 1:
+            print("warning: material %r (metallic %g, specular %g) is approximated by Mitsuba's principled with metallic %g, specular %g" % (name, metallic, spec, metallic, 0.5 * spec), file=sys.stderr)
+        inner = {"type": "principled", "base_color": colour, "metallic": metallic, "specular": 0.5 * spec,
+                 "roughness": rough}
+    return {"type": "twosided", "bsdf": inner}, le, double_sided
 
 
 def punctual_lights(doc):
@@ -313,9 +360,9 @@ def main():
                      "rfilter": {"type": "box"}, "pixel_format": "rgb"},
         },
     }
-    for k, (tris, normals) in groups.items():
-        base, le, double_sided, metallic, rough = material_of(doc, k)
-        sides = [(tris, normals)]
+    for k, (tris, normals, uvs) in groups.items():
+        bsdf, le, double_sided = material_of(doc, k, os.path.dirname(os.path.abspath(args.scene)))
+        sides = [(tris, normals, uvs)]
         if double_sided and le.max() > 0:
             # nrc's double-sided materials emit from both faces; Mitsuba's area lights emit
             # from the front face only. Add a flipped copy, moved a hair along its own normal
@@ -324,17 +371,11 @@ def main():
             n = np.cross(e1, e2)
             n /= np.linalg.norm(n, axis=1, keepdims=True)
             scale = np.abs(tris).max() + 1.0
-            sides.append((tris[:, ::-1] - 1e-5 * scale * n[:, None, :], -normals[:, ::-1]))
-        for s, (t, tn) in enumerate(sides):
+            sides.append((tris[:, ::-1] - 1e-5 * scale * n[:, None, :], -normals[:, ::-1], uvs[:, ::-1]))
+        for s, (t, tn, tuv) in enumerate(sides):
             ply = os.path.join(work, "mesh%d_%d.ply" % (k + 1, s))
-            write_ply(ply, t, tn)
-            if metallic == 1.0:
-                inner = {"type": "principled", "base_color": {"type": "rgb", "value": list(base)},
-                         "metallic": 1.0, "roughness": rough}
-            else:
-                inner = {"type": "diffuse", "reflectance": {"type": "rgb", "value": list(base)}}
-            shape = {"type": "ply", "filename": ply, "face_normals": False,
-                     "bsdf": {"type": "twosided", "bsdf": inner}}
+            write_ply(ply, t, tn, tuv)
+            shape = {"type": "ply", "filename": ply, "face_normals": False, "bsdf": bsdf}
             if le.max() > 0:
                 shape["emitter"] = {"type": "area", "radiance": {"type": "rgb", "value": list(le)}}
             scene["shape%d_%d" % (k + 1, s)] = shape
@@ -361,7 +402,7 @@ def main():
     # Wall-clock time (best of the repeats) and CPU time of all threads (mean over the
     # repeats): on a machine shared with other work, wall time depends on the load and CPU
     # time much less. nrc's CPU time is its whole process (scene loading included).
-    t_mitsuba, t_nrc, cpu_mitsuba, cpu_nrc = [], [], [], []
+    t_mitsuba, t_nrc, cpu_mitsuba, cpu_nrc, cpu_nrc_all = [], [], [], [], []
     for _ in range(max(1, args.repeats)):
         t0, c0 = time.perf_counter(), time.process_time()
         img = np.array(mi.render(ms, spp=args.spp, seed=args.seed))
@@ -370,13 +411,17 @@ def main():
         r0 = resource.getrusage(resource.RUSAGE_CHILDREN)
         run = subprocess.run(cmd, capture_output=True, text=True)
         r1 = resource.getrusage(resource.RUSAGE_CHILDREN)
-        cpu_nrc.append(r1.ru_utime + r1.ru_stime - r0.ru_utime - r0.ru_stime)
+        cpu_nrc_all.append(r1.ru_utime + r1.ru_stime - r0.ru_utime - r0.ru_stime)
         if run.returncode != 0:
             sys.exit("error: nrc render failed: " + run.stderr.strip())
         m = re.search(r"in ([0-9.]+) s", run.stdout)
         t_nrc.append(float(m.group(1)) if m else float("nan"))
+        # The rendering's own CPU time, as Mitsuba's is its `mi.render` call's (loading the
+        # scene excluded on both sides).
+        m = re.search(r"([0-9.]+) CPU-s rendering", run.stdout)
+        cpu_nrc.append(float(m.group(1)) if m else float("nan"))
     t_mitsuba, t_nrc = min(t_mitsuba), min(t_nrc)
-    cpu_mitsuba, cpu_nrc = np.mean(cpu_mitsuba), np.mean(cpu_nrc)
+    cpu_mitsuba, cpu_nrc, cpu_nrc_all = np.mean(cpu_mitsuba), np.mean(cpu_nrc), np.mean(cpu_nrc_all)
     # Mitsuba's EXR input/output waits on its thread pool and hangs with a pool of one.
     dr.set_thread_count(max(2, os.cpu_count() or 2))
     mi.Bitmap(img).write(os.path.join(work, "mitsuba.exr"))
@@ -397,8 +442,11 @@ def main():
         max(1, args.repeats), t_nrc, t_mitsuba, t_mitsuba / t_nrc))
     print("samples/s: nrc %.3f M, mitsuba %.3f M" % (
         args.width * args.height * args.spp / t_nrc * 1e-6, args.width * args.height * args.spp / t_mitsuba * 1e-6))
-    print("CPU time (mean of %d): nrc %.3f s, mitsuba %.3f s (nrc %.2fx less)" % (
-        max(1, args.repeats), cpu_nrc, cpu_mitsuba, cpu_mitsuba / cpu_nrc))
+    print("CPU time of the render (mean of %d): nrc %.3f s, mitsuba %.3f s (nrc %.2fx less); nrc's whole process %.3f s" % (
+        max(1, args.repeats), cpu_nrc, cpu_mitsuba, cpu_mitsuba / cpu_nrc, cpu_nrc_all))
+    print("samples per CPU-second: nrc %.3f M, mitsuba %.3f M (nrc %.2fx)" % (
+        args.width * args.height * args.spp / cpu_nrc * 1e-6, args.width * args.height * args.spp / cpu_mitsuba * 1e-6,
+        cpu_mitsuba / cpu_nrc))
     print("mean radiance (r,g,b): nrc %s, mitsuba %s" % (np.round(a.reshape(-1, 3).mean(0), 5), np.round(b.reshape(-1, 3).mean(0), 5)))
     print("difference z-scores (r,g,b): %s -> %s" % (np.round(z, 2), "agree" if np.all(np.abs(z) < 4) else "DISAGREE"))
     ma, mb = a.reshape(-1, 3).mean(0), b.reshape(-1, 3).mean(0)

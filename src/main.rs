@@ -4,6 +4,11 @@
 use clap::Parser;
 
 fn main() -> std::process::ExitCode {
+    // Before anything else: a CPU without the build's SIMD level gets a line, not SIGILL.
+    if let Err(e) = nrc_scene::cpu::check() {
+        eprintln!("error: {e}");
+        return std::process::ExitCode::FAILURE;
+    }
     let args = match nrc::expand(std::env::args_os().collect()) {
         Ok(a) => a,
         Err(e) => {

@@ -133,6 +133,9 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         nrc_harness::run::camera_path(args.camera_path.as_deref(), &scene.camera, args.frames)?;
     let pool = nrc_harness::options::thread_pool(args.threads)?;
     let counter = progress.clone();
+    // CPU time of the rendering alone (all threads; the scene's loading is not in it), for
+    // comparisons per CPU-second on a shared machine (scripts/mitsuba_compare.py).
+    let cpu0 = nrc_scene::cpu::process_cpu_time();
     let rendered = pool.install(|| {
         nrc_harness::run::render(nrc_harness::run::RenderJob {
             scene: &scene,
@@ -150,6 +153,10 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         })
     })?;
     let (out, seconds) = (rendered.output, rendered.seconds_per_frame);
+    let cpu = match (cpu0, nrc_scene::cpu::process_cpu_time()) {
+        (Some(a), Some(b)) => format!("; {:.2} CPU-s rendering", (b - a).as_secs_f64()),
+        _ => String::new(),
+    };
     progress.finish();
 
     out.image.write_exr(&args.out)?;
@@ -185,7 +192,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     };
     let phases = s.phases.describe().map(|p| format!("; phases: {p}"));
     println!(
-        "rendered {}x{} at {} spp with {}{from} in {seconds:.3} s{frames} on {} threads: {:.3} M samples/s, {:.2} M rays/s{}",
+        "rendered {}x{} at {} spp with {}{from} in {seconds:.3} s{frames} on {} threads: {:.3} M samples/s, {:.2} M rays/s{cpu}{}",
         args.width,
         args.height,
         args.spp,

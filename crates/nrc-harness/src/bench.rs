@@ -129,18 +129,6 @@ fn trace_all(scene: &Scene, rays: &[Ray]) -> usize {
         .sum()
 }
 
-/// CPU time (user + system) used so far by all threads of this process, where the system
-/// tells it (`/proc/self/stat`, in clock ticks of 1/100 s as Linux reports them).
-fn process_cpu_time() -> Option<Duration> {
-    let stat = std::fs::read_to_string("/proc/self/stat").ok()?;
-    // Fields after the parenthesised command name; utime and stime are fields 14 and 15.
-    let rest = &stat[stat.rfind(')')? + 2..];
-    let mut fields = rest.split_whitespace().skip(11);
-    let utime: u64 = fields.next()?.parse().ok()?;
-    let stime: u64 = fields.next()?.parse().ok()?;
-    Some(Duration::from_millis((utime + stime) * 10))
-}
-
 /// A measurement: the best wall-clock time over the repeats, the CPU time per run
 /// (averaged over all repeats) when known, and the last run's result.
 struct Timing<T> {
@@ -154,14 +142,14 @@ fn measure<T>(repeats: u32, mut f: impl FnMut() -> T) -> Timing<T> {
     let repeats = repeats.max(1);
     let mut best = Duration::MAX;
     let mut last = None;
-    let cpu0 = process_cpu_time();
+    let cpu0 = nrc_scene::cpu::process_cpu_time();
     for _ in 0..repeats {
         let t = Instant::now();
         let v = f();
         best = best.min(t.elapsed());
         last = Some(v);
     }
-    let cpu_per_run = match (cpu0, process_cpu_time()) {
+    let cpu_per_run = match (cpu0, nrc_scene::cpu::process_cpu_time()) {
         (Some(a), Some(b)) if b > a => Some((b - a) / repeats),
         _ => None,
     };

@@ -1275,6 +1275,8 @@ fn read_exr(py: Python<'_>, path: PathBuf) -> PyResult<Bound<'_, PyAny>> {
 
 #[pymodule]
 fn _nrc(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    // A CPU without the build's SIMD level gets an ImportError naming it, not SIGILL.
+    nrc_scene::cpu::check().map_err(pyo3::exceptions::PyImportError::new_err)?;
     m.add("NrcError", m.py().get_type::<NrcError>())?;
     m.add("QUERY_DIMS", QUERY_DIMS)?;
     m.add_class::<Scene>()?;

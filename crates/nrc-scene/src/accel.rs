@@ -7,10 +7,9 @@
 
 use std::time::Duration;
 
-use glam::{Vec3, Vec3A};
+use glam::{UVec2, Vec3, Vec3A};
 use obvhs::{
-    BvhBuildParams, cwbvh::CwBvh, cwbvh::builder::build_cwbvh_from_tris, ray::RayHit,
-    triangle::Triangle,
+    BvhBuildParams, cwbvh::CwBvh, cwbvh::builder::build_cwbvh_from_tris, triangle::Triangle,
 };
 
 use crate::geometry::Ray;
@@ -91,10 +90,85 @@ const MAX_INVERSE: f32 = 1e24;
 /// few dozen ULPs, far above the slab test's rounding and far below any geometric scale.
 const SLACK_ULPS: f32 = 1.0 / 262_144.0;
 
+/// `obvhs`' box-culling distance floor (its `cwbvh::node::EPSILON`, crate-private): boxes
+/// left before this `t`, in units of the (scaled) direction, are not entered.
+const NODE_T_MIN: f32 = 1e-4;
+
+/// The hit mask of a compressed 8-wide node's children for the traversal (`obvhs`'
+/// `CwBvhNode::intersect_ray`, same slab arithmetic and the same mask): with AVX2 the eight
+/// quantized boxes are tested at once, each axis's eight bytes widened to floats by one
+/// instruction, where `obvhs`' SSE version converts them one by one in two halves of four.
+#[inline(always)]
+fn node_hits(node: &obvhs::cwbvh::node::CwBvhNode, ray: &obvhs::ray::Ray, oct_inv4: u32) -> u32 {
+    #[cfg(all(target_arch = "x86_64", target_feature = "avx2"))]
+    {
+        use std::arch::x86_64::*;
+        let scale = node.compute_extent() * ray.inv_direction;
+        let origin = (Vec3A::from(node.p) - ray.origin) * ray.inv_direction;
+        // SAFETY: AVX2 is enabled for this build (checked at start-up by `crate::cpu`); each
+        // load reads exactly the 8 bytes of one `[u8; 8]` field.
+        let inside = unsafe {
+            let widen = |q: &[u8; 8]| {
+                _mm256_cvtepi32_ps(_mm256_cvtepu8_epi32(_mm_loadl_epi64(
+                    q.as_ptr().cast::<__m128i>(),
+                )))
+            };
+            // Near and far planes per axis: the far side first where the ray runs backwards.
+            let slab = |lo: &[u8; 8], hi: &[u8; 8], negative: bool, s: f32, o: f32| {
+                let (near, far) = if negative { (hi, lo) } else { (lo, hi) };
+                let (s, o) = (_mm256_set1_ps(s), _mm256_set1_ps(o));
+                (
+                    _mm256_add_ps(_mm256_mul_ps(widen(near), s), o),
+                    _mm256_add_ps(_mm256_mul_ps(widen(far), s), o),
+                )
+            };
+            let [(x0, x1), (y0, y1), (z0, z1)] = [
+                (&node.child_min_x, &node.child_max_x, 0),
+                (&node.child_min_y, &node.child_max_y, 1),
+                (&node.child_min_z, &node.child_max_z, 2),
+            ]
+            .map(|(lo, hi, k)| slab(lo, hi, ray.direction[k] < 0.0, scale[k], origin[k]));
+            let t0 = _mm256_max_ps(x0, _mm256_max_ps(y0, z0));
+            let t1 = _mm256_min_ps(x1, _mm256_min_ps(y1, z1));
+            let t0 = _mm256_max_ps(t0, _mm256_set1_ps(NODE_T_MIN));
+            let t1 = _mm256_min_ps(t1, _mm256_set1_ps(ray.tmax));
+            _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(t0, t1)) as u32
+        };
+        let (child_bits8, bit_index8) = node.get_child_and_index_bits(oct_inv4);
+        let mut mask = inside;
+        let mut hits = 0u32;
+        while mask != 0 {
+            let child = mask.trailing_zeros() as usize;
+            mask &= mask - 1;
+            let bits = ((child_bits8 >> (8 * child)) as u32) & 0xff;
+            let index = ((bit_index8 >> (8 * child)) as u32) & 0xff;
+            hits |= bits << index;
+        }
+        hits
+    }
+    #[cfg(not(all(target_arch = "x86_64", target_feature = "avx2")))]
+    {
+        node.intersect_ray(ray, oct_inv4)
+    }
+}
+
+/// What [`Accel::stats`] reports.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct AccelStats {
+    /// 8-wide compressed nodes.
+    pub nodes: usize,
+    /// Bytes of the nodes and the prepared triangles.
+    pub bytes: usize,
+    /// Wall-clock seconds of the build.
+    pub build_seconds: f32,
+}
+
 /// The BVH over all scene triangles, with the triangles in BVH order.
 pub struct Accel {
     bvh: CwBvh,
     tris: Vec<IsectTriangle>,
+    /// Wall-clock seconds the build took.
+    build_seconds: f32,
     /// Bounding sphere of the triangles (for the traversal slack).
     center: Vec3,
     radius: f32,
@@ -112,8 +186,16 @@ impl std::fmt::Debug for Accel {
 impl Accel {
     /// Builds the BVH over `tris` (each `[v0, v1, v2]`). Returns the structure and the
     /// permutation `order`: BVH triangle `i` is input triangle `order[i]`. `tris` must not be
-    /// empty and must hold only finite coordinates.
-    pub fn build(tris: &[[Vec3; 3]]) -> (Self, Vec<u32>) {
+    /// empty and must hold only finite coordinates. It is taken by value and freed before the
+    /// build, whose scratch memory is the peak of a scene's loading.
+    pub fn build(tris: Vec<[Vec3; 3]>) -> (Self, Vec<u32>) {
+        let (mut lo, mut hi) = (Vec3::INFINITY, Vec3::NEG_INFINITY);
+        for t in &tris {
+            for &v in t {
+                lo = lo.min(v);
+                hi = hi.max(v);
+            }
+        }
         let input: Vec<Triangle> = tris
             .iter()
             .map(|t| Triangle {
@@ -122,6 +204,7 @@ impl Accel {
                 v2: t[2].into(),
             })
             .collect();
+        drop(tris);
         // The "slow" preset (wider PLOC search, more reinsertion) without spatial splits:
         // every triangle is in exactly one leaf, so `primitive_indices` is a permutation and
         // triangles can be stored in leaf order. Measured against the medium preset (CPU
@@ -133,29 +216,39 @@ impl Accel {
             pre_split: false,
             ..BvhBuildParams::slow_build()
         };
-        let bvh = build_cwbvh_from_tris(&input, params, &mut Duration::default());
-        let order = bvh.primitive_indices.clone();
+        let start = std::time::Instant::now();
+        let mut bvh = build_cwbvh_from_tris(&input, params, &mut Duration::default());
+        // Triangles are stored in leaf order, so the traversal's primitive index is the
+        // triangle's: the BVH's own index list becomes the caller's permutation, and the
+        // exact node boxes (kept by `obvhs` for refitting, which nothing here does) go.
+        let order = std::mem::take(&mut bvh.primitive_indices);
+        bvh.exact_node_aabbs = None;
         let bvh_tris = order
             .iter()
             .map(|&i| {
-                let t = &tris[i as usize];
-                IsectTriangle::new(t[0], t[1], t[2])
+                let t = &input[i as usize];
+                IsectTriangle::new(t.v0.into(), t.v1.into(), t.v2.into())
             })
             .collect();
-        let (mut lo, mut hi) = (Vec3::INFINITY, Vec3::NEG_INFINITY);
-        for t in tris {
-            for &v in t {
-                lo = lo.min(v);
-                hi = hi.max(v);
-            }
-        }
         let accel = Self {
             bvh,
             tris: bvh_tris,
+            build_seconds: start.elapsed().as_secs_f32(),
             center: 0.5 * (lo + hi),
             radius: 0.5 * (hi - lo).length(),
         };
         (accel, order)
+    }
+
+    /// What the structure holds and cost: its nodes, its bytes (nodes and prepared triangles)
+    /// and the build's wall-clock seconds.
+    pub fn stats(&self) -> AccelStats {
+        AccelStats {
+            nodes: self.bvh.nodes.len(),
+            bytes: std::mem::size_of_val(self.bvh.nodes.as_slice())
+                + std::mem::size_of_val(self.tris.as_slice()),
+            build_seconds: self.build_seconds,
+        }
     }
 
     /// Number of triangles.
@@ -212,6 +305,27 @@ impl Accel {
         move |t: f32| t + (SLACK_ULPS * t + abs)
     }
 
+    /// Walks the BVH along `r`, calling `triangle(index, r)` for each triangle in a leaf the
+    /// ray enters (it may lower `r.tmax` to cull farther boxes) until it returns true. Through
+    /// `obvhs`' `traverse!` macro rather than its `ray_traverse`, whose per-triangle callback
+    /// stayed an out-of-line call (measured: 5 % of a Cornell-box render in the call alone).
+    #[inline(always)]
+    fn traverse(
+        &self,
+        r: &mut obvhs::ray::Ray,
+        mut triangle: impl FnMut(usize, &mut obvhs::ray::Ray) -> bool,
+    ) {
+        let mut state = self.bvh.new_traversal(r.direction);
+        let mut node;
+        'walk: {
+            obvhs::traverse!(self.bvh, node, state, node_hits(node, r, state.oct_inv4), {
+                if triangle(state.primitive_id as usize, r) {
+                    break 'walk;
+                }
+            });
+        }
+    }
+
     /// The closest hit along the ray with `0 ≤ t < ray.t_max` among the hits `accept(triangle,
     /// b1, b2)` lets through (alpha cut-outs; `|_, _, _| true` for all).
     #[inline]
@@ -221,21 +335,20 @@ impl Accel {
         let mut best = r.tmax;
         r.tmax = slack(best);
         let (mut tri, mut b1, mut b2) = (u32::MAX, 0.0, 0.0);
-        let tris = &self.tris;
-        let mut hit = RayHit::none();
         // The closest hit is tracked here, exactly; the traversal only sees a slightly
         // enlarged distance to cull boxes with (see `slack`).
-        self.bvh.ray_traverse(r, &mut hit, |r, id| {
-            match tris[id].intersect(r.origin, r.direction, best) {
-                Some((t, u, v)) if t < best && accept(id as u32, u, v) => {
-                    best = t;
-                    tri = id as u32;
-                    b1 = u;
-                    b2 = v;
-                    slack(t)
-                }
-                _ => f32::INFINITY,
+        self.traverse(&mut r, |id, r| {
+            if let Some((t, u, v)) = self.tris[id].intersect(r.origin, r.direction, best)
+                && t < best
+                && accept(id as u32, u, v)
+            {
+                best = t;
+                tri = id as u32;
+                b1 = u;
+                b2 = v;
+                r.tmax = slack(t);
             }
+            false
         });
         (tri != u32::MAX).then_some(Hit {
             t: best * DIRECTION_SCALE,
@@ -252,12 +365,14 @@ impl Accel {
         let mut r = Self::to_obvhs(ray);
         let t_max = r.tmax;
         r.tmax = self.slack(&r)(t_max);
-        let tris = &self.tris;
-        !self.bvh.ray_traverse_miss(r, |r, id| {
-            match tris[id].intersect(r.origin, r.direction, t_max) {
-                Some((t, u, v)) if t < t_max && accept(id as u32, u, v) => t,
-                _ => f32::INFINITY,
-            }
-        })
+        let mut blocked = false;
+        self.traverse(&mut r, |id, r| {
+            blocked = matches!(
+                self.tris[id].intersect(r.origin, r.direction, t_max),
+                Some((t, u, v)) if t < t_max && accept(id as u32, u, v)
+            );
+            blocked
+        });
+        blocked
     }
 }

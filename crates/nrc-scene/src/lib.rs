@@ -35,6 +35,7 @@ pub mod accel;
 pub mod animation;
 pub mod bsdf;
 pub mod camera;
+pub mod cpu;
 pub mod environment;
 pub mod error;
 pub mod geometry;

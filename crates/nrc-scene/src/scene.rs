@@ -114,6 +114,8 @@ pub struct SceneSummary {
     pub lights: (usize, usize, usize),
     /// With `--light-sampler tree`: the light tree's node count and depth.
     pub light_tree: Option<(usize, usize)>,
+    /// The ray-query BVH: nodes, bytes, build time.
+    pub bvh: crate::accel::AccelStats,
     pub bounds: Aabb,
     pub camera: Camera,
     /// Whether the camera came from the file (otherwise it frames the bounds).
@@ -145,6 +147,13 @@ impl fmt::Display for SceneSummary {
         if let Some((nodes, depth)) = self.light_tree {
             writeln!(f, "light tree: {nodes} nodes, depth {depth}")?;
         }
+        writeln!(
+            f,
+            "bvh:        {} nodes (8-wide), {:.1} MiB with the prepared triangles, built in {:.2} s",
+            self.bvh.nodes,
+            self.bvh.bytes as f64 / (1 << 20) as f64,
+            self.bvh.build_seconds
+        )?;
         writeln!(
             f,
             "bounds:     min {} max {}",
@@ -304,9 +313,19 @@ impl Scene {
             ));
         }
 
+        let mut bounds = Aabb::EMPTY;
+        for c in &corners {
+            for &p in c {
+                bounds.extend(p);
+            }
+        }
+        // What only the validation needed goes before the BVH's build, the peak of loading.
+        drop((triangles, triangle_materials, triangle_meshes));
+
         // BVH, then triangle records in BVH order.
-        let (accel, order) = Accel::build(&corners);
+        let (accel, order) = Accel::build(corners);
         let tris: Vec<TriangleRecord> = order.iter().map(|&i| kept[i as usize]).collect();
+        drop((kept, order));
         let corner_tangents = if materials.iter().any(|m| m.normal_texture.is_some()) {
             crate::tangents::corner_tangents(
                 &positions,
@@ -325,13 +344,6 @@ impl Scene {
         };
         let has_cutouts = materials.iter().any(Material::has_cutout);
 
-        let mut bounds = Aabb::EMPTY;
-        for c in &corners {
-            for &p in c {
-                bounds.extend(p);
-            }
-        }
-
         for (i, l) in punctual.iter().enumerate() {
             let ok = l.intensity.is_finite()
                 && l.intensity.min_element() >= 0.0
@@ -346,6 +358,13 @@ impl Scene {
             }
         }
         let sphere = (bounds.center(), (0.5 * bounds.extent().length()).max(1e-6));
+        // The loader grew these by pushing: give back their spare capacity (up to half).
+        let (mut positions, mut normals, mut uvs, mut uvs1) = (positions, normals, uvs, uvs1);
+        for v in [&mut normals, &mut positions] {
+            v.shrink_to_fit();
+        }
+        uvs.shrink_to_fit();
+        uvs1.shrink_to_fit();
         let mut scene = Scene {
             source,
             accel,
@@ -896,6 +915,7 @@ impl Scene {
             textures: self.textures.len(),
             lights: self.lights.counts(),
             light_tree: self.tree.as_ref().map(|t| (t.node_count(), t.depth())),
+            bvh: self.accel.stats(),
             bounds: self.bounds,
             camera: self.camera,
             camera_from_file: self.camera_from_file,

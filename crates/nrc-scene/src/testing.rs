@@ -49,34 +49,58 @@ pub fn guarded<T: Send + 'static>(
 }
 
 /// A global allocator (the system's) that records the largest single request, allocation or
-/// reallocation, since [`reset_largest_allocation`]: a mutation test binary installs it
+/// reallocation, since [`reset_largest_allocation`], and the most bytes live at once since
+/// [`reset_peak_live`]: a test binary installs it
 /// (`#[global_allocator] static A: LargestAllocation = LargestAllocation;`) to bound what an
-/// absurd count in a file may make a loader allocate. It sees every thread of the process, so
-/// the bound is checked by a test that runs its cases one at a time.
+/// absurd count in a file may make a loader allocate, or what loading a large scene holds at
+/// its peak. It sees every thread of the process, so a bound is checked by a test that runs
+/// its cases one at a time.
 pub struct LargestAllocation;
 
 static LARGEST: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+static LIVE: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+static PEAK: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
 
-// SAFETY: every call is forwarded unchanged to the system allocator; only a counter is kept.
+/// Counts `size` more bytes live (and the request as a candidate for the largest).
+fn grew(request: usize, size: usize) {
+    use std::sync::atomic::Ordering::Relaxed;
+    LARGEST.fetch_max(request, Relaxed);
+    let live = LIVE.fetch_add(size, Relaxed) + size;
+    PEAK.fetch_max(live, Relaxed);
+}
+
+// SAFETY: every call is forwarded unchanged to the system allocator; only counters are kept.
 unsafe impl std::alloc::GlobalAlloc for LargestAllocation {
     unsafe fn alloc(&self, layout: std::alloc::Layout) -> *mut u8 {
-        LARGEST.fetch_max(layout.size(), std::sync::atomic::Ordering::Relaxed);
         // SAFETY: the caller's contract is the system allocator's.
-        unsafe { std::alloc::System.alloc(layout) }
+        let p = unsafe { std::alloc::System.alloc(layout) };
+        if !p.is_null() {
+            grew(layout.size(), layout.size());
+        }
+        p
     }
     unsafe fn alloc_zeroed(&self, layout: std::alloc::Layout) -> *mut u8 {
-        LARGEST.fetch_max(layout.size(), std::sync::atomic::Ordering::Relaxed);
         // SAFETY: as above.
-        unsafe { std::alloc::System.alloc_zeroed(layout) }
+        let p = unsafe { std::alloc::System.alloc_zeroed(layout) };
+        if !p.is_null() {
+            grew(layout.size(), layout.size());
+        }
+        p
     }
     unsafe fn dealloc(&self, ptr: *mut u8, layout: std::alloc::Layout) {
+        LIVE.fetch_sub(layout.size(), std::sync::atomic::Ordering::Relaxed);
         // SAFETY: as above.
         unsafe { std::alloc::System.dealloc(ptr, layout) }
     }
     unsafe fn realloc(&self, ptr: *mut u8, layout: std::alloc::Layout, new_size: usize) -> *mut u8 {
-        LARGEST.fetch_max(new_size, std::sync::atomic::Ordering::Relaxed);
         // SAFETY: as above.
-        unsafe { std::alloc::System.realloc(ptr, layout, new_size) }
+        let p = unsafe { std::alloc::System.realloc(ptr, layout, new_size) };
+        if !p.is_null() {
+            // The old block counts until the new one exists (a moving realloc holds both).
+            grew(new_size, new_size);
+            LIVE.fetch_sub(layout.size(), std::sync::atomic::Ordering::Relaxed);
+        }
+        p
     }
 }
 
@@ -88,6 +112,21 @@ pub fn largest_allocation() -> usize {
 /// Starts [`largest_allocation`] again from zero.
 pub fn reset_largest_allocation() {
     LARGEST.store(0, std::sync::atomic::Ordering::Relaxed);
+}
+
+/// The bytes live now through [`LargestAllocation`].
+pub fn live_bytes() -> usize {
+    LIVE.load(std::sync::atomic::Ordering::Relaxed)
+}
+
+/// The most bytes live at once through [`LargestAllocation`] since [`reset_peak_live`].
+pub fn peak_live_bytes() -> usize {
+    PEAK.load(std::sync::atomic::Ordering::Relaxed)
+}
+
+/// Starts [`peak_live_bytes`] again from the bytes live now.
+pub fn reset_peak_live() {
+    PEAK.store(live_bytes(), std::sync::atomic::Ordering::Relaxed);
 }
 
 /// The outcome of one mutated input.

@@ -2,7 +2,8 @@
 //! textures, for `cornell-box` (and `cornell-box-moving` and `cornell-box-jump`, its light
 //! animated, linearly and in steps), `caustics`,
 //! `ajar`, `glossy`, `sun-spot-env` (with the
-//! HDR sky `sky.exr` it is rendered under) and `many-lights`, then checks each file
+//! HDR sky `sky.exr` it is rendered under), `many-lights` and `large/rocks` (5.12 M
+//! triangles by instancing), then checks each file
 //! against the glTF 2.0 rules (see `check.rs`), loads it with the project's own loader
 //! (`nrc_scene::Scene::load`), checks that the loader sees what was written (triangles,
 //! lights, emitted power, the camera, no warnings), and prints the figures.
@@ -21,16 +22,26 @@ mod glossy;
 mod gltf_doc;
 mod many_lights;
 mod mesh;
+mod rocks;
 mod sun_spot_env;
 mod textures;
 
 use std::path::PathBuf;
 use std::process::ExitCode;
 
+/// A 32-bit integer hash (lowbias32), for the generators' pseudo-random choices.
+pub fn hash(mut x: u32) -> u32 {
+    x ^= x >> 16;
+    x = x.wrapping_mul(0x7feb_352d);
+    x ^= x >> 15;
+    x = x.wrapping_mul(0x846c_a68b);
+    x ^ (x >> 16)
+}
+
 /// Builds one scene's document.
 type Builder = fn() -> gltf_doc::Document;
 
-const SCENES: [(&str, Builder); 8] = [
+const SCENES: [(&str, Builder); 9] = [
     ("cornell-box", cornell_box::build),
     ("cornell-box-moving", cornell_box::build_moving),
     ("cornell-box-jump", cornell_box::build_jump),
@@ -39,6 +50,9 @@ const SCENES: [(&str, Builder); 8] = [
     ("glossy", glossy::build),
     ("sun-spot-env", sun_spot_env::build),
     ("many-lights", many_lights::build),
+    // In its own folder: the tests that load every scene in `scenes/` many times (the
+    // mutation tests) would spend minutes on its 5 M triangles.
+    ("large/rocks", rocks::build),
 ];
 
 fn main() -> ExitCode {
@@ -50,7 +64,15 @@ fn main() -> ExitCode {
         eprintln!("error: cannot create {}: {e}", dir.display());
         return ExitCode::FAILURE;
     }
-    for (name, build) in SCENES {
+    for (path, build) in SCENES {
+        let (dir, name) = match path.rsplit_once('/') {
+            Some((sub, name)) => (dir.join(sub), name),
+            None => (dir.clone(), path),
+        };
+        if let Err(e) = std::fs::create_dir_all(&dir) {
+            eprintln!("error: cannot create {}: {e}", dir.display());
+            return ExitCode::FAILURE;
+        }
         let doc = build();
         if let Err(e) = doc.write(&dir, name) {
             eprintln!("error: writing {name} into {}: {e}", dir.display());

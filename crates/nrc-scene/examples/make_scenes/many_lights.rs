@@ -8,6 +8,7 @@
 use glam::Vec3;
 
 use crate::gltf_doc::{Document, Light, LightKind, Material, Transform};
+use crate::hash;
 use crate::mesh::Mesh;
 
 /// The hall's extent.
@@ -30,15 +31,6 @@ const COLOURS: [Vec3; 6] = [
 ];
 /// Power factors.
 const POWERS: [f32; 4] = [1.0, 2.0, 5.0, 16.0];
-
-/// A 32-bit integer hash (lowbias32).
-fn hash(mut x: u32) -> u32 {
-    x ^= x >> 16;
-    x = x.wrapping_mul(0x7feb_352d);
-    x ^= x >> 15;
-    x = x.wrapping_mul(0x846c_a68b);
-    x ^ (x >> 16)
-}
 
 pub fn build() -> Document {
     let mut doc = Document::default();
