@@ -20,7 +20,7 @@ use nrc_scene::testing::{LargestAllocation, live_bytes, peak_live_bytes, reset_p
 static ALLOCATOR: LargestAllocation = LargestAllocation;
 
 /// Bytes per triangle the loaded scene may hold (measured: see the module's note).
-const HELD_PER_TRIANGLE: usize = 230;
+const HELD_PER_TRIANGLE: usize = 140;
 /// Bytes per triangle the loader may hold at its peak (the BVH build's scratch included).
 const PEAK_PER_TRIANGLE: usize = 500;
 

@@ -223,6 +223,7 @@ impl Accel {
         // exact node boxes (kept by `obvhs` for refitting, which nothing here does) go.
         let order = std::mem::take(&mut bvh.primitive_indices);
         bvh.exact_node_aabbs = None;
+        bvh.nodes.shrink_to_fit();
         let bvh_tris = order
             .iter()
             .map(|&i| {
