@@ -187,15 +187,9 @@ impl Accel {
     /// Builds the BVH over `tris` (each `[v0, v1, v2]`). Returns the structure and the
     /// permutation `order`: BVH triangle `i` is input triangle `order[i]`. `tris` must not be
     /// empty and must hold only finite coordinates. It is taken by value and freed before the
-    /// build, whose scratch memory is the peak of a scene's loading.
-    pub fn build(tris: Vec<[Vec3; 3]>) -> (Self, Vec<u32>) {
-        let (mut lo, mut hi) = (Vec3::INFINITY, Vec3::NEG_INFINITY);
-        for t in &tris {
-            for &v in t {
-                lo = lo.min(v);
-                hi = hi.max(v);
-            }
-        }
+    /// build, whose scratch memory is the peak of a scene's loading. `sphere`: a bounding
+    /// sphere of the triangles (centre, radius; the scene's), for the traversal's slack.
+    pub fn build(tris: Vec<[Vec3; 3]>, sphere: (Vec3, f32)) -> (Self, Vec<u32>) {
         let input: Vec<Triangle> = tris
             .iter()
             .map(|t| Triangle {
@@ -235,8 +229,8 @@ impl Accel {
             bvh,
             tris: bvh_tris,
             build_seconds: start.elapsed().as_secs_f32(),
-            center: 0.5 * (lo + hi),
-            radius: 0.5 * (hi - lo).length(),
+            center: sphere.0,
+            radius: sphere.1,
         };
         (accel, order)
     }

@@ -322,8 +322,10 @@ impl Scene {
         // What only the validation needed goes before the BVH's build, the peak of loading.
         drop((triangles, triangle_materials, triangle_meshes));
 
+        let sphere = (bounds.center(), (0.5 * bounds.extent().length()).max(1e-6));
+
         // BVH, then triangle records in BVH order.
-        let (accel, order) = Accel::build(corners);
+        let (accel, order) = Accel::build(corners, sphere);
         let tris: Vec<TriangleRecord> = order.iter().map(|&i| kept[i as usize]).collect();
         drop((kept, order));
         let corner_tangents = if materials.iter().any(|m| m.normal_texture.is_some()) {
@@ -357,12 +359,10 @@ impl Scene {
                 )));
             }
         }
-        let sphere = (bounds.center(), (0.5 * bounds.extent().length()).max(1e-6));
         // The loader grew these by pushing: give back their spare capacity (up to half).
         let (mut positions, mut normals, mut uvs, mut uvs1) = (positions, normals, uvs, uvs1);
-        for v in [&mut normals, &mut positions] {
-            v.shrink_to_fit();
-        }
+        positions.shrink_to_fit();
+        normals.shrink_to_fit();
         uvs.shrink_to_fit();
         uvs1.shrink_to_fit();
         let mut scene = Scene {
