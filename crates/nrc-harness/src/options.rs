@@ -49,7 +49,7 @@ pub struct EmitterArgs {
     /// Extra camera rays, their emission only, at each pixel on the outline of an emitter the
     /// camera sees (where the pixel's neighbours disagree about it), averaged with the pass's
     /// own camera rays: unbiased, and cheap (one ray each, no shading); 0: none. At most 256
-    #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u32).range(0..=256))]
+    #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u32).range(0..=nrc_render::emitters::MAX_EXTRA as i64))]
     pub emitter_samples: u32,
 }
 

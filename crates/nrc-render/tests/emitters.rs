@@ -7,7 +7,7 @@ mod common;
 
 use common::{Mesh, SceneBuilder, mat, per_pixel_z_floored, render_scene};
 use glam::Vec3;
-use nrc_render::emitters::{outline, supersample};
+use nrc_render::emitters::{outline, outline_of, supersample};
 use nrc_render::passes::{self, FrameInput, PassSpec};
 use nrc_render::render::render_seen;
 use nrc_render::{PathTracer, RenderSettings, ZeroSource};
@@ -275,7 +275,6 @@ fn the_extra_rays_are_counted_and_only_the_outline_changes() {
         };
         passes::run(spec.build(&tracer).as_mut(), &input, &ZeroSource)
     };
-    let (plain, aa) = (frame(0), frame(EXTRA));
     let settings = RenderSettings {
         width: W,
         height: H,
@@ -284,11 +283,36 @@ fn the_extra_rays_are_counted_and_only_the_outline_changes() {
         variance: false,
     };
     let (_, seen) = render_seen(&scene, &scene.camera, &tracer, &settings, &|_| {});
-    let flags = outline(W, H, &seen);
-    let flagged = flags.iter().filter(|&&f| f).count() as u64;
+    let o = outline_of(&scene, &scene.camera, (W, H), &seen);
+    let flagged = o.flags.iter().filter(|&&f| f).count() as u64;
     assert!(flagged > 0);
+    // Grids of 16 rays, traced once for the view (another test's identical scene at the same
+    // address may have traced them already): a second look traces none.
+    assert_eq!(o.rays % 16, 0);
+    // Where the neighbours saw nearly the mean (64 samples), the thin bar's pixels see the
+    // emitter on both sides and the bar only in part: the neighbours' rule leaves them, the
+    // footprint grid flags them.
+    let many = RenderSettings {
+        spp: 64,
+        ..settings
+    };
+    let (_, seen64) = render_seen(&scene, &scene.camera, &tracer, &many, &|_| {});
+    let by_neighbours = outline(W, H, &seen64);
+    let both = outline_of(&scene, &scene.camera, (W, H), &seen64);
+    let added = both
+        .flags
+        .iter()
+        .zip(&by_neighbours)
+        .filter(|(f, n)| **f && !**n)
+        .count();
+    eprintln!("{flagged} flagged at 1 spp; at 64, {added} more by their footprint");
+    assert!(added > 0);
+    assert!(by_neighbours.iter().zip(&both.flags).all(|(n, f)| !n || *f));
+    let again = outline_of(&scene, &scene.camera, (W, H), &seen);
+    assert_eq!((again.flags, again.rays), (o.flags.clone(), 0));
+    let (plain, aa) = (frame(0), frame(EXTRA));
     assert_eq!(aa.stats.rays, plain.stats.rays + flagged * EXTRA as u64);
-    for (p, flag) in flags.iter().enumerate() {
+    for (p, flag) in o.flags.iter().enumerate() {
         if !flag {
             assert_eq!(
                 aa.image.data[p], plain.image.data[p],
