@@ -12,11 +12,27 @@ use nrc_scene::{
 use crate::sampler::PixelSampler;
 use crate::tracer::PathStats;
 
-/// The MIS weight (power heuristic) of emission found at `si` by a ray of length `dist` that
-/// BSDF sampling at the previous vertex `from` chose with solid-angle density `prev_pdf`, against NEE
-/// (`light_samples` light samples there) choosing the same point. `force_one`: the previous
-/// event could not have been light-sampled (a camera ray, delta scattering, or NEE off), so
-/// the emission counts fully.
+/// How many samples each strategy took at the previous vertex: `light` NEE samples and `bsdf`
+/// BSDF samples (the path's own and any [`crate::PathTracer::glossy_samples`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Counts {
+    pub light: f32,
+    pub bsdf: f32,
+}
+
+impl Counts {
+    /// One sample of each.
+    pub const ONE: Counts = Counts {
+        light: 1.0,
+        bsdf: 1.0,
+    };
+}
+
+/// The factor of emission found at `si` by one of the previous vertex's BSDF samples (a ray of
+/// length `dist`, chosen with solid-angle density `prev_pdf` at `from`): its MIS weight (power
+/// heuristic with the counts) against NEE choosing the same point, over the number of BSDF
+/// samples (they are averaged). `force_one`: the previous event could not have been
+/// light-sampled (a camera ray, delta scattering, or NEE off), so the emission counts fully.
 #[inline]
 pub fn emission_mis_weight(
     scene: &Scene,
@@ -24,19 +40,19 @@ pub fn emission_mis_weight(
     si: &SurfaceInteraction,
     dist: f32,
     prev_pdf: f32,
-    light_samples: f32,
+    counts: Counts,
     force_one: bool,
 ) -> f32 {
     // Area density with which NEE picks this point (0: NEE cannot reach it).
     let pdf_area = scene.light_pdf_area(from, si.tri);
     if force_one || pdf_area == 0.0 {
-        return 1.0;
+        return 1.0 / counts.bsdf;
     }
     // Density with which NEE would have chosen this point, per solid angle at the previous
     // vertex.
     let cos_light = si.ng.dot(si.wo).abs();
     let pdf_light = pdf_area * dist * dist / cos_light;
-    power_heuristic(1.0, prev_pdf, light_samples, pdf_light)
+    power_heuristic(counts.bsdf, prev_pdf, counts.light, pdf_light) / counts.bsdf
 }
 
 /// The MIS weight (power heuristic) of environment radiance reached by a ray leaving in unit
@@ -49,14 +65,14 @@ pub fn environment_mis_weight(
     from: &LightContext,
     d: Vec3,
     prev_pdf: f32,
-    light_samples: f32,
+    counts: Counts,
     force_one: bool,
 ) -> f32 {
     let pdf_light = scene.environment_light_pdf(from, d);
     if force_one || pdf_light == 0.0 {
-        return 1.0;
+        return 1.0 / counts.bsdf;
     }
-    power_heuristic(1.0, prev_pdf, light_samples, pdf_light)
+    power_heuristic(counts.bsdf, prev_pdf, counts.light, pdf_light) / counts.bsdf
 }
 
 /// Next-event estimation at a non-delta vertex: one light sample chosen by the scene's light
@@ -64,8 +80,8 @@ pub fn environment_mis_weight(
 /// an emissive triangle, a punctual light, or an environment direction), its unoccluded
 /// contribution `f · L_i · |cos| / pdf`, weighted against BSDF sampling by the power heuristic
 /// when `mis` (else weight 1; delta lights always have weight 1, BSDF sampling cannot find
-/// them), as one of `light_samples` such samples (the caller averages them; the heuristic
-/// counts them). Draws three numbers from `sampler` always.
+/// them), as one of `counts.light` such samples (the caller averages them; the heuristic counts
+/// them and the `counts.bsdf` BSDF samples). Draws three numbers from `sampler` always.
 #[inline]
 pub fn next_event(
     scene: &Scene,
@@ -74,7 +90,7 @@ pub fn next_event(
     frame: &Frame,
     wo: Vec3,
     mis: bool,
-    light_samples: f32,
+    counts: Counts,
     sampler: &mut PixelSampler,
     stats: &mut PathStats,
 ) -> Vec3 {
@@ -98,7 +114,7 @@ pub fn next_event(
         return Vec3::ZERO;
     }
     let weight = if mis && !inc.delta {
-        power_heuristic(light_samples, inc.pdf, 1.0, bsdf.pdf(wo, wi_local))
+        power_heuristic(counts.light, inc.pdf, counts.bsdf, bsdf.pdf(wo, wi_local))
     } else {
         1.0
     };

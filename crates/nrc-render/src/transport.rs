@@ -19,10 +19,10 @@ use glam::Vec3;
 use nrc_scene::bsdf::{Bsdf, BsdfSample};
 use nrc_scene::{LightContext, Ray, Scene, SurfaceInteraction, sampling::Frame, spawn_ray};
 
-use crate::nee::{emission_mis_weight, environment_mis_weight, next_event};
+use crate::nee::{Counts, emission_mis_weight, environment_mis_weight, next_event};
 use crate::query::RadianceQuery;
 use crate::sampler::PixelSampler;
-use crate::tracer::{LightStrategy, PathStats, PathTracer};
+use crate::tracer::{GLOSSY_ROUGHNESS, LightStrategy, PathStats, PathTracer};
 
 /// A surface vertex of a path, with its BSDF in its shading frame.
 #[derive(Clone, Copy, Debug)]
@@ -111,6 +111,10 @@ pub struct PathWalk {
     segments: u32,
     /// Light samples NEE takes at each vertex (their MIS against BSDF sampling counts them).
     light_samples: u32,
+    /// BSDF samples of the direct light at the latest vertex: 1, or more where
+    /// [`PathTracer::glossy_samples`] applied there (set by [`PathWalk::next_event`], read by
+    /// the next [`PathWalk::arrive`]).
+    bsdf_samples: u32,
     limit: u32,
     /// End the path when its throughput from the start is zero (rendering); training-record
     /// producers keep going, since a later vertex's own record does not depend on it.
@@ -131,6 +135,7 @@ impl PathWalk {
             prev_at: LightContext::new(Vec3::ZERO, Vec3::ZERO),
             segments: 1,
             light_samples: 1,
+            bsdf_samples: 1,
             limit: tracer.segment_limit(),
             zero_throughput_ends: true,
         }
@@ -181,7 +186,7 @@ impl PathWalk {
                     &self.prev_at,
                     d,
                     self.prev_pdf,
-                    self.light_samples as f32,
+                    self.counts(),
                     self.prev_delta || !self.use_nee,
                 )
             };
@@ -208,10 +213,12 @@ impl PathWalk {
                 &si,
                 dist,
                 self.prev_pdf,
-                self.light_samples as f32,
+                self.counts(),
                 self.prev_delta || !self.use_nee,
             )
         };
+        // The new vertex's own direct light starts at one BSDF sample.
+        self.bsdf_samples = 1;
         Arrival::Hit(Hit {
             vertex: Vertex::new(scene, &si, si.wo),
             le,
@@ -240,25 +247,35 @@ impl PathWalk {
     /// leaving `v` toward its `wo`, not yet multiplied by the throughput, the mean of the walk's
     /// light samples. Draws three numbers per light sample always.
     pub fn next_event(
-        &self,
+        &mut self,
         scene: &Scene,
         v: &Vertex,
         sampler: &mut PixelSampler,
         stats: &mut PathStats,
     ) -> Vec3 {
         let n = self.light_samples;
+        let extra = self.glossy_samples_at(v);
+        self.bsdf_samples = 1 + extra;
         if self.use_nee && !v.bsdf.is_delta() {
             let mis = self.tracer.strategy == LightStrategy::Mis;
+            let counts = self.counts();
             let one = |sampler: &mut PixelSampler, stats: &mut PathStats| {
                 next_event(
-                    scene, &v.si, &v.bsdf, &v.frame, v.wo, mis, n as f32, sampler, stats,
+                    scene, &v.si, &v.bsdf, &v.frame, v.wo, mis, counts, sampler, stats,
                 )
             };
-            if n == 1 {
+            let nee = if n == 1 {
                 // The path tracer's case: no averaging on its hot path.
-                return one(sampler, stats);
+                one(sampler, stats)
+            } else {
+                (0..n).map(|_| one(sampler, stats)).sum::<Vec3>() / n as f32
+            };
+            if extra == 0 {
+                return nee;
             }
-            (0..n).map(|_| one(sampler, stats)).sum::<Vec3>() / n as f32
+            nee + (0..extra)
+                .map(|_| self.glossy_sample(scene, v, counts, sampler, stats))
+                .sum::<Vec3>()
         } else {
             // Keep the random stream aligned whatever the strategy.
             for _ in 0..n {
@@ -266,6 +283,68 @@ impl PathWalk {
                 sampler.next_2d();
             }
             Vec3::ZERO
+        }
+    }
+
+    /// The samples of each strategy at the latest vertex, for MIS.
+    fn counts(&self) -> Counts {
+        Counts {
+            light: self.light_samples as f32,
+            bsdf: self.bsdf_samples as f32,
+        }
+    }
+
+    /// [`PathTracer::glossy_samples`] where they apply at `v`: the primary vertex, glossy and
+    /// not a pure delta, with NEE and MIS on; else 0.
+    fn glossy_samples_at(&self, v: &Vertex) -> u32 {
+        let on = self.tracer.glossy_samples > 0
+            && self.segments == 1
+            && self.use_nee
+            && self.tracer.strategy == LightStrategy::Mis
+            && !v.bsdf.is_delta()
+            && v.bsdf.roughness() < GLOSSY_ROUGHNESS;
+        if on { self.tracer.glossy_samples } else { 0 }
+    }
+
+    /// One more BSDF sample of the direct light at `v` (one segment): the emission it finds,
+    /// weighted against NEE by MIS with `counts` and over their BSDF count. Draws three
+    /// numbers always.
+    fn glossy_sample(
+        &self,
+        scene: &Scene,
+        v: &Vertex,
+        counts: Counts,
+        sampler: &mut PixelSampler,
+        stats: &mut PathStats,
+    ) -> Vec3 {
+        let u_lobe = sampler.next_1d();
+        let u_dir = sampler.next_2d();
+        let Some(bs) = v.bsdf.sample(v.wo, u_dir, u_lobe) else {
+            return Vec3::ZERO;
+        };
+        let ray = spawn_ray(v.si.p, v.si.ng, v.frame.to_world(bs.wi));
+        let from = LightContext::new(v.si.p, v.si.ns);
+        stats.closest_rays += 1;
+        match scene.intersect(&ray) {
+            None => {
+                let d = ray.d.normalize();
+                let le = scene.environment().radiance(d);
+                if le == Vec3::ZERO {
+                    return Vec3::ZERO;
+                }
+                let w = environment_mis_weight(scene, &from, d, bs.pdf, counts, bs.delta);
+                bs.weight * le * w
+            }
+            Some(hit) => {
+                let si = scene.interaction(&ray, &hit);
+                let le = scene.emission(&si);
+                if le == Vec3::ZERO {
+                    return Vec3::ZERO;
+                }
+                let dist = hit.t * ray.d.length();
+                let w = emission_mis_weight(scene, &from, &si, dist, bs.pdf, counts, bs.delta);
+                bs.weight * le * w
+            }
         }
     }
 

@@ -78,6 +78,7 @@ fn emissive_enclosure_unlimited_depth() {
             max_depth: -1,
             rr_depth: 3,
             strategy,
+            ..PathTracer::default()
         };
         let out = render_scene(&scene, &tracer, 16, 12, spp, 10 + k as u64);
         assert_eq!(out.stats.invalid_samples, 0);
@@ -97,6 +98,7 @@ fn emissive_enclosure_depth_follows_mitsuba_convention() {
                 max_depth,
                 rr_depth: 100,
                 strategy,
+                ..PathTracer::default()
             };
             let out = render_scene(
                 &scene,

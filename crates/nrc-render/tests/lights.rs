@@ -436,7 +436,7 @@ fn a_masked_quad_casts_the_masked_shadow() {
             &frame,
             frame.to_local(si.wo),
             true,
-            1.0,
+            nrc_render::nee::Counts::ONE,
             &mut sampler,
             &mut PathStats::default(),
         )

@@ -672,3 +672,49 @@ fn resampling_passes_keep_the_path_tracers_tails_where_a_small_bright_emitter_me
     }
     assert!(failures.is_empty(), "{failures:?}");
 }
+
+/// `--glossy-samples` through a pass built on the G-buffer: screen-space ReSTIR GI's direct
+/// light at its shading vertex (NEE, the glossy samples and its candidate's BSDF ray, weighed
+/// with the counts) in [`firefly_room`] at depth 2 (direct light only: no candidate is kept)
+/// matches the path-traced reference without glossy samples per pixel: 192 runs of one frame
+/// through pixel centres, Bonferroni (family-wise 10⁻³), each run's variance floored by the
+/// reference's per sample over 64 (a glossy pixel's window hit is a rare event in a run).
+/// Control: the same runs 20 % too bright fail it (forgetting to divide the candidate ray's
+/// emission by the BSDF count would add 80 % of its share).
+#[test]
+fn glossy_samples_keep_restir_gis_direct_light_unbiased_per_pixel() {
+    let scene = firefly_room();
+    let tracer = PathTracer {
+        max_depth: 2,
+        ..Default::default()
+    };
+    let glossy = PathTracer {
+        glossy_samples: 4,
+        ..tracer
+    };
+    let (w, h) = (24, 16);
+    let ref_spp = 8192;
+    let (reference, ref_var) = reference_at_centres(&scene, &tracer, w, h, ref_spp);
+    let spec: PassSpec = "restir-gi:jitter=0".parse().unwrap();
+    let runs: Vec<Image> = (0..192)
+        .map(|r| last_frame(&scene, &spec, &glossy, w, h, 1, 9000 + r))
+        .collect();
+    let (worst, beyond, bound) =
+        common::per_pixel_z_floored(&runs, &reference, &ref_var, ref_spp, 64.0);
+    println!("glossy samples: worst per-pixel |z| {worst:.2}, {beyond} beyond {bound:.2}");
+    assert_eq!(beyond, 0, "worst |z| {worst:.2} (bound {bound:.2})");
+    // (Pixels that every run sees alike, the emitter's, stay as they are: exact.)
+    let varies = |p: usize| runs.iter().any(|img| img.data[p] != runs[0].data[p]);
+    let bright: Vec<Image> = runs
+        .iter()
+        .map(|img| {
+            let data = (0..img.data.len())
+                .map(|p| img.data[p] * if varies(p) { 1.2 } else { 1.0 })
+                .collect();
+            Image::from_data(w as usize, h as usize, data).unwrap()
+        })
+        .collect();
+    let (worst, beyond, _) =
+        common::per_pixel_z_floored(&bright, &reference, &ref_var, ref_spp, 64.0);
+    assert!(beyond > 0, "20 % too bright passed: worst |z| {worst:.2}");
+}

@@ -965,7 +965,7 @@ impl RenderPass for InstantRadiosityPass {
                         &v.frame,
                         v.wo,
                         false,
-                        1.0,
+                        crate::nee::Counts::ONE,
                         &mut sampler,
                         &mut stats,
                     );
