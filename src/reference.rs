@@ -5,7 +5,7 @@
 use std::path::PathBuf;
 use std::time::Instant;
 
-use anyhow::Result;
+use anyhow::{Result, bail};
 use nrc_harness::options::{CacheArgs, DepthArgs, SceneArgs};
 use nrc_harness::reference::{ReferenceRequest, obtain_showing_progress};
 
@@ -52,6 +52,12 @@ pub struct ReferenceArgs {
 
 /// Runs `nrc reference`.
 pub fn run(args: &ReferenceArgs) -> Result<()> {
+    if args.depth.glossy_samples > 0 {
+        bail!(
+            "--glossy-samples does not apply to references: they are rendered by the plain path \
+             tracer, one estimator per cache key"
+        );
+    }
     let scene = args.scene.load()?;
     for w in scene.warnings() {
         eprintln!("warning: {w}");

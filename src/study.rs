@@ -188,7 +188,7 @@ fn run_job(
             let (moments, _) = nrc_render::render_moments(
                 scene,
                 &scene.camera,
-                &req.tracer,
+                &req.estimator(),
                 (req.width, req.height),
                 req.seed,
                 *first..*end,

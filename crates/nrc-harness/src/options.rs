@@ -33,9 +33,9 @@ pub struct DepthArgs {
 
     /// More BSDF samples of the direct light at each glossy first vertex (roughness below
     /// 0.3), one ray each, weighed against NEE by MIS with the counts: unbiased, for narrow
-    /// lobes reflecting bright emitters, which NEE rarely finds. Every method and the
-    /// reference take them where their paths reach such a vertex through the shared path
-    /// step. 0: none. At most 64
+    /// lobes reflecting bright emitters, which NEE rarely finds. Every method takes them where
+    /// its paths reach such a vertex through the shared path step; references never do (`nrc
+    /// reference` refuses the flag). 0: none. At most 64
     #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u32).range(0..=nrc_render::MAX_GLOSSY_SAMPLES as i64))]
     pub glossy_samples: u32,
 }

@@ -50,6 +50,18 @@ pub struct ReferenceRequest<'a> {
     pub tracer: PathTracer,
 }
 
+impl ReferenceRequest<'_> {
+    /// The estimator a reference is rendered with: the request's depths with the plain path
+    /// tracer, whatever variance-reduction options (`glossy_samples`) the methods use, so that
+    /// one key always holds the same estimator's samples.
+    pub fn estimator(&self) -> PathTracer {
+        PathTracer {
+            glossy_samples: 0,
+            ..self.tracer
+        }
+    }
+}
+
 /// The camera as stored in the sidecar.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct CameraRecord {
@@ -254,7 +266,7 @@ pub fn obtain(
         let (moments, _) = render_moments(
             req.scene,
             &req.scene.camera,
-            &req.tracer,
+            &req.estimator(),
             (req.width, req.height),
             req.seed,
             0..req.spp,

@@ -56,17 +56,13 @@ pub const MAX_EXTRA: u32 = 256;
 /// distinct cells of a `g × g` grid, `g = ⌈√n⌉`, the cells a uniformly random subset (the
 /// whole grid when `n = g²`), each point uniform in its cell. Every point is uniform over the
 /// square, and no two share a cell. `s` gives the numbers.
-pub fn stratified(n: u32, s: &mut PixelSampler) -> impl Iterator<Item = Vec2> + use<> {
+pub fn stratified(n: u32, s: PixelSampler) -> impl Iterator<Item = Vec2> {
     stratified_cells(n, s, true)
 }
 
 /// [`stratified`], with the cells drawn at random (`shuffle`) or the first `n` in row order
 /// (the tests' negative control: not uniform where `n < g²`).
-fn stratified_cells(
-    n: u32,
-    s: &mut PixelSampler,
-    shuffle: bool,
-) -> impl Iterator<Item = Vec2> + use<> {
+fn stratified_cells(n: u32, mut s: PixelSampler, shuffle: bool) -> impl Iterator<Item = Vec2> {
     let n = n.min(MAX_EXTRA) as usize;
     let g = (n as f64).sqrt().ceil() as usize;
     let cells = g * g;
@@ -82,10 +78,9 @@ fn stratified_cells(
         }
     }
     let inv = 1.0 / g as f32;
-    let jitter: Vec<Vec2> = (0..n).map(|_| s.next_2d()).collect();
     (0..n).map(move |k| {
         let c = order[k] as usize;
-        (Vec2::new((c % g) as f32, (c / g) as f32) + jitter[k]) * inv
+        (Vec2::new((c % g) as f32, (c / g) as f32) + s.next_2d()) * inv
     })
 }
 
@@ -103,26 +98,50 @@ pub fn seen(scene: &Scene, ray: &Ray) -> Vec3 {
 /// positive and the dimmest's below half of it. A pixel's own value is never read (see the
 /// module documentation).
 pub fn outline(width: u32, height: u32, seen: &[Vec3]) -> Vec<bool> {
-    let (w, h) = (width as i64, height as i64);
-    assert_eq!(seen.len() as i64, w * h, "one value per pixel");
+    neighbour_ranges(width, height, seen)
+        .into_iter()
+        .map(|(lo, hi)| disagree(lo, hi))
+        .collect()
+}
+
+/// The outline's rule on the dimmest and brightest luminance seen.
+fn disagree(lo: f32, hi: f32) -> bool {
+    hi > 0.0 && lo < 0.5 * hi
+}
+
+/// The pixels around pixel `p` of a `w × h` image (up to eight, `p` excluded), row-major.
+fn neighbours(w: u32, h: u32, p: usize) -> impl Iterator<Item = usize> {
+    let (w, h) = (w as i64, h as i64);
+    let (x, y) = (p as i64 % w, p as i64 / w);
+    (-1..=1i64)
+        .flat_map(|dy| (-1..=1i64).map(move |dx| (dx, dy)))
+        .filter(|&d| d != (0, 0))
+        .map(move |(dx, dy)| (x + dx, y + dy))
+        .filter(move |&(u, v)| u >= 0 && v >= 0 && u < w && v < h)
+        .map(move |(u, v)| (v * w + u) as usize)
+}
+
+/// Per pixel, the dimmest and the brightest luminance its neighbours saw (`seen`, row-major);
+/// `(∞, 0)` for a pixel without neighbours.
+fn neighbour_ranges(w: u32, h: u32, seen: &[Vec3]) -> Vec<(f32, f32)> {
+    assert_eq!(seen.len(), w as usize * h as usize, "one value per pixel");
     let lum: Vec<f32> = seen.iter().map(|&l| luminance(l)).collect();
-    (0..h)
-        .flat_map(|y| (0..w).map(move |x| (x, y)))
-        .map(|(x, y)| {
-            let (mut lo, mut hi) = (f32::INFINITY, 0.0f32);
-            for dy in -1..=1 {
-                for dx in -1..=1 {
-                    let (u, v) = (x + dx, y + dy);
-                    if (dx, dy) != (0, 0) && u >= 0 && v >= 0 && u < w && v < h {
-                        let l = lum[(v * w + u) as usize];
-                        lo = lo.min(l);
-                        hi = hi.max(l);
-                    }
-                }
-            }
-            hi > 0.0 && lo < 0.5 * hi
+    (0..lum.len())
+        .map(|p| {
+            neighbours(w, h, p).fold((f32::INFINITY, 0.0f32), |(lo, hi), q| {
+                (lo.min(lum[q]), hi.max(lum[q]))
+            })
         })
         .collect()
+}
+
+/// The film position of ray `k` of the fixed `FOOTPRINT × FOOTPRINT` grid in pixel `(x, y)`.
+fn grid_film(x: u32, y: u32, k: u32) -> Vec2 {
+    let cell = |i: u32| (i as f32 + 0.5) / FOOTPRINT as f32;
+    Vec2::new(
+        x as f32 + cell(k % FOOTPRINT),
+        y as f32 + cell(k / FOOTPRINT),
+    )
 }
 
 /// The pixels [`supersample`] gives extra rays, and the rays it took to find them.
@@ -141,10 +160,7 @@ const FOOTPRINT: u32 = 4;
 fn footprint(scene: &Scene, camera: &Camera, (w, h): (u32, u32), x: u32, y: u32) -> (f32, f32) {
     let (mut lo, mut hi) = (f32::INFINITY, 0.0f32);
     for k in 0..FOOTPRINT * FOOTPRINT {
-        let film = Vec2::new(
-            x as f32 + ((k % FOOTPRINT) as f32 + 0.5) / FOOTPRINT as f32,
-            y as f32 + ((k / FOOTPRINT) as f32 + 0.5) / FOOTPRINT as f32,
-        );
+        let film = grid_film(x, y, k);
         let l = luminance(seen(scene, &camera.generate_ray(film, w, h)));
         let l = if l.is_finite() { l } else { 0.0 };
         lo = lo.min(l);
@@ -199,37 +215,24 @@ fn footprints(scene: &Scene, camera: &Camera, (w, h): (u32, u32)) -> Arc<Footpri
 /// through the fixed grid (module documentation): never the pixel's own samples. `rays`
 /// counts the grids traced by this call (none where an earlier frame of the view traced them).
 pub fn outline_of(scene: &Scene, camera: &Camera, (w, h): (u32, u32), seen: &[Vec3]) -> Outline {
-    let by_neighbours = outline(w, h, seen);
+    let ranges = neighbour_ranges(w, h, seen);
     let grids = footprints(scene, camera, (w, h));
-    let (wi, hi) = (w as i64, h as i64);
-    let lit_around = |p: usize| {
-        let (x, y) = ((p as u32 % w) as i64, (p as u32 / w) as i64);
-        (-1..=1).any(|dy: i64| {
-            (-1..=1).any(|dx: i64| {
-                let (u, v) = (x + dx, y + dy);
-                (dx, dy) != (0, 0)
-                    && u >= 0
-                    && v >= 0
-                    && u < wi
-                    && v < hi
-                    && luminance(seen[(v * wi + u) as usize]) > 0.0
-            })
-        })
-    };
-    let looked: Vec<(bool, bool)> = (0..seen.len())
-        .into_par_iter()
-        .map(|p| {
-            if by_neighbours[p] {
+    let looked: Vec<(bool, bool)> = ranges
+        .par_iter()
+        .enumerate()
+        .map(|(p, &(lo, hi))| {
+            if disagree(lo, hi) {
                 return (true, false);
             }
-            if !lit_around(p) {
+            // Neighbours that agree on no emission at all: nothing to look for.
+            if hi <= 0.0 {
                 return (false, false);
             }
             let mut traced = false;
             let disagrees = *grids.disagrees[p].get_or_init(|| {
                 traced = true;
                 let (lo, hi) = footprint(scene, camera, (w, h), p as u32 % w, p as u32 / w);
-                hi > 0.0 && lo < 0.5 * hi
+                disagree(lo, hi)
             });
             (disagrees, traced)
         })
@@ -292,8 +295,8 @@ pub fn supersample(
                 return Vec3::ZERO;
             }
             let mut sum = Vec3::ZERO;
-            let mut s = PixelSampler::new(seed, pixel as u64, STREAM);
-            for offset in stratified(extra, &mut s) {
+            let s = PixelSampler::new(seed, pixel as u64, STREAM);
+            for offset in stratified(extra, s) {
                 let film = Vec2::new(x as f32, y as f32) + offset;
                 let l = seen(scene, &camera.generate_ray(film, width, height));
                 // A non-finite value counts as black, as a pass's invalid samples do.
@@ -328,12 +331,8 @@ impl Supersampled {
 /// Pixels whose footprint sees an emitter (4×4 primary rays per pixel), dilated by one pixel.
 pub fn emitter_pixels(scene: &Scene, w: u32, h: u32) -> Vec<bool> {
     let sees = |x: u32, y: u32| {
-        (0..16).any(|k| {
-            let film = Vec2::new(
-                x as f32 + ((k % 4) as f32 + 0.5) / 4.0,
-                y as f32 + ((k / 4) as f32 + 0.5) / 4.0,
-            );
-            let ray = scene.camera.generate_ray(film, w, h);
+        (0..FOOTPRINT * FOOTPRINT).any(|k| {
+            let ray = scene.camera.generate_ray(grid_film(x, y, k), w, h);
             scene
                 .intersect(&ray)
                 .is_some_and(|hit| scene.emission(&scene.interaction(&ray, &hit)) != Vec3::ZERO)
@@ -343,17 +342,8 @@ pub fn emitter_pixels(scene: &Scene, w: u32, h: u32) -> Vec<bool> {
         .flat_map(|y| (0..w).map(move |x| (x, y)))
         .map(|(x, y)| sees(x, y))
         .collect();
-    let (wi, hi) = (w as i64, h as i64);
-    (0..hi)
-        .flat_map(|y| (0..wi).map(move |x| (x, y)))
-        .map(|(x, y)| {
-            (-1..=1).any(|dy| {
-                (-1..=1).any(|dx| {
-                    let (u, v) = (x + dx, y + dy);
-                    u >= 0 && v >= 0 && u < wi && v < hi && direct[(v * wi + u) as usize]
-                })
-            })
-        })
+    (0..direct.len())
+        .map(|p| direct[p] || neighbours(w, h, p).any(|q| direct[q]))
         .collect()
 }
 
@@ -373,8 +363,7 @@ mod tests {
     use super::*;
 
     fn points(n: u32, seed: u64, shuffle: bool) -> Vec<Vec2> {
-        let mut s = PixelSampler::new(seed, 7, STREAM);
-        stratified_cells(n, &mut s, shuffle).collect()
+        stratified_cells(n, PixelSampler::new(seed, 7, STREAM), shuffle).collect()
     }
 
     #[test]

@@ -28,15 +28,17 @@ pub struct PathTracer {
     pub rr_depth: u32,
     /// Estimators of direct illumination.
     pub strategy: LightStrategy,
-    /// More BSDF samples of the direct light at a glossy primary vertex (roughness below
-    /// [`GLOSSY_ROUGHNESS`], not a pure delta), one segment each, weighed against NEE by MIS
+    /// More BSDF samples of the direct light at a glossy first vertex of a walk (roughness below
+    /// [`GLOSSY_ROUGHNESS`], not a pure delta), one segment each: a camera path's primary vertex,
+    /// and equally the first hit of a walk a pass or producer starts elsewhere (a DDGI probe's
+    /// ray, a light-tracing producer's record), weighed against NEE by MIS
     /// with the counts (Veach 1997, §9.2): a narrow lobe reflecting a bright emitter is found
     /// by BSDF samples alone, and each costs one ray, no further path. 0: none (with
     /// [`LightStrategy::Mis`] only).
     pub glossy_samples: u32,
 }
 
-/// Below this roughness a primary vertex takes [`PathTracer::glossy_samples`] (the threshold
+/// Below this roughness a walk's first vertex takes [`PathTracer::glossy_samples`] (the threshold
 /// of the `-diffuse` termination too, 0.3).
 pub const GLOSSY_ROUGHNESS: f32 = 0.3;
 /// `--glossy-samples` at most.

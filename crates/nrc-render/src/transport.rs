@@ -274,7 +274,7 @@ impl PathWalk {
                 return nee;
             }
             nee + (0..extra)
-                .map(|_| self.glossy_sample(scene, v, counts, sampler, stats))
+                .map(|_| self.glossy_sample(scene, v, sampler, stats))
                 .sum::<Vec3>()
         } else {
             // Keep the random stream aligned whatever the strategy.
@@ -294,7 +294,7 @@ impl PathWalk {
         }
     }
 
-    /// [`PathTracer::glossy_samples`] where they apply at `v`: the primary vertex, glossy and
+    /// [`PathTracer::glossy_samples`] where they apply at `v`: the walk's first vertex, glossy and
     /// not a pure delta, with NEE and MIS on; else 0.
     fn glossy_samples_at(&self, v: &Vertex) -> u32 {
         let on = self.tracer.glossy_samples > 0
@@ -306,14 +306,13 @@ impl PathWalk {
         if on { self.tracer.glossy_samples } else { 0 }
     }
 
-    /// One more BSDF sample of the direct light at `v` (one segment): the emission it finds,
-    /// weighted against NEE by MIS with `counts` and over their BSDF count. Draws three
-    /// numbers always.
+    /// One more BSDF sample of the direct light at `v`: one segment, followed and weighed as
+    /// the path's own sample would be (on a copy of the walk, whose count of BSDF samples is
+    /// already `counts.bsdf`), its emission only. Draws three numbers always.
     fn glossy_sample(
         &self,
         scene: &Scene,
         v: &Vertex,
-        counts: Counts,
         sampler: &mut PixelSampler,
         stats: &mut PathStats,
     ) -> Vec3 {
@@ -322,29 +321,11 @@ impl PathWalk {
         let Some(bs) = v.bsdf.sample(v.wo, u_dir, u_lobe) else {
             return Vec3::ZERO;
         };
-        let ray = spawn_ray(v.si.p, v.si.ng, v.frame.to_world(bs.wi));
-        let from = LightContext::new(v.si.p, v.si.ns);
-        stats.closest_rays += 1;
-        match scene.intersect(&ray) {
-            None => {
-                let d = ray.d.normalize();
-                let le = scene.environment().radiance(d);
-                if le == Vec3::ZERO {
-                    return Vec3::ZERO;
-                }
-                let w = environment_mis_weight(scene, &from, d, bs.pdf, counts, bs.delta);
-                bs.weight * le * w
-            }
-            Some(hit) => {
-                let si = scene.interaction(&ray, &hit);
-                let le = scene.emission(&si);
-                if le == Vec3::ZERO {
-                    return Vec3::ZERO;
-                }
-                let dist = hit.t * ray.d.length();
-                let w = emission_mis_weight(scene, &from, &si, dist, bs.pdf, counts, bs.delta);
-                bs.weight * le * w
-            }
+        let mut walk = *self;
+        walk.follow(v, &bs);
+        match walk.arrive(scene, stats) {
+            Arrival::Escaped { le, mis } => bs.weight * le * mis,
+            Arrival::Hit(h) => bs.weight * h.le * h.mis,
         }
     }
 

@@ -679,8 +679,10 @@ fn resampling_passes_keep_the_path_tracers_tails_where_a_small_bright_emitter_me
 /// matches the path-traced reference without glossy samples per pixel: 192 runs of one frame
 /// through pixel centres, Bonferroni (family-wise 10⁻³), each run's variance floored by the
 /// reference's per sample over 64 (a glossy pixel's window hit is a rare event in a run).
-/// Control: the same runs 20 % too bright fail it (forgetting to divide the candidate ray's
-/// emission by the BSDF count would add 80 % of its share).
+/// Control, of the test's power only: the same runs 20 % too bright fail it (forgetting to
+/// divide the candidate ray's emission by the BSDF count would add up to 80 % of its share).
+/// The wrong weight itself, run through the shared walk, is the failing case of
+/// `direct_lighting.rs`'s glossy-samples test.
 #[test]
 fn glossy_samples_keep_restir_gis_direct_light_unbiased_per_pixel() {
     let scene = firefly_room();
