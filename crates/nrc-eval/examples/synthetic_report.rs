@@ -132,6 +132,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             bias_variance: Some(acc.finish(&reference_view, None)?),
             temporal: None,
             concentration: None,
+            cost: None,
         });
         report.sweeps.push(series);
     }

@@ -54,6 +54,6 @@ pub use error::{EvalError, Result};
 pub use hdr_flip::{HdrFlipParams, HdrFlipResult, ToneMapper, hdr_flip};
 pub use image::{ImageView, RgbImage, ScalarImage};
 pub use metrics::{ErrorMetrics, Metric, MetricOptions, compute_metrics};
-pub use report::{Report, ReportRow, write_report};
+pub use report::{PassCost, Report, ReportRow, write_report};
 pub use sweep::{SweepPoint, SweepSeries, TimeToReach, time_to_reach};
 pub use temporal::{TemporalAccumulator, TemporalStats, TrackedLuminance, temporal_stats};

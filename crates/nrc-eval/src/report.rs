@@ -34,6 +34,30 @@ pub struct ReportRow {
     /// Where the error sits (mean over runs).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub concentration: Option<ErrorConcentration>,
+    /// What a pass cost (mean over runs).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cost: Option<PassCost>,
+}
+
+/// What one pass of a method (one estimate at its stated samples per pixel) cost, as means
+/// over runs: where a resampling frame's time goes, against a path-traced sample's.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct PassCost {
+    /// Wall time per pass, ms (a frame's wall time over its passes).
+    pub ms_per_pass: f64,
+    /// Rays per pixel per pass, closest-hit and shadow.
+    pub rays_per_pixel: f64,
+    /// Milliseconds per pass in each phase the pass times (empty where it times none).
+    pub phases: Vec<(String, f64)>,
+}
+
+/// Whether `method` names the path tracer at a fixed sample count (`pt-4spp`): the unit of
+/// the cost table.
+fn is_path_tracer(method: &str) -> bool {
+    method
+        .strip_prefix("pt-")
+        .and_then(|s| s.strip_suffix("spp"))
+        .is_some_and(|n| n.parse::<u32>().is_ok())
 }
 
 /// A whole comparison.
@@ -104,6 +128,9 @@ impl Report {
         }
         if self.rows.iter().any(|r| r.concentration.is_some()) {
             self.concentration_table(&mut md);
+        }
+        if self.rows.iter().any(|r| r.cost.is_some()) {
+            self.cost_table(&mut md);
         }
         if self.rows.iter().any(|r| r.temporal.is_some()) {
             self.temporal_table(&mut md);
@@ -238,6 +265,54 @@ impl Report {
             "\nShares of each run's summed squared error (per pixel, the mean over channels), averaged over runs; \
              the pixels seeing an emitter are those a 4×4 grid of rays per pixel finds on one, and their 8 neighbours: \
              their anti-aliasing noise only more camera samples lower.\n"
+        );
+    }
+
+    fn cost_table(&self, md: &mut String) {
+        let _ = writeln!(md, "## Where the time goes\n");
+        // A path-traced sample's time, from the first path-tracer row.
+        let sample_ms = self
+            .rows
+            .iter()
+            .find(|r| is_path_tracer(&r.method) && r.samples_per_pixel > 0.0)
+            .map(|r| (r.method.clone(), r.time_per_frame_ms / r.samples_per_pixel));
+        let _ = writeln!(
+            md,
+            "| method | ms per pass | path-traced samples per pass | rays per pixel per pass | phases (ms per pass) |\n|---|---:|---:|---:|---|"
+        );
+        for r in &self.rows {
+            let Some(c) = &r.cost else { continue };
+            let in_samples = sample_ms.as_ref().map_or("–".to_string(), |(_, ms)| {
+                format!("{:.2}", c.ms_per_pass / ms)
+            });
+            let phases: Vec<String> = c
+                .phases
+                .iter()
+                .filter(|(_, ms)| *ms > 0.0)
+                .map(|(n, ms)| format!("{n} {ms:.1}"))
+                .collect();
+            let phases = if phases.is_empty() {
+                "–".to_string()
+            } else {
+                phases.join(", ")
+            };
+            let _ = writeln!(
+                md,
+                "| {} | {} | {in_samples} | {:.1} | {phases} |",
+                r.method,
+                fmt_num(c.ms_per_pass),
+                c.rays_per_pixel
+            );
+        }
+        let unit = sample_ms.map_or(
+            "no path tracer at fixed samples was compared, so no unit".to_string(),
+            |(m, ms)| format!("one sample of `{m}`, {} ms", fmt_num(ms)),
+        );
+        let _ = writeln!(
+            md,
+            "\nA pass is one estimate at the method's stated samples per pixel; its time is the frame's wall time over its \
+             passes (a trained cache's training included), its rays those the pass traced (closest-hit and shadow; the \
+             training records' not included). Path-traced samples per pass: against {unit}.\n"
         );
     }
 

@@ -5,7 +5,7 @@ use std::path::Path;
 use nrc_eval::metrics::{ErrorMetrics, Metric};
 use nrc_eval::plot::{PLOT_SIZE, plot_error_vs_time};
 use nrc_eval::png_output::{ColorMap, Scale, write_false_color_png, write_srgb_png};
-use nrc_eval::report::{fmt_num, read_report_json};
+use nrc_eval::report::{PassCost, fmt_num, read_report_json};
 use nrc_eval::sweep::time_to_error_table;
 use nrc_eval::{
     BiasVariance, ErrorConcentration, EvalError, ImageView, Report, ReportRow, ScalarImage,
@@ -80,6 +80,11 @@ fn sample_report() -> Report {
                 emitters: Some(0.5),
                 p999: 12.5,
             }),
+            cost: Some(PassCost {
+                ms_per_pass: 3.25,
+                rays_per_pixel: 4.0,
+                phases: Vec::new(),
+            }),
         },
         ReportRow {
             method: "pt-16spp".into(),
@@ -93,6 +98,12 @@ fn sample_report() -> Report {
             },
             bias_variance: None,
             concentration: None,
+            // Not a path tracer's cost: the table's second row, in units of the first.
+            cost: Some(PassCost {
+                ms_per_pass: 6.5,
+                rays_per_pixel: 9.3,
+                phases: vec![("candidates".into(), 1.5), ("temporal".into(), 0.0)],
+            }),
             temporal: Some(TemporalStats {
                 frames: 3,
                 mean_abs_change: 0.1,
@@ -142,6 +153,15 @@ fn report_files_round_trip() {
         "{md}"
     );
     assert!(!md.contains("| pt-16spp | 0.03100 | "), "{md}");
+    // The cost table counts passes in samples of the first path tracer (3.25 ms each) and
+    // names only the phases that took time.
+    assert!(md.contains("## Where the time goes"), "{md}");
+    assert!(md.contains("| pt-1spp | 3.250 | 1.00 | 4.0 | – |"), "{md}");
+    assert!(
+        md.contains("| pt-16spp | 6.500 | 2.00 | 9.3 | candidates 1.5 |"),
+        "{md}"
+    );
+    assert!(md.contains("one sample of `pt-1spp`, 3.250 ms"), "{md}");
     assert!(
         md.contains("## Time to reach the MSE of pt-bsdf at 24.00 ms"),
         "{md}"

@@ -20,6 +20,7 @@ use glam::{DVec3, Vec3};
 use nrc_scene::{Camera, Image, Scene};
 
 use nrc_render::pass_seed;
+use nrc_render::passes::PhaseTimes;
 
 use crate::error::HarnessError;
 
@@ -33,6 +34,10 @@ pub struct Estimate {
     /// Stateful methods: frames of this size the method's state rendered before this one
     /// since it was last reset (how warm its history was).
     pub warm_frames: Option<u32>,
+    /// Rays the pass traced, closest-hit and shadow (a trained cache's producer not included).
+    pub rays: u64,
+    /// The resampling passes' phases (zero for the others).
+    pub phases: PhaseTimes,
 }
 
 /// A rendering method with its state (for the path tracer, just its settings; for cache-based
@@ -149,6 +154,10 @@ pub struct Frame {
     pub invalid_samples: u64,
     /// The first pass's [`Estimate::warm_frames`].
     pub warm_frames: Option<u32>,
+    /// Rays of all passes ([`Estimate::rays`]).
+    pub rays: u64,
+    /// Phase times summed over the passes.
+    pub phases: PhaseTimes,
 }
 
 /// Why a frame could not be rendered.
@@ -189,6 +198,8 @@ pub fn render_frame(
     let mut longest_pass = Duration::ZERO;
     let mut last_check = Duration::ZERO;
     let mut warm_frames = None;
+    let mut rays = 0;
+    let mut phases = PhaseTimes::default();
     loop {
         let pass = method.render_estimate(scene, camera, w, h, pass_seed(request.seed, passes));
         if passes == 0 {
@@ -198,6 +209,8 @@ pub fn render_frame(
             *s += p.as_dvec3();
         }
         invalid_samples += pass.invalid_samples;
+        rays += pass.rays;
+        phases.add(&pass.phases);
         passes += 1;
         let now = start.elapsed();
         longest_pass = longest_pass.max(now - last_check);
@@ -223,6 +236,8 @@ pub fn render_frame(
         longest_pass,
         invalid_samples,
         warm_frames,
+        rays,
+        phases,
     })
 }
 
@@ -263,6 +278,8 @@ mod tests {
                 image,
                 invalid_samples: 0,
                 warm_frames: None,
+                rays: 0,
+                phases: PhaseTimes::default(),
             }
         }
     }

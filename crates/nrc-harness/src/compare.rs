@@ -27,11 +27,12 @@ use nrc_eval::plot::plot_error_vs_time;
 use nrc_eval::png_output::{ColorMap, Scale, write_false_color_png};
 use nrc_eval::sweep::time_to_error_table;
 use nrc_eval::{
-    BiasVarianceAccumulator, ErrorMetrics, HdrFlipParams, ImageView, Report, ReportRow,
+    BiasVarianceAccumulator, ErrorMetrics, HdrFlipParams, ImageView, PassCost, Report, ReportRow,
     ScalarImage, SweepPoint, SweepSeries, concentration, hdr_flip, mean_concentration,
     write_report,
 };
 use nrc_render::emitters::{emitter_pixels, exclude};
+use nrc_render::passes::PhaseTimes;
 use nrc_render::sampler::Stream;
 use nrc_render::{PathTracer, pass_seed};
 use nrc_scene::{Image, Scene};
@@ -126,6 +127,12 @@ pub struct RunRecord {
     /// was last reset (untimed warm-up included), i.e. how warm the history was.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub warm_frames: Option<u32>,
+    /// Rays traced in the frame (closest-hit and shadow, all passes).
+    #[serde(default)]
+    pub rays: u64,
+    /// The resampling passes' phase times, summed over the frame's passes (ms).
+    #[serde(default)]
+    pub phases: PhaseTimes,
     pub metrics: ErrorMetrics,
 }
 
@@ -212,8 +219,33 @@ fn record(
         longest_pass_ms: f.longest_pass.as_secs_f64() * 1e3,
         invalid_samples: f.invalid_samples,
         warm_frames: f.warm_frames,
+        rays: f.rays,
+        phases: f.phases,
         metrics: m,
     }
+}
+
+/// The mean cost of a pass from totals over a method's runs (`None` if it made none).
+fn pass_cost(
+    time_ms: f64,
+    passes: u64,
+    rays: u64,
+    phases: &PhaseTimes,
+    w: u32,
+    h: u32,
+) -> Option<PassCost> {
+    (passes > 0).then(|| {
+        let n = passes as f64;
+        PassCost {
+            ms_per_pass: time_ms / n,
+            rays_per_pixel: rays as f64 / (n * f64::from(w) * f64::from(h)),
+            phases: phases
+                .named()
+                .iter()
+                .map(|(name, ms)| (name.to_string(), ms / n))
+                .collect(),
+        }
+    })
 }
 
 fn mean_metrics(ms: &[ErrorMetrics]) -> ErrorMetrics {
@@ -400,6 +432,8 @@ pub fn compare_runs(
         let mut metrics = Vec::new();
         let mut spreads = Vec::new();
         let (mut time_ms, mut spp) = (0.0, 0.0);
+        let (mut passes, mut rays) = (0u64, 0u64);
+        let mut phases = PhaseTimes::default();
         let mut first: Option<(Frame, ErrorMetrics)> = None;
         for r in 0..c.runs {
             let seed = pass_seed(base, r);
@@ -425,6 +459,9 @@ pub fn compare_runs(
             metrics.push(m);
             time_ms += frame.elapsed.as_secs_f64() * 1e3;
             spp += frame.samples_per_pixel as f64;
+            passes += u64::from(frame.passes);
+            rays += frame.rays;
+            phases.add(&frame.phases);
             if r == 0 {
                 write_images(c, &name, &frame.image, &ref_view, flip_map.as_ref())?;
                 first = Some((frame, m));
@@ -445,6 +482,7 @@ pub fn compare_runs(
             },
             temporal: None,
             concentration: mean_concentration(&spreads),
+            cost: pass_cost(time_ms, passes, rays, &phases, w, h),
         });
 
         // Plot points: the sweep (run 0 is its first budget), else every run.

@@ -467,6 +467,8 @@ impl Method for PassMethod {
             image: out.image,
             invalid_samples: out.stats.invalid_samples,
             warm_frames: self.stateful.then_some(warm),
+            rays: out.stats.rays,
+            phases: out.stats.phases,
         }
     }
 }
@@ -695,6 +697,8 @@ impl Method for CacheMethod {
                     .expect("one value per pixel"),
                     invalid_samples: width as u64 * height as u64,
                     warm_frames: None,
+                    rays: 0,
+                    phases: Default::default(),
                 };
             }
         };
@@ -714,6 +718,8 @@ impl Method for CacheMethod {
             image: out.image,
             invalid_samples: out.stats.invalid_samples,
             warm_frames: stateful.then(|| trainer.warm_frames()),
+            rays: out.stats.rays,
+            phases: out.stats.phases,
         }
     }
 }

@@ -26,6 +26,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result, bail, ensure};
 use nrc_render::Moments;
+use nrc_render::passes::PhaseTimes;
 use nrc_scene::Image;
 use safetensors::tensor::{Dtype, SafeTensors, TensorView};
 use serde::{Deserialize, Serialize};
@@ -297,6 +298,11 @@ pub struct FrameMeta {
     pub longest_pass_ns: u64,
     pub invalid_samples: u64,
     pub warm_frames: Option<u32>,
+    /// Rays traced and phase times, summed over the passes (absent in older results).
+    #[serde(default)]
+    pub rays: u64,
+    #[serde(default)]
+    pub phases: PhaseTimes,
 }
 
 /// What a job produced.
@@ -348,6 +354,8 @@ pub fn write_result(
                 longest_pass_ns: frame.longest_pass.as_nanos() as u64,
                 invalid_samples: frame.invalid_samples,
                 warm_frames: frame.warm_frames,
+                rays: frame.rays,
+                phases: frame.phases,
             });
             let bytes: Vec<u8> = frame
                 .image
@@ -492,6 +500,8 @@ pub fn read_result(dir: &Path, plan: &Plan, job: &Job) -> Result<Option<(ResultM
                     longest_pass: Duration::from_nanos(f.longest_pass_ns),
                     invalid_samples: f.invalid_samples,
                     warm_frames: f.warm_frames,
+                    rays: f.rays,
+                    phases: f.phases,
                 },
             }
         }

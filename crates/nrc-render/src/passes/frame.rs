@@ -75,7 +75,7 @@ pub struct PassStats {
 }
 
 /// Milliseconds per phase of a resampling pass's frame.
-#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct PhaseTimes {
     /// The probe volume's update (its rays traced and blended), for the DDGI passes.
     pub probes_ms: f64,
@@ -88,19 +88,36 @@ pub struct PhaseTimes {
 }
 
 impl PhaseTimes {
+    /// Each phase by name, in frame order.
+    pub fn named(&self) -> [(&'static str, f64); 5] {
+        [
+            ("probes", self.probes_ms),
+            ("candidates", self.candidates_ms),
+            ("temporal", self.temporal_ms),
+            ("spatial", self.spatial_ms),
+            ("shading", self.shading_ms),
+        ]
+    }
+
     /// `probes 1.0 ms, candidates 2.0 ms, ...`, or `None` for a pass that times no phases.
     pub fn describe(&self) -> Option<String> {
-        let total = self.probes_ms
-            + self.candidates_ms
-            + self.temporal_ms
-            + self.spatial_ms
-            + self.shading_ms;
-        (total > 0.0).then(|| {
-            format!(
-                "probes {:.1} ms, candidates {:.1} ms, temporal {:.1} ms, spatial {:.1} ms, shading {:.1} ms",
-                self.probes_ms, self.candidates_ms, self.temporal_ms, self.spatial_ms, self.shading_ms
-            )
+        let named = self.named();
+        (named.iter().any(|(_, ms)| *ms > 0.0)).then(|| {
+            let parts: Vec<String> = named
+                .iter()
+                .map(|(n, ms)| format!("{n} {ms:.1} ms"))
+                .collect();
+            parts.join(", ")
         })
+    }
+
+    /// Adds another frame's times to these.
+    pub fn add(&mut self, o: &PhaseTimes) {
+        self.probes_ms += o.probes_ms;
+        self.candidates_ms += o.candidates_ms;
+        self.temporal_ms += o.temporal_ms;
+        self.spatial_ms += o.spatial_ms;
+        self.shading_ms += o.shading_ms;
     }
 }
 
