@@ -181,7 +181,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
             " from the cache {} ({} cache queries, {:.1} ms in the cache)",
             p.display(),
             s.queries,
-            s.cache_ms
+            s.phases.source_ms
         ),
         _ => String::new(),
     };

@@ -288,13 +288,14 @@ impl Report {
             let phases: Vec<String> = c
                 .phases
                 .iter()
-                .filter(|(_, ms)| *ms > 0.0)
+                .filter(|(_, ms)| *ms >= 0.05)
                 .map(|(n, ms)| format!("{n} {ms:.1}"))
                 .collect();
+            let named: f64 = c.phases.iter().map(|(_, ms)| ms).sum();
             let phases = if phases.is_empty() {
                 "–".to_string()
             } else {
-                phases.join(", ")
+                format!("{}; rest {:.1}", phases.join(", "), c.ms_per_pass - named)
             };
             let _ = writeln!(
                 md,
@@ -312,7 +313,8 @@ impl Report {
             md,
             "\nA pass is one estimate at the method's stated samples per pixel; its time is the frame's wall time over its \
              passes (a trained cache's training included), its rays those the pass traced (closest-hit and shadow; the \
-             training records' not included). Path-traced samples per pass: against {unit}.\n"
+             training records' not included). The rest is the time outside the named phases (a cache's training, the \
+             outline's extra camera rays, the frame's averaging). Path-traced samples per pass: against {unit}.\n"
         );
     }
 

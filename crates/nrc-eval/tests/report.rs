@@ -83,7 +83,8 @@ fn sample_report() -> Report {
             cost: Some(PassCost {
                 ms_per_pass: 3.25,
                 rays_per_pixel: 4.0,
-                phases: Vec::new(),
+                // Below a twentieth of a millisecond: not shown.
+                phases: vec![("source".into(), 0.01)],
             }),
         },
         ReportRow {
@@ -158,7 +159,7 @@ fn report_files_round_trip() {
     assert!(md.contains("## Where the time goes"), "{md}");
     assert!(md.contains("| pt-1spp | 3.250 | 1.00 | 4.0 | – |"), "{md}");
     assert!(
-        md.contains("| pt-16spp | 6.500 | 2.00 | 9.3 | candidates 1.5 |"),
+        md.contains("| pt-16spp | 6.500 | 2.00 | 9.3 | candidates 1.5; rest 5.0 |"),
         "{md}"
     );
     assert!(md.contains("one sample of `pt-1spp`, 3.250 ms"), "{md}");

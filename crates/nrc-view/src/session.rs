@@ -467,8 +467,8 @@ impl Session {
             line.produce_ms = stats.produce_ms;
             line.train_ms = stats.train_ms;
             line.records = stats.records;
-            line.trace_ms = stats.infer_ms - stats.inference.cache_ms;
-            line.infer_ms = stats.inference.cache_ms;
+            line.trace_ms = stats.infer_ms - stats.inference.phases.source_ms;
+            line.infer_ms = stats.inference.phases.source_ms;
             out.ok_or("the loop rendered no frame")?
         } else {
             let s = &self.trainer.settings;
@@ -489,8 +489,8 @@ impl Session {
             let t = Instant::now();
             let out = self.trainer.render(&input);
             let ms = t.elapsed().as_secs_f64() * 1e3;
-            line.trace_ms = ms - out.stats.cache_ms;
-            line.infer_ms = out.stats.cache_ms;
+            line.trace_ms = ms - out.stats.phases.source_ms;
+            line.infer_ms = out.stats.phases.source_ms;
             out
         };
         let t = Instant::now();

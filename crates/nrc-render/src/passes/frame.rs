@@ -68,13 +68,12 @@ pub struct PassStats {
     pub invalid_samples: u64,
     /// Milliseconds in the trace phase.
     pub trace_ms: f64,
-    /// Milliseconds in the radiance source's call.
-    pub cache_ms: f64,
-    /// The resampling passes' phases (zero for the others).
+    /// The frame's phases: the resampling passes' own (zero for the others) and the source's
+    /// answers (any pass that asks one).
     pub phases: PhaseTimes,
 }
 
-/// Milliseconds per phase of a resampling pass's frame.
+/// Milliseconds per phase of a pass's frame.
 #[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct PhaseTimes {
     /// The probe volume's update (its rays traced and blended), for the DDGI passes.
@@ -85,17 +84,22 @@ pub struct PhaseTimes {
     pub spatial_ms: f64,
     /// Final visibility, shading and the rest of the path.
     pub shading_ms: f64,
+    /// The radiance source answering the frame's queries (between trace and resolve; any
+    /// pass that asks one).
+    #[serde(default)]
+    pub source_ms: f64,
 }
 
 impl PhaseTimes {
     /// Each phase by name, in frame order.
-    pub fn named(&self) -> [(&'static str, f64); 5] {
+    pub fn named(&self) -> [(&'static str, f64); 6] {
         [
             ("probes", self.probes_ms),
             ("candidates", self.candidates_ms),
             ("temporal", self.temporal_ms),
             ("spatial", self.spatial_ms),
             ("shading", self.shading_ms),
+            ("source", self.source_ms),
         ]
     }
 
@@ -118,6 +122,7 @@ impl PhaseTimes {
         self.temporal_ms += o.temporal_ms;
         self.spatial_ms += o.spatial_ms;
         self.shading_ms += o.shading_ms;
+        self.source_ms += o.source_ms;
     }
 }
 
@@ -269,7 +274,7 @@ pub fn run(
     let cache_ms = t1.elapsed().as_secs_f64() * 1e3;
     let mut out = pass.resolve(input, &answers);
     out.stats.trace_ms = trace_ms;
-    out.stats.cache_ms = cache_ms;
+    out.stats.phases.source_ms = cache_ms;
     out.stats.queries = queries.len() as u64;
     out
 }
