@@ -97,6 +97,26 @@ impl ProbeGeometry {
     }
 }
 
+/// Probe rays per frame per pixel of the frame where the rays are sized to it: the seed
+/// paper's 16 × 8 × 16 probes of 256 rays at 1920 × 1080 (`ddgi-resampling.txt` §4), 0.25.
+/// At 256 rays on this project's 2 cores the probe update of a 160 × 90 kitchen frame cost
+/// more than a path-traced sample (RESULTS.md, issue 39).
+pub const PROBE_RAYS_PER_PIXEL: f64 = 0.25;
+
+/// The most rays per probe a frame-sized count takes: the paper's (and RTXGI's) 256.
+const MAX_AUTO_RAYS: u32 = 256;
+
+/// The fewest: enough directions for the 8 × 8 irradiance map to see every texel's hemisphere.
+const MIN_AUTO_RAYS: u32 = 32;
+
+/// [`PROBE_RAYS_PER_PIXEL`] of `pixels` over `probes`, rounded up to a multiple of 32, in
+/// `[MIN_AUTO_RAYS, MAX_AUTO_RAYS]`.
+pub fn auto_rays(pixels: u64, probes: usize) -> u32 {
+    let per_probe = PROBE_RAYS_PER_PIXEL * pixels as f64 / probes.max(1) as f64;
+    let rounded = (per_probe / 32.0).ceil() * 32.0;
+    rounded.clamp(MIN_AUTO_RAYS as f64, MAX_AUTO_RAYS as f64) as u32
+}
+
 /// Above this fraction of back-face hits a probe is inside geometry (RTXGI's threshold).
 const INSIDE_FRACTION: f32 = 0.25;
 
@@ -106,7 +126,9 @@ pub struct DdgiSettings {
     /// Probes per axis; `None`: from the scene's extent (8 along the longest axis, at least 2
     /// along each).
     pub counts: Option<UVec3>,
-    pub rays_per_probe: u32,
+    /// Rays per probe and frame; `None`: sized to the frame the volume serves
+    /// ([`ProbeVolume::fit_rays_to_frame`], [`PROBE_RAYS_PER_PIXEL`]), 256 until it is told.
+    pub rays_per_probe: Option<u32>,
     pub hysteresis: f32,
     /// Interior texels per side of the irradiance and moments maps.
     pub irradiance_texels: u32,
@@ -130,7 +152,7 @@ impl Default for DdgiSettings {
     fn default() -> Self {
         Self {
             counts: None,
-            rays_per_probe: 256,
+            rays_per_probe: None,
             hysteresis: 0.97,
             irradiance_texels: 8,
             moment_texels: 16,
@@ -175,6 +197,71 @@ pub fn oct_decode(e: Vec2) -> Vec3 {
 #[derive(Clone, Copy, Debug)]
 struct OctMap {
     n: u32,
+}
+
+/// A probe's rays' directions by component, for [`OctMap::blend`].
+#[derive(Default)]
+struct RayColumns {
+    x: Vec<f32>,
+    y: Vec<f32>,
+    z: Vec<f32>,
+}
+
+impl RayColumns {
+    fn fill(&mut self, rays: &[(Vec3, Vec3, f32)]) {
+        self.x.clear();
+        self.y.clear();
+        self.z.clear();
+        for (d, _, _) in rays {
+            self.x.push(d.x);
+            self.y.push(d.y);
+            self.z.push(d.z);
+        }
+    }
+
+    /// `max(0, n · d)^exponent` for every ray `d` into `out`, 0 where the cosine is not
+    /// positive; `base` is scratch. An integral exponent below 1024 by repeated squaring, bit
+    /// for bit `f32::powi`'s (whose library call cost a sixth of a DDGI frame), any other by
+    /// `powf`.
+    fn weights(&self, n: Vec3, exponent: f32, out: &mut Vec<f32>, base: &mut Vec<f32>) {
+        base.clear();
+        base.extend(
+            self.x
+                .iter()
+                .zip(&self.y)
+                .zip(&self.z)
+                .map(|((&x, &y), &z)| n.x * x + n.y * y + n.z * z)
+                .map(|c| if c > 0.0 { c } else { 0.0 }),
+        );
+        out.clear();
+        if exponent.fract() != 0.0 || !(0.0..1024.0).contains(&exponent) {
+            out.extend(
+                base.iter()
+                    .map(|&c| if c > 0.0 { c.powf(exponent) } else { 0.0 }),
+            );
+            return;
+        }
+        let mut m = exponent as u32;
+        if m == 0 {
+            out.extend(base.iter().map(|&c| if c > 0.0 { 1.0 } else { 0.0 }));
+            return;
+        }
+        out.extend(base.iter().map(|&c| if m & 1 == 1 { c } else { 1.0 }));
+        loop {
+            m >>= 1;
+            if m == 0 {
+                break;
+            }
+            for b in base.iter_mut() {
+                *b *= *b;
+            }
+            if m & 1 == 1 {
+                for (o, &b) in out.iter_mut().zip(base.iter()) {
+                    *o *= b;
+                }
+            }
+        }
+    }
 }
 
 impl OctMap {
@@ -239,27 +326,30 @@ impl OctMap {
 
     /// Blends one frame's rays `(direction, radiance, distance)` into every interior texel of
     /// `texels` with history weight `h`: the texel gets `Σ w value / Σ w` over the rays, `w` the
-    /// `weight` of the cosine between the texel's direction and the ray (rays behind it skip);
-    /// then the border is filled.
+    /// cosine between the texel's direction and the ray raised to `exponent` (rays behind it
+    /// skip); then the border is filled. The cosines and weights of a texel are computed for
+    /// all rays at once from `rays`' directions in columns (a loop the compiler vectorises),
+    /// the sums in ray order.
     fn blend<T>(
         &self,
         texels: &mut [T],
-        rays: &[(Vec3, Vec3, f32)],
+        rays: &RayColumns,
         h: f32,
-        weight: impl Fn(f32) -> f32,
-        value: impl Fn(Vec3, Vec3, f32) -> T,
+        exponent: f32,
+        value: impl Fn(usize) -> T,
+        scratch: &mut (Vec<f32>, Vec<f32>),
     ) where
         T: Copy + Default + std::ops::Mul<f32, Output = T> + std::ops::Add<Output = T>,
     {
         for y in 1..=self.n as usize {
             for x in 1..=self.n as usize {
                 let nt = oct_decode(self.coords(x, y));
+                let (weights, base) = scratch;
+                rays.weights(nt, exponent, weights, base);
                 let (mut sum, mut wsum) = (T::default(), 0.0);
-                for &(d, l, dist) in rays {
-                    let c = nt.dot(d);
-                    if c > 0.0 {
-                        let w = weight(c);
-                        sum = sum + value(d, l, dist) * w;
+                for (i, &w) in weights.iter().enumerate() {
+                    if w > 0.0 {
+                        sum = sum + value(i) * w;
                         wsum += w;
                     }
                 }
@@ -289,6 +379,8 @@ impl OctMap {
 #[derive(Clone, Debug)]
 pub struct ProbeVolume {
     pub settings: DdgiSettings,
+    /// Rays per probe and frame: the settings' count, or the one sized to the frame.
+    pub rays: u32,
     pub counts: UVec3,
     pub origin: Vec3,
     pub spacing: Vec3,
@@ -333,13 +425,13 @@ impl ProbeVolume {
         if !(ext.is_finite() && ext.max_element() > 0.0) {
             return Err(VolumeError::EmptyBox);
         }
-        if settings.rays_per_probe == 0
+        if settings.rays_per_probe == Some(0)
             || settings.irradiance_texels == 0
             || settings.moment_texels == 0
         {
             return Err(VolumeError::Zero);
         }
-        if settings.rays_per_probe > 1 << 14
+        if settings.rays_per_probe.is_some_and(|r| r > 1 << 14)
             || settings.irradiance_texels.max(settings.moment_texels) > 64
         {
             return Err(VolumeError::TooLarge);
@@ -371,6 +463,7 @@ impl ProbeVolume {
         };
         Ok(Self {
             settings,
+            rays: settings.rays_per_probe.unwrap_or(MAX_AUTO_RAYS),
             counts,
             origin: bounds.min,
             spacing,
@@ -384,6 +477,15 @@ impl ProbeVolume {
             blended: vec![false; n],
             back_fraction: vec![0.0; n],
         })
+    }
+
+    /// Sizes the rays per probe to a frame of `pixels` where the settings leave them to the
+    /// volume: [`PROBE_RAYS_PER_PIXEL`] of the frame's pixels spread over the probes, in
+    /// multiples of 32 between 32 and 256. A count set in the settings is kept.
+    pub fn fit_rays_to_frame(&mut self, pixels: u64) {
+        if self.settings.rays_per_probe.is_none() {
+            self.rays = auto_rays(pixels, self.probe_count());
+        }
     }
 
     /// Probes in the volume.
@@ -559,7 +661,7 @@ impl ProbeVolume {
     /// (for [`ProbeRadiance::Source`]) the reflected radiance at the hits, left as queries for
     /// a radiance source.
     pub fn trace_rays(&self, scene: &Scene, seed: u64) -> ProbeRays {
-        let n_rays = self.settings.rays_per_probe;
+        let n_rays = self.rays;
         let radiance = self.settings.radiance;
         let this = self;
         // Per probe: each ray's direction, radiance and hit distance, and its query if any.
@@ -674,30 +776,29 @@ impl ProbeVolume {
         let (im, mm) = (self.irradiance_map, self.moment_map);
         let hysteresis = self.settings.hysteresis;
         let sharp = self.settings.depth_sharpness;
-        // An integral exponent (the default 50) as a chain of multiplications.
-        let sharp_int = sharp.fract() == 0.0 && sharp.abs() < 1024.0;
         // Per probe, in parallel (each probe's texels are its own).
         self.irradiance
             .par_chunks_mut(im.len())
             .zip(self.moments.par_chunks_mut(mm.len()))
             .zip(rays.rays.par_iter())
             .zip(self.active.par_iter().zip(self.blended.par_iter_mut()))
-            .for_each(|(((irr, mom), rays), (&active, blended))| {
-                if !active {
-                    return;
-                }
-                let h = if *blended { hysteresis } else { 0.0 };
-                *blended = true;
-                im.blend(irr, rays, h, |c| c, |_, l, _| l * PI);
-                let w = |c: f32| {
-                    if sharp_int {
-                        c.powi(sharp as i32)
-                    } else {
-                        c.powf(sharp)
+            .for_each_init(
+                || (RayColumns::default(), (Vec::new(), Vec::new())),
+                |(columns, scratch), (((irr, mom), rays), (&active, blended))| {
+                    if !active {
+                        return;
                     }
-                };
-                mm.blend(mom, rays, h, w, |_, _, d| Vec2::new(d, d * d));
-            });
+                    let h = if *blended { hysteresis } else { 0.0 };
+                    *blended = true;
+                    columns.fill(rays);
+                    im.blend(irr, columns, h, 1.0, |i| rays[i].1 * PI, scratch);
+                    let moments = |i: usize| {
+                        let d = rays[i].2;
+                        Vec2::new(d, d * d)
+                    };
+                    mm.blend(mom, columns, h, sharp, moments, scratch);
+                },
+            );
         self.frames += 1;
         self.relocate_and_classify(&rays.geometry);
     }

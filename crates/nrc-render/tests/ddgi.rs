@@ -461,3 +461,40 @@ fn relocation_leaves_geometry_and_classification_switches_off_empty_cells() {
     println!("ddgi-secondary relMSE: {plain:.4} plain, {classified:.4} classified and relocated");
     assert!(classified < 1.1 * plain, "{classified} against {plain}");
 }
+
+#[test]
+fn rays_per_probe_follow_the_frame_where_the_settings_leave_them_open() {
+    use nrc_render::ddgi::auto_rays;
+    // A quarter of the frame's pixels over the probes, in multiples of 32 within [32, 256]:
+    // the kitchen's 144 probes at 160 × 90 (25 → 32), 320 × 180 (100 → 128), 640 × 360
+    // (400 → 256); the seed paper's 2,048 probes at 1920 × 1080 (253 → 256).
+    assert_eq!(auto_rays(160 * 90, 144), 32);
+    assert_eq!(auto_rays(320 * 180, 144), 128);
+    assert_eq!(auto_rays(640 * 360, 144), 256);
+    assert_eq!(auto_rays(1920 * 1080, 2048), 256);
+    assert_eq!(auto_rays(0, 0), 32);
+    let scene = point_lit_room(false);
+    let open = DdgiSettings {
+        counts: Some(UVec3::new(2, 2, 2)),
+        ..Default::default()
+    };
+    let mut v = ProbeVolume::new(&scene.bounds(), open).unwrap();
+    // Until told the frame, the paper's 256.
+    assert_eq!(v.rays, 256);
+    v.fit_rays_to_frame(64 * 64);
+    assert_eq!(v.rays, 128);
+    let stats = v.update(&scene, 1);
+    assert_eq!(
+        stats.closest_rays,
+        8 * 128,
+        "each of the 8 probes traces its 128 rays"
+    );
+    // A count in the settings is kept whatever the frame.
+    let set = DdgiSettings {
+        rays_per_probe: Some(48),
+        ..open
+    };
+    let mut v = ProbeVolume::new(&scene.bounds(), set).unwrap();
+    v.fit_rays_to_frame(1920 * 1080);
+    assert_eq!(v.rays, 48);
+}

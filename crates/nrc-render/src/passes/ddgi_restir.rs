@@ -787,6 +787,9 @@ impl RenderPass for DdgiRestirPass {
             }
             self.volume = ProbeVolume::new(&input.scene.bounds(), ddgi).ok();
         }
+        if let Some(v) = &mut self.volume {
+            v.fit_rays_to_frame(u64::from(input.width) * u64::from(input.height));
+        }
         // Probes fed by the cache blend in `resolve`, once the source has answered.
         if self.settings.light == SurfaceLight::Probes
             && let Some(v) = &mut self.volume

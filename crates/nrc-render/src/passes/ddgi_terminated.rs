@@ -75,7 +75,10 @@ impl Params for DdgiSettings {
     fn visit(&mut self, f: &mut dyn FnMut(&Key, &mut dyn Value)) {
         let probes = Key::new("probes", "probes per axis (auto: 8 along the longest axis)");
         f(&probes.range(1.0, 64.0), &mut self.counts);
-        let rays = Key::new("rays", "rays per probe and frame");
+        let rays = Key::new(
+            "rays",
+            "rays per probe and frame (auto: a quarter of the frame's pixels over the probes, 32-256)",
+        );
         f(&rays.range(1.0, 16384.0), &mut self.rays_per_probe);
         let hysteresis = Key::new("hysteresis", "weight of the old irradiance in each update");
         f(&hysteresis.range(0.0, 1.0), &mut self.hysteresis);
@@ -216,6 +219,7 @@ impl RenderPass for DdgiTerminatedPass {
             self.volume = ProbeVolume::new(&input.scene.bounds(), self.settings).ok();
         }
         if let Some(v) = &mut self.volume {
+            v.fit_rays_to_frame(u64::from(input.width) * u64::from(input.height));
             if self.settings.radiance == ProbeRadiance::Source {
                 // The rays' queries go to the source with the frame's batch (`trace`).
                 self.rays = Some(v.trace_rays(input.scene, Stream::ProbeRays.seed(input.seed)));

@@ -89,6 +89,27 @@ impl Value for u32 {
     }
 }
 
+/// A count, or `auto` for one chosen where it is used.
+impl Value for Option<u32> {
+    fn read(&mut self, text: &str) -> Option<()> {
+        *self = if text == "auto" {
+            None
+        } else {
+            Some(text.parse().ok()?)
+        };
+        Some(())
+    }
+    fn write(&self) -> String {
+        self.map_or("auto".into(), |n| n.to_string())
+    }
+    fn grammar(&self) -> &'static str {
+        "N|auto"
+    }
+    fn number(&self) -> Option<f64> {
+        self.map(f64::from)
+    }
+}
+
 impl Value for f32 {
     fn read(&mut self, text: &str) -> Option<()> {
         *self = text.parse().ok().filter(|x: &f32| x.is_finite())?;
