@@ -287,7 +287,7 @@ pub fn spatial<R: Resampling>(
             return (own, stats);
         }
         let mut s = stream(seed, i, Phase::Spatial);
-        let mut near = Vec::new();
+        let mut near = Vec::with_capacity(k as usize);
         g.neighbours(i, p, k, radius, &mut s, &mut near);
         let others: Vec<_> = near
             .iter()
@@ -381,7 +381,7 @@ pub fn world_spatial<'a, R: Resampling>(
             return (own, stats);
         };
         let mut s = stream(seed, i, Phase::Spatial);
-        let mut others = Vec::new();
+        let mut others = Vec::with_capacity(samples as usize);
         if let Some(h) = history {
             let jitter = Vec3::new(s.next_1d(), s.next_1d(), s.next_1d()) - Vec3::splat(0.5);
             let cell = h.grid.find(h.rule.key(v.si.p, v.si.ns, jitter));
