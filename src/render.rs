@@ -178,10 +178,9 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     }
     let from = match (&args.cache, &cache) {
         (Some(p), Some(_)) => format!(
-            " from the cache {} ({} cache queries, {:.1} ms in the cache)",
+            " from the cache {} ({} cache queries)",
             p.display(),
-            s.queries,
-            s.phases.source_ms
+            s.queries
         ),
         _ => String::new(),
     };

@@ -274,7 +274,9 @@ impl Report {
         let sample_ms = self
             .rows
             .iter()
-            .find(|r| is_path_tracer(&r.method) && r.samples_per_pixel > 0.0)
+            .find(|r| {
+                is_path_tracer(&r.method) && r.samples_per_pixel > 0.0 && r.time_per_frame_ms > 0.0
+            })
             .map(|r| (r.method.clone(), r.time_per_frame_ms / r.samples_per_pixel));
         let _ = writeln!(
             md,
@@ -313,8 +315,9 @@ impl Report {
             md,
             "\nA pass is one estimate at the method's stated samples per pixel; its time is the frame's wall time over its \
              passes (a trained cache's training included), its rays those the pass traced (closest-hit and shadow; the \
-             training records' not included). The rest is the time outside the named phases (a cache's training, the \
-             outline's extra camera rays, the frame's averaging). Path-traced samples per pass: against {unit}.\n"
+             training records' not included). The rest is the time outside the named phases (for the path tracer and the \
+             passes that name none, their whole trace; for the others a cache's training, the outline's extra \
+             camera rays, the frame's averaging). Path-traced samples per pass: against {unit}.\n"
         );
     }
 

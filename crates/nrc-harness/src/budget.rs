@@ -36,7 +36,7 @@ pub struct Estimate {
     pub warm_frames: Option<u32>,
     /// Rays the pass traced, closest-hit and shadow (a trained cache's producer not included).
     pub rays: u64,
-    /// The resampling passes' phases (zero for the others).
+    /// The pass's phase times ([`PhaseTimes`]).
     pub phases: PhaseTimes,
 }
 

@@ -128,10 +128,8 @@ pub struct RunRecord {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub warm_frames: Option<u32>,
     /// Rays traced in the frame (closest-hit and shadow, all passes).
-    #[serde(default)]
     pub rays: u64,
-    /// The resampling passes' phase times, summed over the frame's passes (ms).
-    #[serde(default)]
+    /// The phase times, summed over the frame's passes (ms).
     pub phases: PhaseTimes,
     pub metrics: ErrorMetrics,
 }

@@ -35,8 +35,10 @@ use sha2::{Digest, Sha256};
 use crate::budget::Frame;
 use crate::compare::StoredRuns;
 
-/// Format tag of plans and results.
-pub const FORMAT: &str = "nrc-study/1";
+/// Format tag of plans and results. 2: a run's frame carries its rays and phase times, and
+/// the DDGI passes' defaults changed (probe rays sized to the frame, history cap 5), so a
+/// plan of the first format does not mix with this build's results.
+pub const FORMAT: &str = "nrc-study/2";
 /// The plan's file name in a study folder.
 pub const PLAN_FILE: &str = "plan.json";
 const METADATA_KEY: &str = "nrc_study";
@@ -298,10 +300,8 @@ pub struct FrameMeta {
     pub longest_pass_ns: u64,
     pub invalid_samples: u64,
     pub warm_frames: Option<u32>,
-    /// Rays traced and phase times, summed over the passes (absent in older results).
-    #[serde(default)]
+    /// Rays traced and phase times, summed over the passes.
     pub rays: u64,
-    #[serde(default)]
     pub phases: PhaseTimes,
 }
 

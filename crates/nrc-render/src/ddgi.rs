@@ -6,7 +6,7 @@
 //! - **Storage**: per probe an `n × n` irradiance map (default 8) and an `m × m` moments map
 //!   (default 16), each with a one-texel border copied from the texels across the octahedral
 //!   seam, so that bilinear lookups near an edge blend the right neighbours.
-//! - **Update** (one call per frame): `rays_per_probe` rays on a spherical Fibonacci set turned
+//! - **Update** (one call per frame): [`ProbeVolume::rays`] rays on a spherical Fibonacci set turned
 //!   by a random rotation each frame; each ray's radiance from the chosen [`ProbeRadiance`];
 //!   each irradiance texel blends `π Σ max(0, n·ω) L / Σ max(0, n·ω)` into its history with
 //!   weight `1 − hysteresis`, each moments texel `(d, d²)` with weights `max(0, n·ω)^sharpness`.
@@ -100,7 +100,7 @@ impl ProbeGeometry {
 /// Probe rays per frame per pixel of the frame where the rays are sized to it: the seed
 /// paper's 16 × 8 × 16 probes of 256 rays at 1920 × 1080 (`ddgi-resampling.txt` §4), 0.25.
 /// At 256 rays on this project's 2 cores the probe update of a 160 × 90 kitchen frame cost
-/// more than a path-traced sample (RESULTS.md, issue 39).
+/// more than a path-traced sample (RESULTS.md, "Where a pass's frame time goes").
 pub const PROBE_RAYS_PER_PIXEL: f64 = 0.25;
 
 /// The most rays per probe a frame-sized count takes: the paper's (and RTXGI's) 256.

@@ -123,8 +123,9 @@ pub struct DdgiRestirSettings {
     /// ReSTIR DI's 20. Consecutive frames of a view that stands still share their history's
     /// samples, and the longer it is kept the less their average gains from each new frame:
     /// at 8 frames averaged and equal samples, 5 gave lower MSE than 20 on the kitchen and on
-    /// every door scene for both DDGI resampling passes (`caustics` `nrc-restir` 3.1 → 0.59),
-    /// with a single frame's error unchanged (RESULTS.md, issue 39).
+    /// every door scene for `ddgi-restir` and `nrc-restir` (`caustics` `nrc-restir` 3.1 →
+    /// 0.59), with a single frame's error unchanged (RESULTS.md, "Where a pass's frame time
+    /// goes"); `ddgi-nrc-restir` shares the default.
     pub m_cap: f32,
     /// Merges by pairwise MIS (off: 1/Z), [`reuse::Merge`].
     pub pairwise: bool,
@@ -821,6 +822,8 @@ impl RenderPass for DdgiRestirPass {
         });
         let mut queries = Vec::new();
         let mut rays = None;
+        // The probes' share of this phase, counted as theirs and not the candidates'.
+        let mut probe_ms = 0.0;
         match self.settings.light {
             SurfaceLight::Probes => {}
             SurfaceLight::Cache => {
@@ -839,7 +842,8 @@ impl RenderPass for DdgiRestirPass {
                     queries = r.queries.clone();
                     rays = Some(r);
                 }
-                self.update_ms += t.elapsed().as_secs_f64() * 1e3;
+                probe_ms = t.elapsed().as_secs_f64() * 1e3;
+                self.update_ms += probe_ms;
             }
         }
         // The history's samples carry the radiance their finders stored, possibly frames ago;
@@ -872,7 +876,7 @@ impl RenderPass for DdgiRestirPass {
             traced,
             rays,
             refresh,
-            trace_ms: t.elapsed().as_secs_f64() * 1e3,
+            trace_ms: t.elapsed().as_secs_f64() * 1e3 - probe_ms,
         });
         queries
     }
@@ -907,6 +911,7 @@ impl RenderPass for DdgiRestirPass {
 
         // The surface candidates' source radiance.
         let t = Instant::now();
+        let mut blend_ms = 0.0;
         match set.light {
             SurfaceLight::Cache => {
                 let mut k = 0;
@@ -929,7 +934,8 @@ impl RenderPass for DdgiRestirPass {
                 if let (Some(v), Some(r)) = (&mut self.volume, rays) {
                     v.blend(r, answers);
                 }
-                self.update_ms += tu.elapsed().as_secs_f64() * 1e3;
+                blend_ms = tu.elapsed().as_secs_f64() * 1e3;
+                self.update_ms += blend_ms;
             }
             SurfaceLight::Probes => {}
         }
@@ -958,7 +964,7 @@ impl RenderPass for DdgiRestirPass {
                 refresh_history(h, &refresh, &fresh);
             }
         }
-        times.candidates_ms += t.elapsed().as_secs_f64() * 1e3;
+        times.candidates_ms += t.elapsed().as_secs_f64() * 1e3 - blend_ms;
 
         let b = scene.bounds();
         let diag = (b.max - b.min).length();

@@ -75,6 +75,7 @@ pub struct PassStats {
 
 /// Milliseconds per phase of a pass's frame.
 #[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default)]
 pub struct PhaseTimes {
     /// The probe volume's update (its rays traced and blended), for the DDGI passes.
     pub probes_ms: f64,
@@ -84,9 +85,8 @@ pub struct PhaseTimes {
     pub spatial_ms: f64,
     /// Final visibility, shading and the rest of the path.
     pub shading_ms: f64,
-    /// The radiance source answering the frame's queries (between trace and resolve; any
-    /// pass that asks one).
-    #[serde(default)]
+    /// The radiance source answering the frame's queries (between trace and resolve; zero
+    /// for a pass that asks none).
     pub source_ms: f64,
 }
 
@@ -103,16 +103,16 @@ impl PhaseTimes {
         ]
     }
 
-    /// `probes 1.0 ms, candidates 2.0 ms, ...`, or `None` for a pass that times no phases.
+    /// `candidates 2.0 ms, temporal 0.5 ms, ...` with the phases that took a twentieth of a
+    /// millisecond or more, or `None` for a pass that took none.
     pub fn describe(&self) -> Option<String> {
-        let named = self.named();
-        (named.iter().any(|(_, ms)| *ms > 0.0)).then(|| {
-            let parts: Vec<String> = named
-                .iter()
-                .map(|(n, ms)| format!("{n} {ms:.1} ms"))
-                .collect();
-            parts.join(", ")
-        })
+        let parts: Vec<String> = self
+            .named()
+            .iter()
+            .filter(|(_, ms)| *ms >= 0.05)
+            .map(|(n, ms)| format!("{n} {ms:.1} ms"))
+            .collect();
+        (!parts.is_empty()).then(|| parts.join(", "))
     }
 
     /// Adds another frame's times to these.
@@ -261,20 +261,20 @@ pub fn run(
     let queries = pass.trace(input);
     let trace_ms = t0.elapsed().as_secs_f64() * 1e3;
     let t1 = Instant::now();
-    let answers = if queries.is_empty() {
-        Vec::new()
+    let (answers, source_ms) = if queries.is_empty() {
+        (Vec::new(), 0.0)
     } else {
-        source.radiance(&queries)
+        let a = source.radiance(&queries);
+        (a, t1.elapsed().as_secs_f64() * 1e3)
     };
     assert_eq!(
         answers.len(),
         queries.len(),
         "a radiance source answers every query"
     );
-    let cache_ms = t1.elapsed().as_secs_f64() * 1e3;
     let mut out = pass.resolve(input, &answers);
     out.stats.trace_ms = trace_ms;
-    out.stats.phases.source_ms = cache_ms;
+    out.stats.phases.source_ms = source_ms;
     out.stats.queries = queries.len() as u64;
     out
 }

@@ -381,8 +381,9 @@ pub fn world_spatial<'a, R: Resampling>(
             return (own, stats);
         };
         let mut s = stream(seed, i, Phase::Spatial);
-        let mut others = Vec::with_capacity(samples as usize);
+        let mut others = Vec::new();
         if let Some(h) = history {
+            others.reserve(samples as usize);
             let jitter = Vec3::new(s.next_1d(), s.next_1d(), s.next_1d()) - Vec3::splat(0.5);
             let cell = h.grid.find(h.rule.key(v.si.p, v.si.ns, jitter));
             let count = cell.len();
