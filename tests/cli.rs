@@ -354,7 +354,9 @@ fn resampling_passes_render_and_train_from_the_command_line() {
         assert!(o.status.success(), "{pass}: {}", text(&o.stderr));
         let stdout = text(&o.stdout);
         assert!(
-            stdout.contains("last of 3 frames") && stdout.contains("phases: probes"),
+            stdout.contains("last of 3 frames")
+                && stdout.contains("phases: ")
+                && stdout.contains("candidates "),
             "{stdout}"
         );
         let img = nrc_scene::Image::read_exr(&out).unwrap();

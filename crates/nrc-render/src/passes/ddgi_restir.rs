@@ -122,10 +122,11 @@ pub struct DdgiRestirSettings {
     /// The history's `M` is capped at this multiple of the candidate count: 5 by default, not
     /// ReSTIR DI's 20. Consecutive frames of a view that stands still share their history's
     /// samples, and the longer it is kept the less their average gains from each new frame:
-    /// at 8 frames averaged and equal samples, 5 gave lower MSE than 20 on the kitchen and on
-    /// every door scene for `ddgi-restir` and `nrc-restir` (`caustics` `nrc-restir` 3.1 →
-    /// 0.59), with a single frame's error unchanged (RESULTS.md, "Where a pass's frame time
-    /// goes"); `ddgi-nrc-restir` shares the default.
+    /// at 8 frames averaged and equal samples, 5 gave lower MSE than 20 on the kitchen, the
+    /// Cornell box and `glossy` for `ddgi-restir` and `nrc-restir` (and on `ajar` for
+    /// `ddgi-restir`; `caustics` is decided by single fireflies), and a single frame's error
+    /// on the kitchen fell too (RESULTS.md, "Where a pass's frame time goes");
+    /// `ddgi-nrc-restir` shares the default.
     pub m_cap: f32,
     /// Merges by pairwise MIS (off: 1/Z), [`reuse::Merge`].
     pub pairwise: bool,
