@@ -892,3 +892,42 @@ impl RadianceSource for ProbeVolume {
             .collect()
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The blend's weights are `f32::powi`'s to the bit for integral exponents (so the faster
+    /// blend renders the same images), `powf`'s otherwise, and zero behind the texel.
+    #[test]
+    fn blend_weights_are_powi_to_the_bit() {
+        let mut s = PixelSampler::new(7, 0, 0);
+        let dirs: Vec<Vec3> = (0..512)
+            .map(|_| {
+                let u = s.next_2d();
+                let z = 1.0 - 2.0 * u.x;
+                let r = (1.0 - z * z).max(0.0).sqrt();
+                Vec3::new(r * (2.0 * PI * u.y).cos(), r * (2.0 * PI * u.y).sin(), z)
+            })
+            .collect();
+        let rays: Vec<(Vec3, Vec3, f32)> = dirs.iter().map(|&d| (d, Vec3::ZERO, 1.0)).collect();
+        let mut columns = RayColumns::default();
+        columns.fill(&rays);
+        let n = Vec3::new(0.3, -0.5, 0.81).normalize();
+        let (mut out, mut base) = (Vec::new(), Vec::new());
+        for exponent in [0.0f32, 1.0, 2.0, 7.0, 50.0, 2.5] {
+            columns.weights(n, exponent, &mut out, &mut base);
+            for (d, &w) in dirs.iter().zip(&out) {
+                let c = n.dot(*d);
+                let want = if c <= 0.0 {
+                    0.0
+                } else if exponent.fract() == 0.0 {
+                    c.powi(exponent as i32)
+                } else {
+                    c.powf(exponent)
+                };
+                assert_eq!(w.to_bits(), want.to_bits(), "cos {c}, exponent {exponent}");
+            }
+        }
+    }
+}
