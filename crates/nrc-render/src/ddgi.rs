@@ -903,12 +903,7 @@ mod tests {
     fn blend_weights_are_powi_to_the_bit() {
         let mut s = PixelSampler::new(7, 0, 0);
         let dirs: Vec<Vec3> = (0..512)
-            .map(|_| {
-                let u = s.next_2d();
-                let z = 1.0 - 2.0 * u.x;
-                let r = (1.0 - z * z).max(0.0).sqrt();
-                Vec3::new(r * (2.0 * PI * u.y).cos(), r * (2.0 * PI * u.y).sin(), z)
-            })
+            .map(|_| nrc_scene::sampling::sample_uniform_sphere(s.next_2d()))
             .collect();
         let rays: Vec<(Vec3, Vec3, f32)> = dirs.iter().map(|&d| (d, Vec3::ZERO, 1.0)).collect();
         let mut columns = RayColumns::default();
