@@ -7,7 +7,9 @@
 # Usage: scripts/drift-study.sh [VARIANT...]    (from the repository root; a variant is a
 # comma-separated list of path=value edits of the preset's JSON, or `base`)
 # Environment: SCENE (photon-nrc-ajar-caustic, ajar or caustics), PRODUCERS (pt), FRAMES (2000),
-# RECORDS (4096), RESOLUTION (128: the finest grid resolution along the scene's longest axis).
+# RECORDS (4096), RESOLUTION (128: the finest grid resolution along the scene's longest axis),
+# SPP (256: the renders' samples; at 4 the spread render's relMSE is mostly its own variance,
+# which a darker cache lowers, and the study prints that control).
 set -euo pipefail
 if [ $# -eq 0 ]; then
   set -- base \
@@ -25,6 +27,6 @@ fi
 variants=$(IFS=';'; echo "$*")
 NRC_DRIFT_SCENE=${SCENE:-photon-nrc-ajar-caustic} NRC_DRIFT_PRODUCERS=${PRODUCERS:-pt} \
   NRC_DRIFT_FRAMES=${FRAMES:-2000} NRC_DRIFT_RECORDS=${RECORDS:-4096} \
-  NRC_DRIFT_RESOLUTION=${RESOLUTION:-128} NRC_DRIFT_VARIANTS="$variants" \
+  NRC_DRIFT_RESOLUTION=${RESOLUTION:-128} NRC_DRIFT_SPP=${SPP:-256} NRC_DRIFT_VARIANTS="$variants" \
   cargo test --release --locked --workspace --test online drift_study -- --ignored --nocapture \
   | grep -E '^(\||  )'

@@ -324,6 +324,11 @@ impl RadianceCache {
             self.adam.l2_reg,
             self.ema.map_or("off".into(), |a| format!("α {a}"))
         ));
+        let loss = &self.config.loss;
+        s.push_str(&format!(
+            "loss: {:?} ε {} (Huber beyond a relative residual of {}), targets above {:e} dropped\n",
+            loss.otype, loss.epsilon, loss.max_relative_error, loss.max_target
+        ));
         s.push_str(&format!(
             "device: {} ({} path), step {}",
             self.device, self.path, self.step

@@ -124,22 +124,45 @@ impl BiasVarianceAccumulator {
         reference: &ImageView<'_>,
         reference_variance: Option<&ImageView<'_>>,
     ) -> Result<BiasVariance> {
-        let denom = self.variance_denominator()?;
-        let mean = self.mean_image();
-        check_pair(&mean.view("mean of renders"), reference)?;
         if let Some(rv) = reference_variance {
             check_pair(rv, reference)?;
         }
+        self.weighted(reference, reference_variance, |_| 1.0)
+    }
+
+    /// The same in relMSE's units: every pixel and channel's terms divided by `y² + epsilon`
+    /// (`y` the reference), so that `bias_sq` is the relMSE a render would have without its
+    /// variance: the part of relMSE the method's bias makes, which more samples do not remove.
+    pub fn finish_relative(&self, reference: &ImageView<'_>, epsilon: f64) -> Result<BiasVariance> {
+        if !(epsilon.is_finite() && epsilon > 0.0) {
+            return Err(EvalError::InvalidParameter {
+                name: "relative bias epsilon",
+                reason: format!("must be finite and > 0, got {epsilon}"),
+            });
+        }
+        self.weighted(reference, None, |y| 1.0 / (y * y + epsilon))
+    }
+
+    fn weighted(
+        &self,
+        reference: &ImageView<'_>,
+        reference_variance: Option<&ImageView<'_>>,
+        weight: impl Fn(f64) -> f64,
+    ) -> Result<BiasVariance> {
+        let denom = self.variance_denominator()?;
+        let mean = self.mean_image();
+        check_pair(&mean.view("mean of renders"), reference)?;
         let r = self.count as f64;
         let (mut raw, mut var, mut ref_var) = (0.0f64, 0.0f64, 0.0f64);
         for (i, (m, m2)) in self.mean.iter().zip(&self.m2).enumerate() {
             let y = reference.pixels()[i];
             for c in 0..3 {
+                let w = weight(y[c] as f64);
                 let d = m[c] - y[c] as f64;
-                raw += d * d;
-                var += m2[c] / denom;
+                raw += w * d * d;
+                var += w * m2[c] / denom;
                 if let Some(rv) = reference_variance {
-                    ref_var += rv.pixels()[i][c] as f64;
+                    ref_var += w * rv.pixels()[i][c] as f64;
                 }
             }
         }

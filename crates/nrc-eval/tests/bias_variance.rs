@@ -163,3 +163,58 @@ fn too_few_or_mismatched_renders_are_errors() {
         .unwrap_err();
     assert!(err.to_string().contains("render 2"), "{err}");
 }
+
+/// The relative form weighs each pixel and channel by `1 / (y² + ε)`, as relMSE does: with a
+/// constant bias `b` and noise σ it recovers `mean(b² / (y² + ε))` within five of its standard
+/// deviations (`√(Σ w² (2v² + 4b²v)) / N`, `v = σ²/R`), and an unbiased estimator gets about
+/// zero while its renders' relMSE, the relative variance, stays far above that.
+#[test]
+fn relative_bias_is_the_bias_in_rel_mse_units_without_the_variance() {
+    let eps = 0.01f64;
+    let y = reference();
+    let weights: Vec<f64> = y
+        .iter()
+        .flat_map(|p| p.map(|v| 1.0 / ((v as f64).powi(2) + eps)))
+        .collect();
+    let n = weights.len() as f64;
+    let relative = |bias: f32, sigma: f32, seed: u64| {
+        let mut acc = BiasVarianceAccumulator::new(W, H);
+        for r in renders(&y, bias, sigma, seed) {
+            acc.add(&ImageView::new("render", W, H, &r).unwrap())
+                .unwrap();
+        }
+        acc.finish_relative(&ImageView::new("reference", W, H, &y).unwrap(), eps)
+            .unwrap()
+    };
+    let sd = |b: f64, sigma: f64| {
+        let v = sigma * sigma / R as f64;
+        (weights.iter().map(|w| w * w).sum::<f64>() * (2.0 * v * v + 4.0 * b * b * v)).sqrt() / n
+    };
+    let (b, sigma) = (0.05f64, 0.2f64);
+    let expected = weights.iter().map(|w| w * b * b).sum::<f64>() / n;
+    let got = relative(b as f32, sigma as f32, 5);
+    assert!(
+        (got.bias_sq - expected).abs() < 5.0 * sd(b, sigma),
+        "relative bias² {} vs {expected} (sd {})",
+        got.bias_sq,
+        sd(b, sigma)
+    );
+    let unbiased = relative(0.0, sigma as f32, 9);
+    assert!(
+        unbiased.bias_sq.abs() < 5.0 * sd(0.0, sigma),
+        "{}",
+        unbiased.bias_sq
+    );
+    let rel_variance = weights.iter().map(|w| w * sigma * sigma).sum::<f64>() / n;
+    assert!((unbiased.variance / rel_variance - 1.0).abs() < 0.05);
+    assert!(unbiased.variance > 100.0 * 5.0 * sd(0.0, sigma));
+    let mut acc = BiasVarianceAccumulator::new(W, H);
+    acc.add(&ImageView::new("render", W, H, &y).unwrap())
+        .unwrap();
+    acc.add(&ImageView::new("render", W, H, &y).unwrap())
+        .unwrap();
+    let err = acc
+        .finish_relative(&ImageView::new("reference", W, H, &y).unwrap(), 0.0)
+        .unwrap_err();
+    assert!(err.to_string().contains("epsilon"), "{err}");
+}
