@@ -34,7 +34,7 @@
 //!
 //! **Stratified.** A pixel's extra rays are spread over a `g × g` grid of equal cells
 //! (`g = ⌈√extra⌉`), one ray in each of `extra` distinct cells drawn at random, jittered in its
-//! cell ([`stratified`]). Each ray is still uniform over the pixel, so the mean stays unbiased;
+//! cell ([`crate::sampler::stratified`]). Each ray is still uniform over the pixel, so the mean stays unbiased;
 //! an edge crossing the pixel now leaves its variance only in the `≈ g` cells it cuts, not in
 //! every ray (for a straight edge and a full grid, `O(extra^-1.5)` instead of `1/extra`).
 
@@ -44,45 +44,13 @@ use glam::{Vec2, Vec3};
 use nrc_scene::{Camera, Image, Ray, Scene, sampling::luminance};
 use rayon::prelude::*;
 
-use crate::sampler::PixelSampler;
+use crate::sampler::{MAX_STRATA, PixelSampler, stratified};
 
 /// The sample index of a pixel's first extra camera ray in its stream: above any pass's
 /// sample or phase index, so the extra rays are independent of the pass's numbers.
 const STREAM: u64 = 1 << 40;
 /// Extra rays per pixel at most (`--emitter-samples`).
-pub const MAX_EXTRA: u32 = 256;
-
-/// `n` (at most [`MAX_EXTRA`]) points of the unit square for one pixel: one in each of `n`
-/// distinct cells of a `g × g` grid, `g = ⌈√n⌉`, the cells a uniformly random subset (the
-/// whole grid when `n = g²`), each point uniform in its cell. Every point is uniform over the
-/// square, and no two share a cell. `s` gives the numbers.
-pub fn stratified(n: u32, s: PixelSampler) -> impl Iterator<Item = Vec2> {
-    stratified_cells(n, s, true)
-}
-
-/// [`stratified`], with the cells drawn at random (`shuffle`) or the first `n` in row order
-/// (the tests' negative control: not uniform where `n < g²`).
-fn stratified_cells(n: u32, mut s: PixelSampler, shuffle: bool) -> impl Iterator<Item = Vec2> {
-    let n = n.min(MAX_EXTRA) as usize;
-    let g = (n as f64).sqrt().ceil() as usize;
-    let cells = g * g;
-    // A partial Fisher–Yates shuffle picks the n cells.
-    let mut order = [0u16; MAX_EXTRA as usize];
-    for (i, c) in order.iter_mut().enumerate().take(cells) {
-        *c = i as u16;
-    }
-    if shuffle && n < cells {
-        for i in 0..n {
-            let j = i + ((s.next_1d() * (cells - i) as f32) as usize).min(cells - i - 1);
-            order.swap(i, j);
-        }
-    }
-    let inv = 1.0 / g as f32;
-    (0..n).map(move |k| {
-        let c = order[k] as usize;
-        (Vec2::new((c % g) as f32, (c / g) as f32) + s.next_2d()) * inv
-    })
-}
+pub const MAX_EXTRA: u32 = MAX_STRATA;
 
 /// Radiance the camera ray `ray` sees directly: the emission of its first hit, or the
 /// environment where it escapes (what a path's first segment counts fully).
@@ -355,93 +323,5 @@ pub fn exclude(image: &mut Image, mask: Option<&[bool]>, reference: &Image) {
                 *p = *r;
             }
         }
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    fn points(n: u32, seed: u64, shuffle: bool) -> Vec<Vec2> {
-        stratified_cells(n, PixelSampler::new(seed, 7, STREAM), shuffle).collect()
-    }
-
-    #[test]
-    fn every_point_has_its_own_cell() {
-        for n in [1, 2, 3, 5, 8, 9, 16, 17, 100, MAX_EXTRA] {
-            let g = (n as f64).sqrt().ceil() as usize;
-            for seed in 0..20 {
-                let p = points(n, seed, true);
-                assert_eq!(p.len(), n as usize);
-                let mut used = vec![false; g * g];
-                for q in &p {
-                    assert!(q.x >= 0.0 && q.x < 1.0 && q.y >= 0.0 && q.y < 1.0, "{q}");
-                    let c = (q.y * g as f32) as usize * g + (q.x * g as f32) as usize;
-                    assert!(!used[c], "n {n}: cell {c} twice");
-                    used[c] = true;
-                }
-            }
-        }
-    }
-
-    /// χ² of where the `k`-th of `n` points falls, over a 6 × 6 histogram of `draws` draws.
-    fn chi2(n: u32, k: usize, shuffle: bool, draws: u64) -> f64 {
-        let mut bins = [0u64; 36];
-        for seed in 0..draws {
-            let q = points(n, seed, shuffle)[k];
-            bins[(q.y * 6.0) as usize * 6 + (q.x * 6.0) as usize] += 1;
-        }
-        let e = draws as f64 / 36.0;
-        bins.iter().map(|&b| (b as f64 - e).powi(2) / e).sum()
-    }
-
-    #[test]
-    fn each_point_is_uniform_over_the_pixel_and_the_unshuffled_cells_are_not() {
-        // 35 degrees of freedom: P(χ² > 80) ≈ 2e-5.
-        let bound = 80.0;
-        for (n, k) in [(8, 0), (8, 7), (5, 4), (12, 3)] {
-            let x = chi2(n, k, true, 36_000);
-            assert!(x < bound, "n {n}, point {k}: χ² {x:.1}");
-        }
-        // Negative control: the first 8 of 9 cells in row order never reach the last one.
-        let x = chi2(8, 7, false, 36_000);
-        assert!(x > bound, "the unshuffled cells passed: χ² {x:.1}");
-    }
-
-    #[test]
-    fn an_edge_through_the_pixel_costs_far_less_variance_than_independent_rays() {
-        // The half-plane x + 0.3 y < 0.6 covers 0.6 − 0.15 = 0.45 of the unit square.
-        let inside = |q: Vec2| q.x + 0.3 * q.y < 0.6;
-        let (n, runs, c) = (16u32, 4_000u64, 0.45f64);
-        let estimate = |q: &[Vec2]| q.iter().filter(|&&q| inside(q)).count() as f64 / n as f64;
-        let stats = |est: Vec<f64>| {
-            let m = est.iter().sum::<f64>() / est.len() as f64;
-            let v = est.iter().map(|e| (e - m).powi(2)).sum::<f64>() / (est.len() - 1) as f64;
-            (m, v)
-        };
-        let (m, v) = stats(
-            (0..runs)
-                .map(|seed| estimate(&points(n, seed, true)))
-                .collect(),
-        );
-        let independent = c * (1.0 - c) / n as f64;
-        assert!(
-            (m - c).abs() < 4.0 * (v / runs as f64).sqrt() + 1e-9,
-            "mean {m} against {c}"
-        );
-        assert!(
-            v < 0.25 * independent,
-            "variance {v:.2e} against {independent:.2e}"
-        );
-        // The control: the same count of independent rays has the binomial variance.
-        let (_, vi) = stats(
-            (0..runs)
-                .map(|seed| {
-                    let mut s = PixelSampler::new(seed, 7, STREAM);
-                    estimate(&(0..n).map(|_| s.next_2d()).collect::<Vec<_>>())
-                })
-                .collect(),
-        );
-        assert!(vi > 0.25 * independent, "independent rays: {vi:.2e}");
     }
 }

@@ -11,6 +11,13 @@ use glam::Vec2;
 /// 2⁶⁴ / φ, the Weyl increment of SplitMix64.
 const GOLDEN: u64 = 0x9E37_79B9_7F4A_7C15;
 
+/// Salt of [`PixelSampler::split`]'s keys.
+const SPLIT: u64 = 0x5851_F42D_4C95_7F2D;
+/// The largest f32 below 1.
+const BELOW_ONE: f32 = 1.0 - f32::EPSILON / 2.0;
+/// Points a stratified set ([`stratified`], [`stratified_1d`]) holds at most.
+pub const MAX_STRATA: u32 = 256;
+
 /// SplitMix64 finaliser: a bijective 64-bit mix with full avalanche.
 #[inline]
 fn mix64(mut z: u64) -> u64 {
@@ -60,6 +67,79 @@ impl PixelSampler {
     pub fn dimension(&self) -> u64 {
         self.dimension
     }
+
+    /// A new stream, independent of this one's numbers, keyed by this stream's position (which
+    /// advances by one number): for a set of draws whose count or structure is its own (the
+    /// stratified sets below), so that this stream's later numbers stay where they were.
+    #[inline]
+    pub fn split(&mut self) -> PixelSampler {
+        self.dimension += 1;
+        let h = mix64(self.key.wrapping_add(self.dimension.wrapping_mul(GOLDEN)));
+        Self {
+            key: mix64(h ^ SPLIT),
+            dimension: 0,
+        }
+    }
+}
+
+/// `n` (at most [`MAX_STRATA`]) points of the unit square: one in each of `n`
+/// distinct cells of a `g × g` grid, `g = ⌈√n⌉`, the cells a uniformly random subset (the
+/// whole grid when `n = g²`), each point uniform in its cell. Every point is uniform over the
+/// square, and no two share a cell. `s` gives the numbers.
+pub fn stratified(n: u32, s: PixelSampler) -> impl Iterator<Item = Vec2> {
+    stratified_cells(n, s, true)
+}
+
+/// [`stratified`], with the cells drawn at random (`shuffle`) or the first `n` in row order
+/// (the tests' negative control: not uniform where `n < g²`).
+fn stratified_cells(n: u32, mut s: PixelSampler, shuffle: bool) -> impl Iterator<Item = Vec2> {
+    let n = n.min(MAX_STRATA) as usize;
+    let g = (n as f64).sqrt().ceil() as usize;
+    let cells = g * g;
+    // A partial Fisher–Yates shuffle picks the n cells.
+    let mut order = [0u16; MAX_STRATA as usize];
+    for (i, c) in order.iter_mut().enumerate().take(cells) {
+        *c = i as u16;
+    }
+    if shuffle && n < cells {
+        for i in 0..n {
+            let j = i + ((s.next_1d() * (cells - i) as f32) as usize).min(cells - i - 1);
+            order.swap(i, j);
+        }
+    }
+    let inv = 1.0 / g as f32;
+    (0..n).map(move |k| {
+        let c = order[k] as usize;
+        // A point jittered into the last row or column may round up to 1.0: keep it below.
+        ((Vec2::new((c % g) as f32, (c / g) as f32) + s.next_2d()) * inv)
+            .min(Vec2::splat(BELOW_ONE))
+    })
+}
+
+/// `n` (at most [`MAX_STRATA`]) numbers of `[0, 1)`: one in each of the `n` equal strata, in
+/// a uniformly random order, each uniform in its stratum. Every number is uniform over
+/// `[0, 1)`, and no two share a stratum. `s` gives the numbers.
+pub fn stratified_1d(n: u32, s: PixelSampler) -> impl Iterator<Item = f32> {
+    strata_1d(n, s, true)
+}
+
+/// [`stratified_1d`], in random order (`shuffle`) or in the strata's order (the tests'
+/// negative control: the `k`-th number is not uniform).
+fn strata_1d(n: u32, mut s: PixelSampler, shuffle: bool) -> impl Iterator<Item = f32> {
+    let n = n.min(MAX_STRATA) as usize;
+    let mut order = [0u16; MAX_STRATA as usize];
+    for (i, c) in order.iter_mut().enumerate().take(n) {
+        *c = i as u16;
+    }
+    if shuffle {
+        for i in 0..n.saturating_sub(1) {
+            let j = i + ((s.next_1d() * (n - i) as f32) as usize).min(n - i - 1);
+            order.swap(i, j);
+        }
+    }
+    let inv = 1.0 / n as f32;
+    // The jittered value may round up to 1.0 in f32 at the last stratum: keep it below.
+    (0..n).map(move |k| ((order[k] as f32 + s.next_1d()) * inv).min(BELOW_ONE))
 }
 
 /// The seed of pass (or frame) `pass` of a run seeded `seed`: a bijective mix (SplitMix64's
@@ -196,5 +276,163 @@ mod tests {
         let c2 = chi2(&bins2);
         assert!(c1 < 115.6, "1-D chi2 {c1}");
         assert!(c2 < 346.0, "2-D chi2 {c2}");
+    }
+
+    fn points(n: u32, seed: u64, shuffle: bool) -> Vec<Vec2> {
+        stratified_cells(n, PixelSampler::new(seed, 7, 3), shuffle).collect()
+    }
+
+    #[test]
+    fn every_point_has_its_own_cell() {
+        for n in [1, 2, 3, 5, 8, 9, 16, 17, 100, MAX_STRATA] {
+            let g = (n as f64).sqrt().ceil() as usize;
+            for seed in 0..20 {
+                let p = points(n, seed, true);
+                assert_eq!(p.len(), n as usize);
+                let mut used = vec![false; g * g];
+                for q in &p {
+                    assert!(q.x >= 0.0 && q.x < 1.0 && q.y >= 0.0 && q.y < 1.0, "{q}");
+                    let c = (q.y * g as f32) as usize * g + (q.x * g as f32) as usize;
+                    assert!(!used[c], "n {n}: cell {c} twice");
+                    used[c] = true;
+                }
+            }
+        }
+    }
+
+    /// χ² of where the `k`-th of `n` points falls, over a 6 × 6 histogram of `draws` draws.
+    fn chi2(n: u32, k: usize, shuffle: bool, draws: u64) -> f64 {
+        let mut bins = [0u64; 36];
+        for seed in 0..draws {
+            let q = points(n, seed, shuffle)[k];
+            bins[(q.y * 6.0) as usize * 6 + (q.x * 6.0) as usize] += 1;
+        }
+        let e = draws as f64 / 36.0;
+        bins.iter().map(|&b| (b as f64 - e).powi(2) / e).sum()
+    }
+
+    #[test]
+    fn each_point_is_uniform_over_the_pixel_and_the_unshuffled_cells_are_not() {
+        // 35 degrees of freedom: P(χ² > 80) ≈ 2e-5.
+        let bound = 80.0;
+        for (n, k) in [(8, 0), (8, 7), (5, 4), (12, 3)] {
+            let x = chi2(n, k, true, 36_000);
+            assert!(x < bound, "n {n}, point {k}: χ² {x:.1}");
+        }
+        // Negative control: the first 8 of 9 cells in row order never reach the last one.
+        let x = chi2(8, 7, false, 36_000);
+        assert!(x > bound, "the unshuffled cells passed: χ² {x:.1}");
+    }
+
+    #[test]
+    fn an_edge_through_the_pixel_costs_far_less_variance_than_independent_rays() {
+        // The half-plane x + 0.3 y < 0.6 covers 0.6 − 0.15 = 0.45 of the unit square.
+        let inside = |q: Vec2| q.x + 0.3 * q.y < 0.6;
+        let (n, runs, c) = (16u32, 4_000u64, 0.45f64);
+        let estimate = |q: &[Vec2]| q.iter().filter(|&&q| inside(q)).count() as f64 / n as f64;
+        let stats = |est: Vec<f64>| {
+            let m = est.iter().sum::<f64>() / est.len() as f64;
+            let v = est.iter().map(|e| (e - m).powi(2)).sum::<f64>() / (est.len() - 1) as f64;
+            (m, v)
+        };
+        let (m, v) = stats(
+            (0..runs)
+                .map(|seed| estimate(&points(n, seed, true)))
+                .collect(),
+        );
+        let independent = c * (1.0 - c) / n as f64;
+        assert!(
+            (m - c).abs() < 4.0 * (v / runs as f64).sqrt() + 1e-9,
+            "mean {m} against {c}"
+        );
+        assert!(
+            v < 0.25 * independent,
+            "variance {v:.2e} against {independent:.2e}"
+        );
+        // The control: the same count of independent rays has the binomial variance.
+        let (_, vi) = stats(
+            (0..runs)
+                .map(|seed| {
+                    let mut s = PixelSampler::new(seed, 7, 3);
+                    estimate(&(0..n).map(|_| s.next_2d()).collect::<Vec<_>>())
+                })
+                .collect(),
+        );
+        assert!(vi > 0.25 * independent, "independent rays: {vi:.2e}");
+    }
+
+    fn numbers(n: u32, seed: u64, shuffle: bool) -> Vec<f32> {
+        strata_1d(n, PixelSampler::new(seed, 5, 9), shuffle).collect()
+    }
+
+    #[test]
+    fn every_number_has_its_own_stratum_and_each_is_uniform() {
+        for n in [1, 2, 3, 5, 16, 17, MAX_STRATA] {
+            for seed in 0..20 {
+                let x = numbers(n, seed, true);
+                assert_eq!(x.len(), n as usize);
+                let mut used = vec![false; n as usize];
+                for &v in &x {
+                    assert!((0.0..1.0).contains(&v), "{v}");
+                    let c = (v * n as f32) as usize;
+                    assert!(!used[c], "n {n}: stratum {c} twice");
+                    used[c] = true;
+                }
+            }
+        }
+        assert_eq!(numbers(0, 1, true).len(), 0);
+        // χ² of where the k-th of n numbers falls, 20 bins: 19 degrees of freedom,
+        // P(χ² > 55) ≈ 2e-5.
+        let chi2 = |n: u32, k: usize, shuffle: bool| {
+            let draws = 20_000u64;
+            let mut bins = [0u64; 20];
+            for seed in 0..draws {
+                bins[(numbers(n, seed, shuffle)[k] * 20.0) as usize] += 1;
+            }
+            let e = draws as f64 / 20.0;
+            bins.iter()
+                .map(|&b| (b as f64 - e).powi(2) / e)
+                .sum::<f64>()
+        };
+        for (n, k) in [(4, 0), (4, 3), (5, 2), (16, 15)] {
+            let x = chi2(n, k, true);
+            assert!(x < 55.0, "n {n}, number {k}: χ² {x:.1}");
+        }
+        // Negative control: in the strata's order the first of four numbers is below 1/4.
+        let x = chi2(4, 0, false);
+        assert!(x > 55.0, "the unshuffled strata passed: χ² {x:.1}");
+    }
+
+    /// A split stream's numbers are not its parent's: over many streams, the split's first
+    /// number is uncorrelated with the parent's next ones, and the parent's later numbers are
+    /// where they would be after one draw.
+    #[test]
+    fn a_split_stream_is_independent_of_its_parent() {
+        let n = 20_000u64;
+        let (mut sxy, mut sx, mut sy, mut sxx, mut syy) = (0f64, 0f64, 0f64, 0f64, 0f64);
+        let mut same_as_parent = 0;
+        for seed in 0..n {
+            let mut parent = PixelSampler::new(seed, 3, 4);
+            let mut copy = parent;
+            let mut child = parent.split();
+            copy.next_1d();
+            let (x, y) = (child.next_1d() as f64, parent.next_1d() as f64);
+            assert_eq!(parent.next_1d(), {
+                copy.next_1d();
+                copy.next_1d()
+            });
+            same_as_parent += (x == y) as u32;
+            sxy += x * y;
+            sx += x;
+            sy += y;
+            sxx += x * x;
+            syy += y * y;
+        }
+        let nf = n as f64;
+        let cov = sxy / nf - sx * sy / nf / nf;
+        let r = cov / ((sxx / nf - (sx / nf).powi(2)) * (syy / nf - (sy / nf).powi(2))).sqrt();
+        // |r| of independent numbers: about 1/√n = 0.007; 5 of those.
+        assert!(r.abs() < 5.0 / nf.sqrt(), "correlation {r:.4}");
+        assert!(same_as_parent < 5, "{same_as_parent} equal numbers");
     }
 }

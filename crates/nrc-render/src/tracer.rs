@@ -36,6 +36,10 @@ pub struct PathTracer {
     /// by BSDF samples alone, and each costs one ray, no further path. 0: none (with
     /// [`LightStrategy::Mis`] only).
     pub glossy_samples: u32,
+    /// The [`PathTracer::glossy_samples`] of a vertex stratified together (directions over a
+    /// grid of cells, lobe choices over strata; on by default); off: independent samples, the
+    /// baseline the tests compare with.
+    pub glossy_stratified: bool,
 }
 
 /// Below this roughness a walk's first vertex takes [`PathTracer::glossy_samples`] (the threshold
@@ -51,6 +55,7 @@ impl Default for PathTracer {
             rr_depth: 5,
             strategy: LightStrategy::Mis,
             glossy_samples: 0,
+            glossy_stratified: true,
         }
     }
 }

@@ -15,13 +15,13 @@
 //! strategy), three for the BSDF sample, one for Russian roulette from `rr_depth` on. The
 //! reference path tracer's images are bit for bit those it made before this module existed.
 
-use glam::Vec3;
+use glam::{Vec2, Vec3};
 use nrc_scene::bsdf::{Bsdf, BsdfSample};
 use nrc_scene::{LightContext, Ray, Scene, SurfaceInteraction, sampling::Frame, spawn_ray};
 
 use crate::nee::{Counts, emission_mis_weight, environment_mis_weight, next_event};
 use crate::query::RadianceQuery;
-use crate::sampler::PixelSampler;
+use crate::sampler::{PixelSampler, stratified, stratified_1d};
 use crate::tracer::{GLOSSY_ROUGHNESS, LightStrategy, PathStats, PathTracer};
 
 /// A surface vertex of a path, with its BSDF in its shading frame.
@@ -273,9 +273,7 @@ impl PathWalk {
             if extra == 0 {
                 return nee;
             }
-            nee + (0..extra)
-                .map(|_| self.glossy_sample(scene, v, sampler, stats))
-                .sum::<Vec3>()
+            nee + self.glossy_direct(scene, v, extra, sampler, stats)
         } else {
             // Keep the random stream aligned whatever the strategy.
             for _ in 0..n {
@@ -306,18 +304,50 @@ impl PathWalk {
         if on { self.tracer.glossy_samples } else { 0 }
     }
 
-    /// One more BSDF sample of the direct light at `v`: one segment, followed and weighed as
-    /// the path's own sample would be (on a copy of the walk, whose count of BSDF samples is
-    /// already `counts.bsdf`), its emission only. Draws three numbers always.
+    /// The `extra` BSDF samples of the direct light at `v` ([`PathTracer::glossy_samples`]),
+    /// summed. Stratified (unless [`PathTracer::glossy_stratified`] is off): the directions'
+    /// numbers one in each of `extra` distinct cells of a `⌈√extra⌉²` grid, the lobe choices one
+    /// in each of `extra` strata, both in random order ([`stratified`], [`stratified_1d`]).
+    /// Each sample's numbers are still uniform, so each is the independent sample's estimate
+    /// in expectation; where the lobe sees an edge (the window's bars behind a glossy table)
+    /// only the cells the edge cuts keep its variance. Draws two numbers of `sampler`
+    /// (independent samples: three per sample).
+    fn glossy_direct(
+        &self,
+        scene: &Scene,
+        v: &Vertex,
+        extra: u32,
+        sampler: &mut PixelSampler,
+        stats: &mut PathStats,
+    ) -> Vec3 {
+        if !self.tracer.glossy_stratified {
+            return (0..extra)
+                .map(|_| {
+                    let u_lobe = sampler.next_1d();
+                    let u_dir = sampler.next_2d();
+                    self.glossy_sample(scene, v, u_lobe, u_dir, stats)
+                })
+                .sum();
+        }
+        let dirs = stratified(extra, sampler.split());
+        let lobes = stratified_1d(extra, sampler.split());
+        lobes
+            .zip(dirs)
+            .map(|(u_lobe, u_dir)| self.glossy_sample(scene, v, u_lobe, u_dir, stats))
+            .sum()
+    }
+
+    /// One more BSDF sample of the direct light at `v`, from the numbers `u_lobe`, `u_dir`: one
+    /// segment, followed and weighed as the path's own sample would be (on a copy of the walk,
+    /// whose count of BSDF samples is already `counts.bsdf`), its emission only.
     fn glossy_sample(
         &self,
         scene: &Scene,
         v: &Vertex,
-        sampler: &mut PixelSampler,
+        u_lobe: f32,
+        u_dir: Vec2,
         stats: &mut PathStats,
     ) -> Vec3 {
-        let u_lobe = sampler.next_1d();
-        let u_dir = sampler.next_2d();
         let Some(bs) = v.bsdf.sample(v.wo, u_dir, u_lobe) else {
             return Vec3::ZERO;
         };
