@@ -7,18 +7,24 @@
 # --prepare copies, stripped, from "$CARGO_TARGET_DIR/release" (after `cargo build --release
 # --locked --workspace --all-targets`): the `nrc` binary and nrc-cache's `gpu_fused`, `backends`
 # and `wgpu_training` test binaries (the device self-check: the fused CubeCL kernels, both atomic
-# paths, and the custom-ops path's kernels against the CPU path). `.bench/` and the Vulkan
-# loaders `.gl/` are ignored by git and travel with `carry` (the device README's recipe for
-# `.gl`).
+# paths, and the custom-ops path's kernels against the CPU path); then it builds `nrc` and
+# `gpu_fused` with the cargo feature `vulkan` (the same kernels compiled to SPIR-V on a Vulkan
+# adapter: `nrc-spirv`, `gpu_fused-spirv`) and puts the default `nrc` back. The CUDA runtime
+# is not built: cubecl-cuda 0.11's build downloads an LLVM bundle, which neither this machine
+# nor the device can reach. `.bench/` and the Vulkan loaders `.gl/` are ignored by git and
+# travel with `carry` (the device README's recipe for `.gl`).
 #
 # OUT receives, each step under its own time limit (the whole run under 5 minutes on a GPU):
 #   adapter.txt     the adapters, their features and limits (f16, subgroups, float atomics,
 #                   cooperative matrices, workgroup memory), nvidia-smi where it exists
 #   selfcheck.txt   the wgpu kernels against the CPU path (the three test binaries)
+#   selfcheck-spirv.txt  the fused kernels' tests, compiled to SPIR-V
 #   bench-wgpu.txt  `nrc bench cache --device wgpu`: training samples/s and inference queries/s
 #                   of the hash-grid preset at each batch along the fused path (the default), its
 #                   dispatches per step, and fused against custom-ops (and generic tensor ops at
 #                   2^14) at each batch
+#   bench-spirv.txt the fused path compiled to SPIR-V, at the same batches (its custom-ops
+#                   path cannot load WGSL source and says so)
 #   bench-cpu.txt   the same on the machine's CPU cores (the fused CPU path), for the ratio
 #   profile.txt     per-kernel GPU time, totalled, of 3 s of fused training steps and 3 s of
 #                   inference at 2^16 (CubeCL's profile log)
@@ -26,7 +32,7 @@
 #                   records per frame (training batches of at most 2^14), per frame
 #   summary.txt     every step's exit status and duration
 # GPU_BENCH_BATCHES and GPU_BENCH_FRAMES override the batch list and the online run's frames (a
-# software rasteriser needs smaller ones). Worst case, every step at its limit: 565 s.
+# software rasteriser needs smaller ones). Worst case, every step at its limit: 595 s.
 set -uo pipefail
 cd "$(dirname "$0")/.."
 
@@ -43,6 +49,20 @@ if [[ "${1:-}" == "--prepare" ]]; then
     strip -o ".bench/$name" "$src"
     xz -9 -T2 -f ".bench/$name"
   done
+  # The SPIR-V build: cargo names each artifact it built in its JSON messages.
+  executable() { python3 -c '
+import json, sys
+for line in sys.stdin:
+    m = json.loads(line)
+    if m.get("reason") == "compiler-artifact" and m.get("executable") and m["target"]["name"] == sys.argv[1]:
+        print(m["executable"])' "$1" | tail -1; }
+  nrc_spirv=$(cargo build --release --locked --features vulkan --bin nrc --message-format=json | executable nrc)
+  strip -o .bench/nrc-spirv "$nrc_spirv"
+  fused_spirv=$(cargo test --release --locked -p nrc-cache --features vulkan --test gpu_fused --no-run --message-format=json | executable gpu_fused)
+  strip -o .bench/gpu_fused-spirv "$fused_spirv"
+  xz -9 -T2 -f .bench/nrc-spirv .bench/gpu_fused-spirv
+  # The feature build replaced target/release/nrc: link the default one back.
+  cargo build --release --locked --bin nrc
   du -sh .bench/*
   exit 0
 fi
@@ -84,9 +104,17 @@ step adapters 40 adapter-lines.txt "$BIN/nrc" bench cache --device wgpu --config
   --batch 1024 --min-ms 1 --no-compare
 grep '^wgpu' "$OUT/adapter-lines.txt" >>"$OUT/adapter.txt"
 
-NRC_SKIP_LOG="$OUT/skipped.txt" step selfcheck 120 selfcheck.txt bash -c "s=0; for t in gpu_fused backends wgpu_training; do '$BIN/'\$t --test-threads 1 --nocapture || s=1; done; exit \$s"
+NRC_SKIP_LOG="$OUT/skipped.txt" step selfcheck 90 selfcheck.txt bash -c "s=0; for t in gpu_fused backends wgpu_training; do '$BIN/'\$t --test-threads 1 --nocapture || s=1; done; exit \$s"
+if [[ -x "$BIN/gpu_fused-spirv" ]]; then
+  NRC_SKIP_LOG="$OUT/skipped.txt" step selfcheck-spirv 40 selfcheck-spirv.txt \
+    "$BIN/gpu_fused-spirv" --test-threads 1 --nocapture
+fi
 step bench-wgpu 120 bench-wgpu.txt "$BIN/nrc" bench cache --device wgpu --config hashgrid \
   "${batch_args[@]}" --min-ms 1000
+if [[ -x "$BIN/nrc-spirv" ]]; then
+  step bench-spirv 60 bench-spirv.txt "$BIN/nrc-spirv" bench cache --device wgpu --config hashgrid \
+    "${batch_args[@]}" --min-ms 1000
+fi
 step bench-cpu 45 bench-cpu.txt "$BIN/nrc" bench cache --device cpu --config hashgrid \
   --batch 16384 --batch 65536 --min-ms 1000 --no-compare
 # CubeCL logs each kernel's time and a summary at every device synchronisation.
@@ -115,7 +143,7 @@ PY
 fi
 for records in 4096 65536; do
   for dev in wgpu cpu; do
-    step "train-$dev-$records" 45 "train-$dev-$records.txt" "$BIN/nrc" train \
+    step "train-$dev-$records" 35 "train-$dev-$records.txt" "$BIN/nrc" train \
       --scene scenes/cornell-box.gltf --frames "$FRAMES" --resolution 128 --width 256 --height 256 \
       --records "$records" --batch "$(( records < 16384 ? records : 16384 ))" --device "$dev" \
       --stats "$OUT/train-$dev-$records.csv"

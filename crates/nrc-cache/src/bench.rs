@@ -482,11 +482,14 @@ fn compare(
             if device == CacheDevice::Wgpu && path == ComputePath::Unfused && n > 1 << 14 {
                 continue;
             }
-            let Ok(mut cache) =
-                RadianceCache::with_path(config.clone(), SceneBox::default(), device, path)
-            else {
-                continue;
-            };
+            let mut cache =
+                match RadianceCache::with_path(config.clone(), SceneBox::default(), device, path) {
+                    Ok(c) => c,
+                    Err(e) => {
+                        println!("  path {path:<10} batch {n}: skipped ({e})");
+                        continue;
+                    }
+                };
             let train = rate(short, n, || {
                 cache.train(&batch, 1).expect("training");
             });

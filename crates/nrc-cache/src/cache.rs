@@ -166,6 +166,16 @@ impl RadianceCache {
         if device == CacheDevice::Wgpu && path == ComputePath::Fused {
             crate::gpu::fused::check(&burn_device, &layout).map_err(CacheError::Device)?;
         }
+        if path == ComputePath::CustomOps
+            && layout.encoding.grid().is_some()
+            && crate::gpu::fused::compiles_spirv(&burn_device)
+        {
+            return Err(CacheError::Device(
+                "the custom-ops path's hash-grid kernels are WGSL source, which a SPIR-V \
+                 build (cargo feature `vulkan`) cannot load on this adapter: use the fused path"
+                    .into(),
+            ));
+        }
         let (adam, ema) = config.optimizer.resolve();
         // The fused CPU step keeps the table as per-entry records; the GPU's as four arrays.
         let packed = (path == ComputePath::Fused && device == CacheDevice::Cpu)

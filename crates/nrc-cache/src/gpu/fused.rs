@@ -61,6 +61,12 @@ pub fn client(device: &burn::tensor::Device) -> Option<burn::cubecl::prelude::Cl
     }
 }
 
+/// Whether CubeCL compiles kernels for `device` to SPIR-V (a build with the cargo feature
+/// `vulkan`, on a Vulkan adapter): raw WGSL source kernels cannot load there.
+pub fn compiles_spirv(device: &burn::tensor::Device) -> bool {
+    client(device).is_some_and(|c| c.name().contains("spirv"))
+}
+
 /// Whether the fused path can run `layout` on `device` (the table within 32-bit indexing, a
 /// tile within the adapter's workgroup memory): the error names what stands in the way.
 pub fn check(device: &burn::tensor::Device, layout: &ModelLayout) -> Result<(), String> {
