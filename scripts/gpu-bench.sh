@@ -38,32 +38,43 @@ cd "$(dirname "$0")/.."
 
 if [[ "${1:-}" == "--prepare" ]]; then
   set -e
-  dir="${CARGO_TARGET_DIR:-target}/release"
   rm -rf .bench && mkdir -p .bench
-  newest() { ls -t "$dir"/deps/"$1"-* 2>/dev/null | grep -v '\.d$' | head -1; }
-  for pair in "nrc:$dir/nrc" "gpu_fused:$(newest gpu_fused)" \
-    "backends:$(newest backends)" "wgpu_training:$(newest wgpu_training)"; do
-    name=${pair%%:*} src=${pair#*:}
-    [[ -x "$src" ]] || { echo "error: $name not built ($src)"; exit 1; }
-    # Stripped, these are 54-62 MB each; xz brings the four under the device's 64 MiB carry.
-    strip -o ".bench/$name" "$src"
-    xz -9 -T2 -f ".bench/$name"
-  done
-  # The SPIR-V build: cargo names each artifact it built in its JSON messages.
+  # Cargo names every executable it built (or found fresh) in its JSON messages: `executable
+  # NAME` prints NAME's, so a binary of another feature set lying in deps/ is never taken.
   executable() { python3 -c '
 import json, sys
 for line in sys.stdin:
     m = json.loads(line)
     if m.get("reason") == "compiler-artifact" and m.get("executable") and m["target"]["name"] == sys.argv[1]:
         print(m["executable"])' "$1" | tail -1; }
-  nrc_spirv=$(cargo build --release --locked --features vulkan --bin nrc --message-format=json | executable nrc)
-  strip -o .bench/nrc-spirv "$nrc_spirv"
-  fused_spirv=$(cargo test --release --locked -p nrc-cache --features vulkan --test gpu_fused --no-run --message-format=json | executable gpu_fused)
-  strip -o .bench/gpu_fused-spirv "$fused_spirv"
-  xz -9 -T2 -f .bench/nrc-spirv .bench/gpu_fused-spirv
-  # The feature build replaced target/release/nrc: link the default one back.
-  cargo build --release --locked --bin nrc
-  du -sh .bench/*
+  # take NAME BINARY: strips BINARY into .bench/NAME (stripped they are 54-62 MB each; xz
+  # brings six under the device's 64 MiB carry).
+  take() {
+    [[ -n "$2" && -x "$2" ]] || { echo "error: $1 was not built (cargo named no executable)"; exit 1; }
+    strip -o ".bench/$1" "$2"
+  }
+  default=$(cargo build --release --locked --workspace --all-targets --message-format=json)
+  for name in nrc gpu_fused backends wgpu_training; do
+    take "$name" "$(executable "$name" <<<"$default")"
+  done
+  # The SPIR-V build of the same binaries that run the fused kernels.
+  take nrc-spirv "$(cargo build --release --locked --features vulkan --bin nrc \
+    --message-format=json | executable nrc)"
+  take gpu_fused-spirv "$(cargo test --release --locked -p nrc-cache --features vulkan \
+    --test gpu_fused --no-run --message-format=json | executable gpu_fused)"
+  xz -9 -T2 -f .bench/*
+  # The feature build replaced target/release/nrc: the default build's command puts it back.
+  cargo build --release --locked --workspace --all-targets --quiet
+  du -ch .bench/*
+  # What travels: the tracked tree, .bench and .gl (if unpacked already), within 64 MiB.
+  total=$(du -cb .bench/* | tail -1 | cut -f1)
+  tree=$(git ls-files -z | du -cb --files0-from=- | tail -1 | cut -f1)
+  gl=$(du -sb .gl 2>/dev/null | cut -f1)
+  carry=$((total + tree + ${gl:-0}))
+  if (( carry > 64 * 1024 * 1024 )); then
+    echo "error: .bench ($((total >> 20)) MiB), the tree ($((tree >> 20)) MiB) and .gl ($((${gl:-0} >> 20)) MiB) exceed the device's 64 MiB carry"
+    exit 1
+  fi
   exit 0
 fi
 

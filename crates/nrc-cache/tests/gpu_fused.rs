@@ -550,3 +550,35 @@ fn fused_gpu_step_takes_four_dispatches() {
         assert!(per_step <= 8, "the issue's bound");
     }
 }
+
+/// Where the kernels compile to SPIR-V (the cargo feature `vulkan` on a Vulkan adapter), the
+/// custom-ops baseline, whose hash-grid kernels are WGSL source, is refused with an error that
+/// says why; on WGSL it is made. The triangle-wave preset has no hash grid and is made on both.
+#[test]
+fn the_custom_ops_baseline_is_refused_only_where_kernels_compile_to_spirv() {
+    let _guard = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    if !wgpu_or_skip("the_custom_ops_baseline_is_refused_only_where_kernels_compile_to_spirv") {
+        return;
+    }
+    let device = CacheDevice::Wgpu.burn_device().unwrap();
+    let spirv = nrc_cache::gpu::fused::compiles_spirv(&device);
+    // lavapipe and the GPUs seen so far have what CubeCL's SPIR-V compiler needs.
+    assert_eq!(spirv, cfg!(feature = "vulkan"), "SPIR-V {spirv}");
+    let [(_, grid), (_, wave)] = presets(1);
+    let make = |c: &CacheConfig| {
+        RadianceCache::with_path(
+            c.clone(),
+            SceneBox::default(),
+            CacheDevice::Wgpu,
+            ComputePath::CustomOps,
+        )
+    };
+    match make(&grid) {
+        Ok(_) => assert!(!spirv, "the custom-ops hash grid was made on SPIR-V"),
+        Err(e) => {
+            assert!(spirv, "refused on WGSL: {e}");
+            assert!(e.to_string().contains("SPIR-V"), "{e}");
+        }
+    }
+    assert!(make(&wave).is_ok());
+}

@@ -84,8 +84,9 @@ impl PixelSampler {
 
 /// `n` (at most [`MAX_STRATA`]) points of the unit square: one in each of `n`
 /// distinct cells of a `g × g` grid, `g = ⌈√n⌉`, the cells a uniformly random subset (the
-/// whole grid when `n = g²`), each point uniform in its cell. Every point is uniform over the
-/// square, and no two share a cell. `s` gives the numbers.
+/// whole grid when `n = g²`), each point uniform in its cell; no two share a cell. Where
+/// `n < g²` every point is uniform over the square; where `n = g²` the `k`-th point lies in cell
+/// `k`, and the set (a point at a random index) is uniform. `s` gives the numbers.
 pub fn stratified(n: u32, s: PixelSampler) -> impl Iterator<Item = Vec2> {
     stratified_cells(n, s, true)
 }
@@ -137,9 +138,20 @@ fn strata_1d(n: u32, mut s: PixelSampler, shuffle: bool) -> impl Iterator<Item =
             order.swap(i, j);
         }
     }
-    let inv = 1.0 / n as f32;
-    // The jittered value may round up to 1.0 in f32 at the last stratum: keep it below.
-    (0..n).map(move |k| ((order[k] as f32 + s.next_1d()) * inv).min(BELOW_ONE))
+    // In f64, so that a value near a stratum's top does not round onto the next stratum; the
+    // last stratum's may still round up to 1.0 in f32: keep it below.
+    (0..n).map(move |k| (((order[k] as f64 + s.next_1d() as f64) / n as f64) as f32).min(BELOW_ONE))
+}
+
+/// `n` (at most [`MAX_STRATA`]) triples of numbers for `n` samples drawn together, each a
+/// number of `[0, 1)` and a point of the unit square: the numbers [`stratified_1d`], the points
+/// [`stratified`], each set from its own stream split off `s` (which advances by two numbers),
+/// and the numbers in random order, so the `k`-th number is independent of the `k`-th point and
+/// a triple at a random index is uniform over the unit cube: a sum of one function over the
+/// triples estimates `n` times its mean.
+pub fn stratified_pairs(n: u32, s: &mut PixelSampler) -> impl Iterator<Item = (f32, Vec2)> {
+    let points = stratified(n, s.split());
+    stratified_1d(n, s.split()).zip(points)
 }
 
 /// The seed of pass (or frame) `pass` of a run seeded `seed`: a bijective mix (SplitMix64's
@@ -434,5 +446,73 @@ mod tests {
         // |r| of independent numbers: about 1/√n = 0.007; 5 of those.
         assert!(r.abs() < 5.0 / nf.sqrt(), "correlation {r:.4}");
         assert!(same_as_parent < 5, "{same_as_parent} equal numbers");
+        // No number of a split stream is one of its parent's (the first 64 of each, from a
+        // parent 10 numbers in); the control, a "split" that copies the parent, shares them all.
+        let shared = |split: fn(&mut PixelSampler) -> PixelSampler| {
+            (0..200u64)
+                .map(|seed| {
+                    let mut parent = PixelSampler::new(seed, 1, 2);
+                    let mut before = parent;
+                    for _ in 0..10 {
+                        parent.next_1d();
+                    }
+                    let mut child = split(&mut parent);
+                    let parents: Vec<f32> = (0..80).map(|_| before.next_1d()).collect();
+                    (0..64)
+                        .filter(|_| parents.contains(&child.next_1d()))
+                        .count()
+                })
+                .sum::<usize>()
+        };
+        // 24-bit numbers: 64 × 80 × 200 pairs meet by chance about 0.06 times.
+        let own = shared(PixelSampler::split);
+        assert!(
+            own <= 2,
+            "{own} numbers of split streams are their parents'"
+        );
+        let copied = shared(|p| {
+            let c = *p;
+            p.dimension += 1;
+            c
+        });
+        assert!(copied > 1000, "the copying control shares only {copied}");
+    }
+
+    /// A triple of [`stratified_pairs`] at a random index is uniform over the unit cube (its
+    /// number's quarter against its point's quadrant, 16 bins), for a full grid of cells (n = 4,
+    /// where the k-th point lies in cell k) and a partial one (n = 5): the numbers' random order
+    /// keeps a lobe choice independent of its direction. The control, both sets in order, pairs
+    /// the k-th stratum with the k-th cell.
+    #[test]
+    fn stratified_pairs_are_jointly_uniform() {
+        let bin = |(u, p): (f32, Vec2)| {
+            (u * 4.0) as usize * 4 + (p.y * 2.0) as usize * 2 + (p.x * 2.0) as usize
+        };
+        let chi2 = |n: u32, ordered: bool| {
+            let draws = 16_000u64;
+            let mut bins = [0u64; 16];
+            for seed in 0..draws {
+                let mut s = PixelSampler::new(seed, 2, 5);
+                let k = (seed % n as u64) as usize;
+                let t = if ordered {
+                    let points: Vec<Vec2> = stratified_cells(n, s.split(), false).collect();
+                    strata_1d(n, s.split(), false).zip(points).nth(k)
+                } else {
+                    stratified_pairs(n, &mut s).nth(k)
+                };
+                bins[bin(t.unwrap())] += 1;
+            }
+            let e = draws as f64 / 16.0;
+            bins.iter()
+                .map(|&b| (b as f64 - e).powi(2) / e)
+                .sum::<f64>()
+        };
+        // 15 degrees of freedom: P(χ² > 45) ≈ 7e-5.
+        for n in [4, 5] {
+            let x = chi2(n, false);
+            assert!(x < 45.0, "n {n}: χ² {x:.1}");
+        }
+        let x = chi2(4, true);
+        assert!(x > 45.0, "the ordered sets passed: χ² {x:.1}");
     }
 }

@@ -21,7 +21,7 @@ use nrc_scene::{LightContext, Ray, Scene, SurfaceInteraction, sampling::Frame, s
 
 use crate::nee::{Counts, emission_mis_weight, environment_mis_weight, next_event};
 use crate::query::RadianceQuery;
-use crate::sampler::{PixelSampler, stratified, stratified_1d};
+use crate::sampler::{MAX_STRATA, PixelSampler, stratified_pairs};
 use crate::tracer::{GLOSSY_ROUGHNESS, LightStrategy, PathStats, PathTracer};
 
 /// A surface vertex of a path, with its BSDF in its shading frame.
@@ -307,9 +307,8 @@ impl PathWalk {
     /// The `extra` BSDF samples of the direct light at `v` ([`PathTracer::glossy_samples`]),
     /// summed. Stratified (unless [`PathTracer::glossy_stratified`] is off): the directions'
     /// numbers one in each of `extra` distinct cells of a `⌈√extra⌉²` grid, the lobe choices one
-    /// in each of `extra` strata, both in random order ([`stratified`], [`stratified_1d`]).
-    /// Each sample's numbers are still uniform, so each is the independent sample's estimate
-    /// in expectation; where the lobe sees an edge (the window's bars behind a glossy table)
+    /// in each of `extra` strata in random order ([`stratified_pairs`]). A sample at a random
+    /// index has uniform numbers, so the sum is the independent samples' in expectation; where the lobe sees an edge (the window's bars behind a glossy table)
     /// only the cells the edge cuts keep its variance. Draws two numbers of `sampler`
     /// (independent samples: three per sample).
     fn glossy_direct(
@@ -320,7 +319,9 @@ impl PathWalk {
         sampler: &mut PixelSampler,
         stats: &mut PathStats,
     ) -> Vec3 {
-        if !self.tracer.glossy_stratified {
+        // Beyond MAX_STRATA a stratified set would be cut short while the MIS counts take
+        // them all: independent samples there (the CLI allows 64).
+        if !self.tracer.glossy_stratified || extra > MAX_STRATA {
             return (0..extra)
                 .map(|_| {
                     let u_lobe = sampler.next_1d();
@@ -329,10 +330,7 @@ impl PathWalk {
                 })
                 .sum();
         }
-        let dirs = stratified(extra, sampler.split());
-        let lobes = stratified_1d(extra, sampler.split());
-        lobes
-            .zip(dirs)
+        stratified_pairs(extra, sampler)
             .map(|(u_lobe, u_dir)| self.glossy_sample(scene, v, u_lobe, u_dir, stats))
             .sum()
     }
