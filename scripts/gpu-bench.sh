@@ -40,13 +40,17 @@ if [[ "${1:-}" == "--prepare" ]]; then
   set -e
   rm -rf .bench && mkdir -p .bench
   # Cargo names every executable it built (or found fresh) in its JSON messages: `executable
-  # NAME` prints NAME's, so a binary of another feature set lying in deps/ is never taken.
+  # NAME KIND` prints the program (KIND bin) or the integration test (KIND test) called NAME,
+  # so neither a binary of another feature set lying in deps/ nor the program's own unit-test
+  # harness (also called `nrc`) is taken.
   executable() { python3 -c '
 import json, sys
 for line in sys.stdin:
     m = json.loads(line)
-    if m.get("reason") == "compiler-artifact" and m.get("executable") and m["target"]["name"] == sys.argv[1]:
-        print(m["executable"])' "$1" | tail -1; }
+    if (m.get("reason") == "compiler-artifact" and m.get("executable")
+            and m["target"]["name"] == sys.argv[1] and sys.argv[2] in m["target"]["kind"]
+            and m["profile"]["test"] == (sys.argv[2] == "test")):
+        print(m["executable"])' "$1" "$2" | tail -1; }
   # take NAME BINARY: strips BINARY into .bench/NAME (stripped they are 54-62 MB each; xz
   # brings six under the device's 64 MiB carry).
   take() {
@@ -54,14 +58,15 @@ for line in sys.stdin:
     strip -o ".bench/$1" "$2"
   }
   default=$(cargo build --release --locked --workspace --all-targets --message-format=json)
-  for name in nrc gpu_fused backends wgpu_training; do
-    take "$name" "$(executable "$name" <<<"$default")"
+  take nrc "$(executable nrc bin <<<"$default")"
+  for name in gpu_fused backends wgpu_training; do
+    take "$name" "$(executable "$name" test <<<"$default")"
   done
   # The SPIR-V build of the same binaries that run the fused kernels.
   take nrc-spirv "$(cargo build --release --locked --features vulkan --bin nrc \
-    --message-format=json | executable nrc)"
+    --message-format=json | executable nrc bin)"
   take gpu_fused-spirv "$(cargo test --release --locked -p nrc-cache --features vulkan \
-    --test gpu_fused --no-run --message-format=json | executable gpu_fused)"
+    --test gpu_fused --no-run --message-format=json | executable gpu_fused test)"
   xz -9 -T2 -f .bench/*
   # The feature build replaced target/release/nrc: the default build's command puts it back.
   cargo build --release --locked --workspace --all-targets --quiet
