@@ -98,6 +98,17 @@ fn block_differences(
     out
 }
 
+/// The largest difference of `a` and `b` over 4×4 blocks in standard errors (any channel), and
+/// the Bonferroni bound of the blocks (family-wise 10⁻³).
+fn worst_block(a: &RenderOutput, na: u32, b: &RenderOutput, nb: u32) -> (f64, f64) {
+    let blocks = block_differences(a, na, b, nb, 4);
+    let worst = blocks
+        .iter()
+        .map(|(d, se)| d.abs() / se.max(1e-12))
+        .fold(0.0, f64::max);
+    (worst, z_two_sided(1e-3 / blocks.len() as f64))
+}
+
 /// Image-mean differences per channel in standard errors.
 fn image_mean_z(a: &RenderOutput, na: u32, b: &RenderOutput, nb: u32) -> Vec<f64> {
     block_differences(a, na, b, nb, W.max(H))
@@ -199,12 +210,7 @@ fn glossy_samples_agree_with_mis_and_lower_the_variance_of_glossy_pixels() {
     );
     // Per 4×4 block, every block within a Bonferroni bound (family-wise 10⁻³): dim pixels'
     // estimates at 64 samples are too skewed for a per-pixel normal bound.
-    let blocks = block_differences(&reference, 1024, &glossy, n, 4);
-    let z_max = z_two_sided(1e-3 / blocks.len() as f64);
-    let worst = blocks
-        .iter()
-        .map(|(d, se)| d.abs() / se.max(1e-12))
-        .fold(0.0, f64::max);
+    let (worst, z_max) = worst_block(&reference, 1024, &glossy, n);
     eprintln!("worst block {worst:.2} standard errors (bound {z_max:.2})");
     assert!(worst <= z_max, "a block is {worst:.2} standard errors off");
     // The walk driven by hand, depth 2, agrees too; the control, the same walk whose path
@@ -213,20 +219,25 @@ fn glossy_samples_agree_with_mis_and_lower_the_variance_of_glossy_pixels() {
     // (2,048 samples a pixel: the wrong weight's bias lies in the few pixels of the glossy
     // highlights, and the blocks must see it beyond the Bonferroni bound.)
     let m = 2048;
-    let worst_block = |r: &RenderOutput| {
-        let blocks = block_differences(&reference, 1024, r, m, 4);
-        blocks
-            .iter()
-            .map(|(d, se)| d.abs() / se.max(1e-12))
-            .fold(0.0, f64::max)
-    };
-    let by_hand = worst_block(&walk_by_hand(&scene, &tracer(4), false, m, 17));
+    let by_hand = worst_block(
+        &reference,
+        1024,
+        &walk_by_hand(&scene, &tracer(4), false, m, 17),
+        m,
+    )
+    .0;
     eprintln!("the walk by hand: worst block {by_hand:.2}");
     assert!(
         by_hand <= z_max,
         "by hand: a block is {by_hand:.2} standard errors off"
     );
-    let forgot = worst_block(&walk_by_hand(&scene, &tracer(4), true, m, 17));
+    let forgot = worst_block(
+        &reference,
+        1024,
+        &walk_by_hand(&scene, &tracer(4), true, m, 17),
+        m,
+    )
+    .0;
     eprintln!("the path sample weighed as the only BSDF sample: worst block {forgot:.2}");
     assert!(
         forgot > z_max,
@@ -256,12 +267,7 @@ fn stratified_glossy_samples_agree_and_lower_the_variance_of_independent_ones() 
     let strat = render_scene(&scene, &tracer(true), W, H, n, 23);
     let indep = render_scene(&scene, &tracer(false), W, H, n, 23);
     let indep_b = render_scene(&scene, &tracer(false), W, H, n, 29);
-    let blocks = block_differences(&reference, 1024, &strat, n, 4);
-    let z_max = z_two_sided(1e-3 / blocks.len() as f64);
-    let worst = blocks
-        .iter()
-        .map(|(d, se)| d.abs() / se.max(1e-12))
-        .fold(0.0, f64::max);
+    let (worst, z_max) = worst_block(&reference, 1024, &strat, n);
     eprintln!("stratified against independent: worst block {worst:.2} (bound {z_max:.2})");
     assert!(worst <= z_max, "a block is {worst:.2} standard errors off");
     // The variance of the pixels whose samples differ (the glossy ones): the same seed draws
