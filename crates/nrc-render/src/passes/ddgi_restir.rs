@@ -13,21 +13,35 @@
 //! Per frame and pixel sample at the primary vertex `x` (non-delta, perceptual roughness at
 //! least `smooth` = 0.2; delta and near-specular primaries are path traced):
 //!
-//! 1. **Candidates** (§3.2 step 1): `light` points from the light sampler and `bsdf` BSDF
-//!    samples, each ray's first hit a candidate wherever it lands (an escaped ray: the
+//! 1. **Candidates** (§3.2 step 1; as the paper, with `direct=0`): `light` points from the
+//!    light sampler and `bsdf` BSDF samples, each ray's first hit a candidate wherever it lands (an escaped ray: the
 //!    environment). A surface candidate `y` carries its emission and the source's radiance
 //!    `L_src(y → x)`; its target is `p̂(y) = lum(f · (L_e + L_src) · min(G, G_max))` in area
 //!    measure, with the balance-heuristic RIS weight `p̂ / (M_l p_l + M_b p_b)` (`p_l` the light
 //!    sampler's area density, zero off emitters; `p_b` the BSDF density converted to area).
 //!    Punctual and environment samples enter in their own measures, unclamped, as in ReSTIR DI.
+//!
+//!    With `direct=1`, the default, the emission leaves the reservoir: the direct light at `x`
+//!    is the path tracer's next-event estimation (one light sample and its shadow ray, the
+//!    first BSDF candidate's ray as the path's BSDF sample, MIS by the power heuristic, and
+//!    the tracer's extra glossy samples), no light candidates are drawn, escaped BSDF rays
+//!    are no candidates, and the surface candidates carry only `L_src`. On the
+//!    Country Kitchen most of the window is hidden from most points behind its frame and
+//!    blinds, so an unshadowed target keeps choosing occluded points of it (RESULTS.md, "The
+//!    direct light out of the reservoir").
 //! 2. **Spatial then temporal reuse** (§3.2 step 2): `k` screen neighbours' initial
-//!    reservoirs, then the previous frame's final one at the reprojected pixel (`M` capped);
-//!    each merge is unbiased, by pairwise MIS ([`reuse::Merge`]; `pairwise=0`: `1/Z` over the
+//!    reservoirs, then (`temporal=1`; off by default) the previous frame's final one at the
+//!    reprojected pixel (`M` capped); each merge is unbiased, by pairwise MIS ([`reuse::Merge`]; `pairwise=0`: `1/Z` over the
 //!    owners that see `y`), one shadow ray per reused reservoir.
 //!    A reused sample keeps the source radiance its finder stored (§3.7's query reuse: the
 //!    target is approximate, the estimator stays unbiased for its integrand because the BSDF
 //!    candidates cover every direction); `requery=1` (probes only) evaluates `L_DDGI+` toward
-//!    each receiver instead.
+//!    each receiver instead. The history's samples are asked again each frame: with a source
+//!    whose every answer is fresh noise, a sample kept because its last answer was high is
+//!    then weighed by that answer and shaded with a new one, which darkens the image (3 % at
+//!    a few pixels of the exact-source test with `direct=1,temporal=1`, where the exact
+//!    emission does not dilute it: `tests/ddgi_restir.rs`); a trained cache answers
+//!    deterministically and changes slowly.
 //! 3. **Shading** (§3.2 steps 3–4): one shadow ray to the chosen sample, `f · L · G_c · W`.
 //! 4. **Residual** (§3.6, eq. 9): the clamped-away part `max(0, 1 − G_max/G)` of the
 //!    first BSDF candidate's own estimate `f cos / p · L`, which needs no extra ray (the
@@ -71,7 +85,7 @@ use crate::reservoir::Reservoir;
 use crate::sampler::PixelSampler;
 use crate::source::{RadianceQuery, usable_answer};
 use crate::spread::Spread;
-use crate::transport::Vertex;
+use crate::transport::{Arrival, PathWalk, Vertex};
 use rayon::prelude::*;
 
 /// What lights the scene's surfaces in the resampling.
@@ -87,11 +101,12 @@ pub enum SurfaceLight {
 
 pub const KIND: PassKind = PassKind {
     grammar: "ddgi-restir, nrc-restir, ddgi-nrc-restir",
-    about: "DDGI resampling: at the primary vertex, light-sampler and BSDF-sampled surface \
-            points resampled by their emission plus the radiance they reflect (eq. 6) from \
-            probes (ddgi-restir), the cache (nrc-restir) or cache-fed probes \
-            (ddgi-nrc-restir), the geometry term clamped at 1/(clamp · diagonal)² with the \
-            residual of eq. 9; spatial and temporal reuse, one shadow ray",
+    about: "DDGI resampling: at the primary vertex, BSDF-sampled surface points resampled by \
+            the radiance they reflect (eq. 6) from probes (ddgi-restir), the cache \
+            (nrc-restir) or cache-fed probes (ddgi-nrc-restir), the direct light by the path \
+            tracer's NEE (direct=0: emitters and light-sampler candidates in the reservoir, \
+            the paper), the geometry term clamped at 1/(clamp · diagonal)² with the residual \
+            of eq. 9; spatial reuse (temporal=1: and temporal), a shadow ray to the chosen sample",
     method: true,
     variants: || variants().into_iter().map(|(_, s)| s.into()).collect(),
     parse: |name| parse_variant(name, &variants(), DdgiRestirSettings::validate),
@@ -110,16 +125,22 @@ fn variants() -> [(&'static str, DdgiRestirSettings); 3] {
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct DdgiRestirSettings {
     pub light: SurfaceLight,
-    /// Light-sampler candidates per pixel sample ("a small number", §3.2).
+    /// Light-sampler candidates per pixel sample ("a small number", §3.2); none are drawn
+    /// with [`DdgiRestirSettings::direct_nee`].
     pub light_candidates: u32,
     /// BSDF-sampled candidates (a ray each); the first also estimates the residual.
     pub bsdf_candidates: u32,
     /// Spatial neighbours (the paper: 3) and their disc's radius in pixels.
     pub spatial_neighbours: u32,
     pub spatial_radius: f32,
-    /// Reuse the previous frame's reservoir (the paper: 1 temporal candidate).
+    /// Reuse the previous frame's reservoir (the paper: 1 temporal candidate). Off by default:
+    /// measured on the kitchen and the four door scenes with the direct light by NEE, the
+    /// history cost more time than it saved error in every case, at equal time, whether
+    /// frames were averaged (their shared history correlates them) or a single warm frame
+    /// was judged (the kitchen); RESULTS.md, "The direct light out of the reservoir".
     pub temporal: bool,
-    /// The history's `M` is capped at this multiple of the candidate count: 5 by default, not
+    /// With `temporal`, the history's `M` is capped at this multiple of the candidate count
+    /// (a frame's candidates: 9 with `direct=0`, 1 with `direct=1`): 5 by default, not
     /// ReSTIR DI's 20. Consecutive frames of a view that stands still share their history's
     /// samples, and the longer it is kept the less their average gains from each new frame:
     /// at 8 frames averaged and equal samples, 5 gave lower MSE than 20 on the kitchen, the
@@ -149,6 +170,14 @@ pub struct DdgiRestirSettings {
     /// path's footprint from the primary vertex stays below `c · a0`, then ends in eq. 6
     /// (probe modes; the resampling's targets keep eq. 6 itself, as in the paper).
     pub footprint: f32,
+    /// The direct light at the primary vertex by the path tracer's next-event estimation (one
+    /// light sample and the first BSDF candidate, by MIS, with the tracer's extra glossy
+    /// samples), and the reservoir resampling only the light the surfaces reflect (emission
+    /// excluded, no light candidates). Off: emitters are surfaces of the reservoir like any
+    /// other (the paper, §3.2), whose unshadowed targets choose occluded points of a window
+    /// behind blinds. On by default (RESULTS.md, "The direct light out of the reservoir").
+    /// See [`DdgiRestirSettings::light_candidates_used`].
+    pub direct_nee: bool,
     /// The probe volume (probe modes).
     pub ddgi: DdgiSettings,
 }
@@ -161,7 +190,7 @@ impl Default for DdgiRestirSettings {
             bsdf_candidates: 1,
             spatial_neighbours: 3,
             spatial_radius: 30.0,
-            temporal: true,
+            temporal: false,
             m_cap: 5.0,
             pairwise: true,
             clamp: 0.1,
@@ -170,6 +199,7 @@ impl Default for DdgiRestirSettings {
             jitter: true,
             smooth: 0.2,
             footprint: 0.0,
+            direct_nee: true,
             ddgi: DdgiSettings::default(),
         }
     }
@@ -221,11 +251,18 @@ impl DdgiRestirSettings {
     fn uses_probes(&self) -> bool {
         self.light != SurfaceLight::Cache
     }
+
+    /// The light-sampler candidates a pixel sample draws: none with [`DdgiRestirSettings::direct_nee`],
+    /// whose reservoir holds no emission (a light sample would bring only what the emitter's
+    /// own surface reflects, which the BSDF candidates cover).
+    pub fn light_candidates_used(&self) -> u32 {
+        if self.direct_nee { 0 } else { self.light_candidates }
+    }
 }
 
 impl Params for DdgiRestirSettings {
     fn visit(&mut self, f: &mut dyn FnMut(&Key, &mut dyn Value)) {
-        let light = Key::new("light", "light-sampler candidates per pixel sample");
+        let light = Key::new("light", "light-sampler candidates per pixel sample (none with direct=1)");
         f(&light.range(0.0, MAX), &mut self.light_candidates);
         let bsdf = Key::new("bsdf", "BSDF-sampled candidates (the first also for the residual)");
         f(&bsdf.range(1.0, MAX), &mut self.bsdf_candidates);
@@ -245,6 +282,11 @@ impl Params for DdgiRestirSettings {
         f(&smooth.range(0.0, 1.0), &mut self.smooth);
         let footprint = Key::new("footprint", "eqs. 7-8's near-specular recursion, c (0: off)");
         f(&footprint.range(0.0, 1e3), &mut self.footprint);
+        let direct = Key::new(
+            "direct",
+            "the direct light by the path tracer's NEE, the reservoir only the reflected light",
+        );
+        f(&direct, &mut self.direct_nee);
         if self.uses_probes() {
             self.ddgi.visit(f);
         }
@@ -425,10 +467,12 @@ struct Candidate {
 /// Where a surface candidate lies, for the source to answer the radiance it reflects: kept
 /// small, since a frame holds every pixel's candidates until the source answers them all (whole
 /// shading vertices, 9 a pixel, took 4.4 GiB at 1280 × 720: BENCHMARKS.md), and its vertex
-/// rebuilt, with the same bits, when it is asked.
+/// rebuilt when it is asked (with the same bits from a hit; from a point, by its triangle's
+/// interpolation at `p`, equal to rounding).
 #[derive(Clone, Copy, Debug)]
 enum At {
-    /// A light sample's point `p` on triangle `tri`, seen from `wo`.
+    /// A point `p` on triangle `tri`, seen from `wo`: a light sample's, or the surface the
+    /// first BSDF candidate's ray found with `direct=1`.
     Point { tri: u32, p: Vec3, wo: Vec3 },
     /// A BSDF ray's hit, seen from the ray.
     Hit { ray: Ray, hit: Hit },
@@ -468,6 +512,8 @@ struct Aux {
 struct Traced {
     candidates: Vec<Candidate>,
     aux: Option<Aux>,
+    /// The direct light at the vertex ([`DdgiRestirSettings::direct_nee`]; zero otherwise).
+    direct: Vec3,
     stats: PathStats,
 }
 
@@ -515,14 +561,24 @@ impl DdgiRestirPass {
     fn candidates(&self, scene: &Scene, v: &Vertex, s: &mut PixelSampler) -> Traced {
         let set = &self.settings;
         // Room for every candidate at once: growing the vector cost a twentieth of a frame.
+        let light_candidates = set.light_candidates_used();
         let mut t = Traced {
-            candidates: Vec::with_capacity((set.light_candidates + set.bsdf_candidates) as usize),
+            candidates: Vec::with_capacity((light_candidates + set.bsdf_candidates) as usize),
             ..Default::default()
         };
         let from = nrc_scene::LightContext::new(v.si.p, v.si.ns);
+        // With `direct_nee` the emission is the direct light's, estimated here as the path tracer
+        // does; the first BSDF candidate's ray is the path's own BSDF sample of it.
+        let mut walk = set
+            .direct_nee
+            .then(|| PathWalk::from_vertex(scene, &self.tracer, 1))
+            .filter(|w| !w.at_depth_limit());
+        if let Some(w) = &mut walk {
+            t.direct = w.next_event(scene, v, s, &mut t.stats);
+        }
         let surface = |si: &nrc_scene::SurfaceInteraction, at: Vertex| {
             let m = &scene.materials()[si.material as usize];
-            let emits = m.is_emissive();
+            let emits = m.is_emissive() && !set.direct_nee;
             DdgiSample::Surface(SurfacePoint {
                 x: si.p,
                 ng: si.ng,
@@ -547,7 +603,7 @@ impl DdgiRestirPass {
         // reflects; none where its BSDF is black (the converted scenes' emitters): that
         // radiance is exactly zero, and asking costs a cache query or a probe lookup.
         let reflecting = |at: Vertex, place: At| (!at.bsdf.is_black()).then_some(place);
-        for _ in 0..set.light_candidates {
+        for _ in 0..light_candidates {
             let u_select = s.next_1d();
             let u_point = s.next_2d();
             let c = match scene.sample_light(&from, u_select, u_point) {
@@ -581,9 +637,36 @@ impl DdgiRestirPass {
             let Some(bs) = v.bsdf.sample(v.wo, u_dir, u_lobe) else {
                 continue;
             };
-            let ray = spawn_ray(v.si.p, v.si.ng, v.frame.to_world(bs.wi));
-            t.stats.closest_rays += 1;
-            let c = match scene.intersect(&ray) {
+            let c = match walk.as_mut().filter(|_| k == 0) {
+                // The path's BSDF sample: the emission it finds, weighed against NEE, is
+                // direct light; the surface it finds a candidate.
+                Some(w) => {
+                    w.follow(v, &bs);
+                    match w.arrive(scene, &mut t.stats) {
+                        Arrival::Escaped { le, mis } => {
+                            t.direct += bs.weight * le * mis;
+                            None
+                        }
+                        Arrival::Hit(h) => {
+                            t.direct += bs.weight * h.le * h.mis;
+                            let si = &h.vertex.si;
+                            let place = At::Point {
+                                tri: si.tri,
+                                p: si.p,
+                                wo: si.wo,
+                            };
+                            Some(Candidate {
+                                y: surface(si, h.vertex),
+                                at: reflecting(h.vertex, place),
+                                from_bsdf: true,
+                            })
+                        }
+                    }
+                }
+                None => {
+                    let ray = spawn_ray(v.si.p, v.si.ng, v.frame.to_world(bs.wi));
+                    t.stats.closest_rays += 1;
+                    match scene.intersect(&ray) {
                 Some(hit) => {
                     let si = scene.interaction(&ray, &hit);
                     let at = Vertex::new(scene, &si, si.wo);
@@ -593,6 +676,8 @@ impl DdgiRestirPass {
                         from_bsdf: true,
                     })
                 }
+                // With `direct_nee` the environment is direct light, which this ray does not estimate.
+                None if set.direct_nee => None,
                 None => scene
                     .environment_sample(&from, ray.d.normalize())
                     .map(|ls| Candidate {
@@ -600,6 +685,8 @@ impl DdgiRestirPass {
                         at: None,
                         from_bsdf: true,
                     }),
+                    }
+                }
             };
             let Some(c) = c else { continue };
             if bs.delta {
@@ -977,7 +1064,7 @@ impl RenderPass for DdgiRestirPass {
             },
             requery: self.volume.as_ref().filter(|_| set.requery),
         };
-        let (ml, mb) = (set.light_candidates as f32, set.bsdf_candidates as f32);
+        let (ml, mb) = (set.light_candidates_used() as f32, set.bsdf_candidates as f32);
 
         // 1. Initial reservoirs (RIS, visibility reuse) and the aux estimates.
         let t = Instant::now();
@@ -1072,7 +1159,7 @@ impl RenderPass for DdgiRestirPass {
             let mut l = g.emitted[i];
             if let Some(p) = &g.primary[i] {
                 if usable(&g.primary[i], set.smooth).is_some() {
-                    l += aux;
+                    l += aux + traced[i].direct;
                     if let Some(y) = r.sample {
                         match contribution(&ctx, &p.v, &y) {
                             Some(c) if sees(scene, &p.v, &y, &mut stats) => {

@@ -42,7 +42,7 @@ fn names_parse_print_and_round_trip_through_json() {
         "ddgi-restir",
         "nrc-restir",
         "ddgi-nrc-restir",
-        "ddgi-restir:light=4,bsdf=2,k=0,radius=10,mcap=6,temporal=0,clamp=0,residual=0,requery=1,jitter=0,smooth=0.5,footprint=0.2,probes=4,rays=64,hysteresis=0.9,relocate=1,classify=1,attenuation=0.5",
+        "ddgi-restir:light=4,bsdf=2,k=0,radius=10,mcap=6,temporal=1,clamp=0,residual=0,requery=1,jitter=0,smooth=0.5,footprint=0.2,direct=0,probes=4,rays=64,hysteresis=0.9,relocate=1,classify=1,attenuation=0.5",
         "nrc-restir:clamp=0.05",
     ] {
         let spec: PassSpec = name.parse().unwrap();
