@@ -58,7 +58,9 @@
 //!
 //! What the estimator converges to is `L_e(x) + T(L_e + L_src)`: exact where the source is
 //! exact, and, with probes or a cache, biased by the source's error one bounce away from the
-//! camera (the paper's premise: the error is hidden behind a scattering event). §3.3's
+//! camera (the paper's premise: the error is hidden behind a scattering event); with
+//! `smoothend=1` a smooth primary shows the source's error through its glossy chain, less
+//! hidden. §3.3's
 //! attenuation of `L_e` in the probe update is the volume's option (`attenuation=S`). The
 //! near-specular recursion of eqs. 7–8 (`footprint=c`, the paper's 0.2; off by default, see
 //! the setting) follows, at shading,
@@ -192,11 +194,14 @@ pub struct DdgiRestirSettings {
     /// the source there (the cache's answer, or the probes' `L_DDGI+`), instead of being path
     /// traced whole: their direct light at each vertex before it is NEE's, as the path
     /// tracer's. Biased by the source's error seen through the glossy chain, as the rest of
-    /// the image is by the source's error one bounce away. On for `nrc-restir`, whose cache
-    /// answers the radiance leaving a point in each direction (lower or equal error at equal
-    /// samples on the kitchen and the four door scenes); off for the probe modes, whose
-    /// `L_DDGI+` is irradiance and one glossy sample (6–38 % higher error on the door scenes,
-    /// lower on the kitchen). RESULTS.md, "The direct light out of the reservoir".
+    /// the image is by the source's error one bounce away. With a depth limit, a chain ends
+    /// only at its second vertex (where the candidates, whose source answers match the limit
+    /// there, sit); longer chains are traced whole. On for `nrc-restir`, whose cache answers
+    /// the radiance leaving a point in each direction (at equal samples lower error on
+    /// `glossy` and `caustics`, within 2 % on the Cornell box and `ajar`; on the kitchen
+    /// within the runs' spread); off for the probe modes, whose `L_DDGI+` is irradiance and
+    /// one glossy sample (6–38 % higher error on the door scenes). RESULTS.md, "The direct
+    /// light out of the reservoir".
     pub smooth_ends_in_source: bool,
     /// The probe volume (probe modes).
     pub ddgi: DdgiSettings,
@@ -760,7 +765,9 @@ impl DdgiRestirPass {
     /// BSDF sampling (MIS, the tracer's glossy samples at `v`) at each vertex, Russian
     /// roulette and the depth limit as the path tracer's, up to the first vertex that is not
     /// a delta and has roughness at least `smooth`, where it ends (no NEE there: the source's
-    /// answer holds all the light leaving it).
+    /// answer holds all the light leaving it); with a depth limit only if that vertex is the
+    /// second (the source answers with its own depth). A vertex whose BSDF is black ends the
+    /// path unasked: the light it reflects is exactly zero.
     fn smooth_path(
         &self,
         scene: &Scene,
@@ -770,7 +777,9 @@ impl DdgiRestirPass {
     ) -> SmoothPath {
         let mut out = SmoothPath::default();
         let mut walk = PathWalk::from_vertex(scene, &self.tracer, 1);
+        let unlimited = self.tracer.segment_limit() == u32::MAX;
         let mut v = *v;
+        let mut vertex = 1;
         loop {
             if walk.at_depth_limit() {
                 return out;
@@ -785,8 +794,14 @@ impl DdgiRestirPass {
                     return out;
                 }
                 Arrival::Hit(h) => {
+                    vertex += 1;
                     out.prefix += walk.throughput() * h.le * h.mis;
-                    if !h.vertex.bsdf.is_delta() && h.vertex.bsdf.roughness() >= self.settings.smooth
+                    if h.vertex.bsdf.is_black() {
+                        return out;
+                    }
+                    if !h.vertex.bsdf.is_delta()
+                        && h.vertex.bsdf.roughness() >= self.settings.smooth
+                        && (unlimited || vertex == 2)
                     {
                         let si = &h.vertex.si;
                         out.throughput = walk.throughput();
