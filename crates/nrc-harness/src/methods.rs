@@ -85,9 +85,10 @@ impl fmt::Display for ParseMethodError {
 
 impl std::error::Error for ParseMethodError {}
 
-/// Methods separated by commas, as `nrc compare --methods` takes them: an item `key=value`
-/// (no `:`, no `@`) continues the parameters of the method before it, so
-/// `ddgi-restir:rays=64,k=0,restir-di` is two methods.
+/// Methods separated by commas, as `nrc compare --methods` takes them: an item whose part
+/// before any `@` is `key=value` (no `:`) continues the parameters of the method before it, so
+/// `ddgi-restir:rays=64,k=0,restir-di` is two methods, and so is
+/// `nrc-restir:light=2,direct=0@1spp+hash:pt-sl,pt-1spp` (a pass name never holds `=`).
 #[derive(Clone, Debug, PartialEq)]
 pub struct MethodList(pub Vec<MethodSpec>);
 
@@ -97,7 +98,8 @@ impl FromStr for MethodList {
     fn from_str(s: &str) -> Result<Self, Self::Err> {
         let mut items: Vec<String> = Vec::new();
         for part in s.split(',') {
-            let continues = part.contains('=') && !part.contains(':') && !part.contains('@');
+            let head = part.split_once('@').map_or(part, |(head, _)| head);
+            let continues = head.contains('=') && !head.contains(':');
             match items.last_mut() {
                 Some(last) if continues => {
                     last.push(',');
@@ -849,5 +851,16 @@ mod tests {
             ]
         );
         assert!("k=0,pt-1spp".parse::<MethodList>().is_err());
+        // Several parameters before a general form's `@`, and a producer mix after it.
+        let l: MethodList =
+            "nrc-restir:light=2,direct=0@1spp+hash:pt-sl,pt-1spp,cache-first@2spp+mix:pt-sl=0.5,sppc=0.5"
+                .parse()
+                .unwrap();
+        assert_eq!(l.0.len(), 3, "{:?}", l.0);
+        let first = l.0[0].to_string();
+        assert!(
+            first.contains("light=2") && first.contains("direct=0"),
+            "{first}"
+        );
     }
 }

@@ -510,6 +510,15 @@ enum At {
 }
 
 impl At {
+    /// The surface point of `si`, seen from its `wo`.
+    fn point(si: &nrc_scene::SurfaceInteraction) -> Self {
+        At::Point {
+            tri: si.tri,
+            p: si.p,
+            wo: si.wo,
+        }
+    }
+
     /// The direction the radiance is asked toward (world space, unit).
     fn wo(&self) -> Vec3 {
         match *self {
@@ -693,15 +702,9 @@ impl DdgiRestirPass {
                         }
                         Arrival::Hit(h) => {
                             t.direct += bs.weight * h.le * h.mis;
-                            let si = &h.vertex.si;
-                            let place = At::Point {
-                                tri: si.tri,
-                                p: si.p,
-                                wo: si.wo,
-                            };
                             Some(Candidate {
-                                y: surface(si, h.vertex),
-                                at: reflecting(h.vertex, place),
+                                y: surface(&h.vertex.si, h.vertex),
+                                at: reflecting(h.vertex, At::point(&h.vertex.si)),
                                 from_bsdf: true,
                             })
                         }
@@ -803,13 +806,8 @@ impl DdgiRestirPass {
                         && h.vertex.bsdf.roughness() >= self.settings.smooth
                         && (unlimited || vertex == 2)
                     {
-                        let si = &h.vertex.si;
                         out.throughput = walk.throughput();
-                        out.end = Some(At::Point {
-                            tri: si.tri,
-                            p: si.p,
-                            wo: si.wo,
-                        });
+                        out.end = Some(At::point(&h.vertex.si));
                         return out;
                     }
                     v = h.vertex;
