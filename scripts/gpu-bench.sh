@@ -21,8 +21,9 @@
 #   selfcheck-spirv.txt  the fused kernels' tests, compiled to SPIR-V
 #   bench-wgpu.txt  `nrc bench cache --device wgpu`: training samples/s and inference queries/s
 #                   of the hash-grid preset at each batch along the fused path (the default), its
-#                   dispatches per step, and fused against custom-ops (and generic tensor ops at
-#                   2^14) at each batch
+#                   dispatches per step, and fused (f32 MLP, then the f16 MLP where the adapter
+#                   has shader-f16) against custom-ops (and generic tensor ops at 2^14) at each
+#                   batch
 #   bench-spirv.txt the fused path compiled to SPIR-V, at the same batches (its custom-ops
 #                   path cannot load WGSL source and says so)
 #   bench-cpu.txt   the same on the machine's CPU cores (the fused CPU path), for the ratio

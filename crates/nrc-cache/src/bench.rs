@@ -475,21 +475,44 @@ fn compare(
         v.dedup();
         v
     };
+    // On wgpu the fused path also with the half-precision MLP (`"precision": "f16"`), beside
+    // the configuration's own.
+    let mut half = config.clone();
+    half.network.precision = crate::config::MlpPrecision::F16;
+    let mut variants: Vec<(String, &CacheConfig, ComputePath)> = Vec::new();
+    for path in paths {
+        variants.push((path.to_string(), config, path));
+        if path == ComputePath::Fused
+            && device == CacheDevice::Wgpu
+            && config.network.precision != crate::config::MlpPrecision::F16
+        {
+            variants.push(("fused f16".into(), &half, path));
+        }
+    }
     for &n in &sizes {
         let batch = synthetic_batch(n, 2);
         let mut base: Option<(Rate, Rate)> = None;
-        for path in paths {
+        for (label, config, path) in &variants {
+            let (label, path) = (label.as_str(), *path);
             if device == CacheDevice::Wgpu && path == ComputePath::Unfused && n > 1 << 14 {
                 continue;
             }
-            let mut cache =
-                match RadianceCache::with_path(config.clone(), SceneBox::default(), device, path) {
-                    Ok(c) => c,
-                    Err(e) => {
-                        println!("  path {path:<10} batch {n}: skipped ({e})");
-                        continue;
-                    }
-                };
+            let mut cache = match RadianceCache::with_path(
+                (*config).clone(),
+                SceneBox::default(),
+                device,
+                path,
+            ) {
+                Ok(c) => c,
+                Err(e) => {
+                    println!("  path {label:<10} batch {n}: skipped ({e})");
+                    continue;
+                }
+            };
+            if label == "fused f16" && cache.mlp_arithmetic() != "f16" {
+                println!("  path {label:<10} batch {n}: skipped (the adapter has no shader-f16)");
+                continue;
+            }
             let train = rate(short, n, || {
                 cache.train(&batch, 1).expect("training");
             });
@@ -502,14 +525,18 @@ fn compare(
                 _ => a.per_s / b.per_s,
             };
             println!(
-                "  path {path:<10} batch {n}: train {} samples/s, infer {} queries/s  (first path / this: {:.1}× train, {:.1}× infer)",
+                "  path {label:<10} batch {n}: train {} samples/s, infer {} queries/s  (first path / this: {:.1}× train, {:.1}× infer)",
                 show(train),
                 show(infer),
                 ratio(bt, train),
                 ratio(bi, infer)
             );
             out.push(BenchFigure {
-                preset: name.to_string(),
+                preset: if label == "fused f16" {
+                    format!("{name}, f16 MLP")
+                } else {
+                    name.to_string()
+                },
                 device,
                 path,
                 batch: n,

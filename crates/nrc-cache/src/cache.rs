@@ -8,7 +8,7 @@ use burn::backend::Dispatch;
 use burn::tensor::{Device, Tensor, TensorData};
 
 use crate::batch::{QUERY_ROW, TRAIN_ROW, pack_queries, pack_training};
-use crate::config::{AdamParams, CacheConfig, SceneBox, Sizing};
+use crate::config::{AdamParams, CacheConfig, MlpPrecision, SceneBox, Sizing};
 use crate::cpu::train::LossSettings;
 use crate::device::{CacheDevice, ComputePath};
 use crate::error::CacheError;
@@ -237,6 +237,29 @@ impl RadianceCache {
         self.path
     }
 
+    /// The arithmetic of the MLP's products as this cache computes them: `"bf16"` on the fused
+    /// CPU path with `"precision": "bf16"` (and an even input width), `"f16"` on the fused wgpu
+    /// path with `"precision": "f16"` on an adapter with `shader-f16`, else `"f32"`.
+    pub fn mlp_arithmetic(&self) -> &'static str {
+        if self.path != ComputePath::Fused {
+            return "f32";
+        }
+        match (self.device, self.layout.mlp_precision) {
+            (CacheDevice::Cpu, MlpPrecision::Bf16)
+                if self.layout.layers[0].inputs.is_multiple_of(2) =>
+            {
+                "bf16"
+            }
+            (CacheDevice::Wgpu, MlpPrecision::F16)
+                if crate::gpu::fused::client(&self.burn_device)
+                    .is_some_and(|c| crate::gpu::fused::half_mlp(&c, &self.layout)) =>
+            {
+                "f16"
+            }
+            _ => "f32",
+        }
+    }
+
     /// Steps taken so far.
     pub fn step_count(&self) -> u32 {
         self.step
@@ -312,6 +335,7 @@ impl RadianceCache {
             self.device,
             self.layout.mlp_precision,
             crate::cpu::bf16::PairKernel::best(),
+            self.mlp_arithmetic() == "f16",
         );
         s.push_str(&format!(
             "network: {} hidden layers × 64, ReLU, no biases, {products}, output {:?} × (diffuse + specular)\n",
@@ -796,18 +820,29 @@ impl RadianceCache {
 }
 
 /// The MLP products part of [`RadianceCache::describe`]'s network line: the bf16 kernels exist
-/// on the fused CPU (Flex) path only; wgpu multiplies in f32 whatever the configuration says.
+/// on the fused CPU (Flex) path only, the f16 kernels on the fused wgpu path only (`gpu_half`:
+/// taken here, on an adapter with `shader-f16`); elsewhere the products are f32 whatever the
+/// configuration says.
 fn mlp_products(
     device: CacheDevice,
     precision: crate::config::MlpPrecision,
     kernel: crate::cpu::bf16::PairKernel,
+    gpu_half: bool,
 ) -> &'static str {
-    use crate::config::MlpPrecision;
     use crate::cpu::bf16::PairKernel;
     match (device, precision) {
         (CacheDevice::Wgpu, MlpPrecision::F32) => "MLP products f32 on wgpu",
         (CacheDevice::Wgpu, MlpPrecision::Bf16) => {
             "MLP products f32 on wgpu (the bf16 precision applies to the fused CPU path only)"
+        }
+        (CacheDevice::Wgpu, MlpPrecision::F16) if gpu_half => {
+            "f16 products on the fused wgpu path (f16 weights and activations, f32 sums)"
+        }
+        (CacheDevice::Wgpu, MlpPrecision::F16) => {
+            "MLP products f32 on wgpu (the f16 precision needs the fused path on an adapter with shader-f16)"
+        }
+        (CacheDevice::Cpu, MlpPrecision::F16) => {
+            "f32 products (the f16 precision applies to the fused wgpu path only)"
         }
         (CacheDevice::Cpu, MlpPrecision::F32) => "f32 products",
         (CacheDevice::Cpu, MlpPrecision::Bf16) => match kernel {
@@ -825,18 +860,17 @@ fn mlp_products(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::config::MlpPrecision;
     use crate::cpu::bf16::PairKernel;
 
     #[test]
     fn wgpu_description_claims_no_cpu_kernels() {
-        for precision in [MlpPrecision::F32, MlpPrecision::Bf16] {
+        for precision in [MlpPrecision::F32, MlpPrecision::Bf16, MlpPrecision::F16] {
             for kernel in [
                 PairKernel::Expanded,
                 PairKernel::Avx2,
                 PairKernel::Avx512Bf16,
             ] {
-                let text = mlp_products(CacheDevice::Wgpu, precision, kernel);
+                let text = mlp_products(CacheDevice::Wgpu, precision, kernel, false);
                 assert!(text.starts_with("MLP products f32 on wgpu"), "{text}");
                 assert!(!text.contains("AVX"), "{text}");
                 assert!(!text.contains("bf16 products"), "{text}");
@@ -847,13 +881,34 @@ mod tests {
     #[test]
     fn cpu_description_names_its_kernel() {
         assert_eq!(
-            mlp_products(CacheDevice::Cpu, MlpPrecision::F32, PairKernel::Avx512Bf16),
+            mlp_products(
+                CacheDevice::Cpu,
+                MlpPrecision::F32,
+                PairKernel::Avx512Bf16,
+                false
+            ),
             "f32 products"
         );
-        let text = mlp_products(CacheDevice::Cpu, MlpPrecision::Bf16, PairKernel::Avx512Bf16);
+        let text = mlp_products(
+            CacheDevice::Cpu,
+            MlpPrecision::Bf16,
+            PairKernel::Avx512Bf16,
+            false,
+        );
         assert!(text.contains("AVX-512 BF16"), "{text}");
-        let text = mlp_products(CacheDevice::Cpu, MlpPrecision::Bf16, PairKernel::Avx2);
+        let text = mlp_products(
+            CacheDevice::Cpu,
+            MlpPrecision::Bf16,
+            PairKernel::Avx2,
+            false,
+        );
         assert!(text.contains("AVX2 emulation"), "{text}");
+        // The f16 precision is the wgpu path's: the CPU says it computes in f32, even when the
+        // caller (wrongly) says a GPU takes it.
+        let text = mlp_products(CacheDevice::Cpu, MlpPrecision::F16, PairKernel::Avx2, true);
+        assert!(text.starts_with("f32 products"), "{text}");
+        let text = mlp_products(CacheDevice::Wgpu, MlpPrecision::F16, PairKernel::Avx2, true);
+        assert!(text.starts_with("f16 products"), "{text}");
     }
 
     /// A small hash-grid cache on the CPU, with a few steps of training.

@@ -183,24 +183,31 @@ pub struct NetworkConfig {
     /// Must be 3 (RGB).
     #[serde(default = "three")]
     pub n_output_dims: u32,
-    /// Arithmetic of the hidden layers' products in the fused CPU path (`"f32"` when absent).
+    /// Arithmetic of the MLP's products (`"f32"` when absent; `"bf16"` on the fused CPU path,
+    /// `"f16"` on the fused wgpu path).
     #[serde(default, skip_serializing_if = "MlpPrecision::is_f32")]
     pub precision: MlpPrecision,
 }
 
-/// Arithmetic of the MLP's products in the fused CPU path (training and inference): `f32`, or
-/// `bf16`: operands rounded to bfloat16 with f32 sums, the weights rounded from f32 master
+/// Arithmetic of the MLP's products (training and inference): `f32`; `bf16`, on the fused CPU
+/// path: operands rounded to bfloat16 with f32 sums, the weights rounded from f32 master
 /// weights each step (mixed precision, as tiny-cuda-nn's half-precision MLP), twice the
-/// multiply-adds per cycle on CPUs with AVX-512 BF16 (see [`crate::cpu::bf16`]). The output
-/// layer, the optimizer and the other paths (custom ops, wgpu) stay f32.
+/// multiply-adds per cycle on CPUs with AVX-512 BF16 (see [`crate::cpu::bf16`]), the output
+/// layer f32; `f16`, on the fused wgpu path where the adapter has `shader-f16`: the weights
+/// rounded to IEEE half from f32 master weights each step and the activations kept in half
+/// precision in workgroup memory, every product summed in f32, the backward's deltas and
+/// gradients f32 (see `nrc_gpu::Layout::half_mlp`). Each precision applies to its path only;
+/// the others compute in f32 and the cache's description line says so. The optimizer is f32.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum MlpPrecision {
     /// Single precision (the default).
     #[default]
     F32,
-    /// bfloat16 operands, f32 sums.
+    /// bfloat16 operands, f32 sums (the fused CPU path).
     Bf16,
+    /// IEEE half weights and activations, f32 sums (the fused wgpu path, with `shader-f16`).
+    F16,
 }
 
 impl MlpPrecision {

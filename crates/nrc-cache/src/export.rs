@@ -103,11 +103,9 @@ pub fn describe(cache: &RadianceCache) -> Value {
         crate::config::OutputActivation::ReLU => "ReLU",
     };
     let scene_box = cache.scene_box();
-    // The products inference takes: bfloat16 only on the fused CPU path, with an even input
-    // width (`cpu::mlp::PreparedMlp`); f32 elsewhere (wgpu, the tensor paths).
-    let bf16 = layout.mlp_precision == crate::config::MlpPrecision::Bf16
-        && layout.layers[0].inputs.is_multiple_of(2)
-        && cache.path() == crate::device::ComputePath::Fused;
+    // The products inference takes (bfloat16 only on the fused CPU path with an even input
+    // width, f16 only on the fused wgpu path with shader-f16, f32 elsewhere).
+    let mlp_precision = cache.mlp_arithmetic();
     json!({
         "format": FORMAT,
         "version": VERSION,
@@ -146,7 +144,7 @@ pub fn describe(cache: &RadianceCache) -> Value {
             "n_output_dims": crate::model::OUTPUTS,
             "biases": false,
             "layers": layers,
-            "mlp_precision": if bf16 { "bf16" } else { "f32" },
+            "mlp_precision": mlp_precision,
         },
         "output": "radiance[c] = output_activation(y[c]) * max(diffuse[c] + specular[c], 0)",
         "weights": WEIGHTS_FILE,

@@ -117,11 +117,11 @@ fn tri(t: f32) -> f32 {
 /// non-grid parts one unit per row, the hash grid one unit per (row, level). Rows at or past
 /// `n` encode as zeros.
 #[cube]
-fn encode_tile<T: Float>(
+fn encode_tile<T: Float, M: Float>(
     rows: &[f32],
     table: &[T],
     info: &[u32],
-    act: &mut Shared<[f32]>,
+    act: &mut Shared<[M]>,
     first: usize,
     n: usize,
     n_parts: u32,
@@ -160,28 +160,28 @@ fn encode_tile<T: Float>(
                         let mut left = blob_cdf_sum(0.0f32, x, bins, wrap);
                         for b in 0..count {
                             let right = blob_cdf_sum(f32::cast_from(b + 1) / bins, x, bins, wrap);
-                            act[at + b] = right - left;
+                            act[at + b] = M::cast_from(right - left);
                             left = right;
                         }
                     } else if kind == 2u32 {
                         let at = base + out_off + dim * count;
                         let mut freq = 1.0f32;
                         for b in 0..count {
-                            act[at + b] = tri(freq * x);
+                            act[at + b] = M::cast_from(tri(freq * x));
                             freq *= 2.0f32;
                         }
                     } else {
-                        act[base + out_off + dim] = x * sc + of;
+                        act[base + out_off + dim] = M::cast_from(x * sc + of);
                     }
                 }
             }
             for c in unpadded..k {
-                act[base + c] = 1.0f32;
+                act[base + c] = M::cast_from(1.0f32);
             }
         } else {
             for c in 0..k {
                 if c < grid_out || c >= grid_end {
-                    act[base + c] = 0.0f32;
+                    act[base + c] = M::cast_from(0.0f32);
                 }
             }
         }
@@ -221,12 +221,12 @@ fn encode_tile<T: Float>(
                 }
                 #[unroll]
                 for f in 0..features {
-                    act[o + f] = acc[f];
+                    act[o + f] = M::cast_from(acc[f]);
                 }
             } else {
                 #[unroll]
                 for f in 0..features {
-                    act[o + f] = 0.0f32;
+                    act[o + f] = M::cast_from(0.0f32);
                 }
             }
             p += WIDTH;
@@ -237,10 +237,10 @@ fn encode_tile<T: Float>(
 /// One hidden layer: `act[out_base + r·64 + j] = relu(Σ_k W[k][j] · act[in_base + r·in_dims + k])`
 /// for unit `j` and every row `r` of the tile.
 #[cube]
-fn dense_forward(
-    mlp: &[f32],
+fn dense_forward<M: Float>(
+    mlp: &[M],
     w_off: usize,
-    act: &mut Shared<[f32]>,
+    act: &mut Shared<[M]>,
     in_base: usize,
     out_base: usize,
     #[comptime] in_dims: usize,
@@ -253,27 +253,27 @@ fn dense_forward(
         acc[r] = 0.0f32;
     }
     for kk in 0..in_dims {
-        let w = mlp[w_off + kk * WIDTH + j];
+        let w = f32::cast_from(mlp[w_off + kk * WIDTH + j]);
         #[unroll]
         for r in 0..r_tile {
-            acc[r] += w * act[in_base + r * in_dims + kk];
+            acc[r] += w * f32::cast_from(act[in_base + r * in_dims + kk]);
         }
     }
     #[unroll]
     for r in 0..r_tile {
-        act[out_base + r * WIDTH + j] = acc[r].max(0.0f32);
+        act[out_base + r * WIDTH + j] = M::cast_from(acc[r].max(0.0f32));
     }
 }
 
 /// The whole forward of a tile: encoding, hidden layers, and the raw outputs in
 /// `small[r·3 + c]`.
 #[cube]
-fn forward_tile<T: Float>(
+fn forward_tile<T: Float, M: Float>(
     rows: &[f32],
     table: &[T],
     info: &[u32],
-    mlp: &[f32],
-    act: &mut Shared<[f32]>,
+    mlp: &[M],
+    act: &mut Shared<[M]>,
     small: &mut Shared<[f32]>,
     first: usize,
     n: usize,
@@ -289,17 +289,17 @@ fn forward_tile<T: Float>(
     #[comptime] grid_out: usize,
     #[comptime] unpadded: usize,
 ) {
-    encode_tile::<T>(
+    encode_tile::<T, M>(
         rows, table, info, act, first, n, n_parts, r_tile, k, levels, features, stride, row_len,
         grid_in, grid_out, unpadded,
     );
     sync_cube();
     let xs_len = r_tile * k;
-    dense_forward(mlp, 0usize, act, 0usize, xs_len, k, r_tile);
+    dense_forward::<M>(mlp, 0usize, act, 0usize, xs_len, k, r_tile);
     sync_cube();
     #[unroll]
     for l in 1..hidden {
-        dense_forward(
+        dense_forward::<M>(
             mlp,
             k * WIDTH + (l - 1) * WIDTH * WIDTH,
             act,
@@ -319,7 +319,8 @@ fn forward_tile<T: Float>(
         let c = t % 3;
         let mut o = 0.0f32;
         for kk in 0..WIDTH {
-            o += mlp[out_off + kk * 3 + c] * act[last + r * WIDTH + kk];
+            o += f32::cast_from(mlp[out_off + kk * 3 + c])
+                * f32::cast_from(act[last + r * WIDTH + kk]);
         }
         small[t] = o;
         t += WIDTH;
@@ -379,8 +380,8 @@ fn huber(r: f32, k: f32, deriv: &mut Array<f32>) -> f32 {
 /// `kk` (the layer's input rows at `in_base`, `in_dims` wide; δ at `d_base`), added to (or, on
 /// the cube's first tile, written to) the cube's partial at `w_at + kk·64 + u`.
 #[cube]
-fn weight_gradient(
-    act: &Shared<[f32]>,
+fn weight_gradient<M: Float>(
+    act: &Shared<[M]>,
     delta: &Shared<[f32]>,
     wpart: &mut [f32],
     in_base: usize,
@@ -400,7 +401,7 @@ fn weight_gradient(
         let mut g = 0.0f32;
         #[unroll]
         for r in 0..r_tile {
-            g += act[in_base + r * in_dims + kk] * own[r];
+            g += f32::cast_from(act[in_base + r * in_dims + kk]) * own[r];
         }
         let at = w_at + kk * WIDTH + u;
         if first_tile {
@@ -415,11 +416,11 @@ fn weight_gradient(
 /// per tile; the cube's weight-gradient partial in `wpart[CUBE_POS·w_total..]`, its loss sum in
 /// `lpart[CUBE_POS]`, ∂L/∂(grid columns) in `dxg` (`[n][levels·features]`).
 #[cube(launch_unchecked)]
-pub fn train_tiles<T: Float>(
+pub fn train_tiles<T: Float, M: Float>(
     rows: &[f32],
     table: &[T],
     info: &[u32],
-    mlp: &[f32],
+    mlp: &[M],
     dxg: &mut [f32],
     wpart: &mut [f32],
     lpart: &mut [f32],
@@ -446,7 +447,7 @@ pub fn train_tiles<T: Float>(
     let u = UNIT_POS as usize;
     let n = n as usize;
     let tiles = n.div_ceil(r_tile);
-    let mut act = Shared::<[f32]>::new_slice(act_len);
+    let mut act = Shared::<[M]>::new_slice(act_len);
     let mut small = Shared::<[f32]>::new_slice(r_tile * 7);
     let mut delta = Shared::<[f32]>::new_slice(r_tile * WIDTH * 2);
     let xs_len = r_tile * k;
@@ -457,7 +458,7 @@ pub fn train_tiles<T: Float>(
     let mut deriv = Array::<f32>::new(1usize);
     while t < tiles {
         let first = t * r_tile;
-        forward_tile::<T>(
+        forward_tile::<T, M>(
             rows, table, info, mlp, &mut act, &mut small, first, n, n_parts, r_tile, k, hidden,
             levels, features, stride, row_len, grid_in, grid_out, unpadded,
         );
@@ -515,7 +516,7 @@ pub fn train_tiles<T: Float>(
             let mut g = 0.0f32;
             #[unroll]
             for r in 0..r_tile {
-                g += act[last + r * WIDTH + u] * small[r_tile * 3 + r * 3 + c];
+                g += f32::cast_from(act[last + r * WIDTH + u]) * small[r_tile * 3 + r * 3 + c];
             }
             let at = wp + out_off + u * 3 + c;
             if first_tile {
@@ -524,14 +525,14 @@ pub fn train_tiles<T: Float>(
                 wpart[at] += g;
             }
         }
-        let w0 = mlp[out_off + u * 3];
-        let w1 = mlp[out_off + u * 3 + 1];
-        let w2 = mlp[out_off + u * 3 + 2];
+        let w0 = f32::cast_from(mlp[out_off + u * 3]);
+        let w1 = f32::cast_from(mlp[out_off + u * 3 + 1]);
+        let w2 = f32::cast_from(mlp[out_off + u * 3 + 2]);
         #[unroll]
         for r in 0..r_tile {
             let d = r_tile * 3 + r * 3;
             let s = w0 * small[d] + w1 * small[d + 1] + w2 * small[d + 2];
-            let h = act[last + r * WIDTH + u];
+            let h = f32::cast_from(act[last + r * WIDTH + u]);
             delta[r * WIDTH + u] = select(h > 0.0f32, s, 0.0f32);
         }
         sync_cube();
@@ -549,7 +550,7 @@ pub fn train_tiles<T: Float>(
             let in_base = xs_len + (l - 1) * r_tile * WIDTH;
             let cb = ((back - 1) % 2) * r_tile * WIDTH;
             let nb = (back % 2) * r_tile * WIDTH;
-            weight_gradient(
+            weight_gradient::<M>(
                 &act,
                 &delta,
                 wpart,
@@ -566,7 +567,7 @@ pub fn train_tiles<T: Float>(
                 acc[r] = 0.0f32;
             }
             for j in 0..WIDTH {
-                let w = mlp[w_off + u * WIDTH + j];
+                let w = f32::cast_from(mlp[w_off + u * WIDTH + j]);
                 #[unroll]
                 for r in 0..r_tile {
                     acc[r] += w * delta[cb + r * WIDTH + j];
@@ -574,14 +575,14 @@ pub fn train_tiles<T: Float>(
             }
             #[unroll]
             for r in 0..r_tile {
-                let h = act[in_base + r * WIDTH + u];
+                let h = f32::cast_from(act[in_base + r * WIDTH + u]);
                 delta[nb + r * WIDTH + u] = select(h > 0.0f32, acc[r], 0.0f32);
             }
             sync_cube();
         }
         // The first layer: its weight gradient, and ∂L/∂(grid columns) out.
         let cb = ((hidden - 1) % 2) * r_tile * WIDTH;
-        weight_gradient(&act, &delta, wpart, 0usize, cb, wp, first_tile, k, r_tile);
+        weight_gradient::<M>(&act, &delta, wpart, 0usize, cb, wp, first_tile, k, r_tile);
         let mut col = u;
         while col < grid_dims {
             let kk = grid_out + col;
@@ -590,7 +591,7 @@ pub fn train_tiles<T: Float>(
                 acc[r] = 0.0f32;
             }
             for j in 0..WIDTH {
-                let w = mlp[kk * WIDTH + j];
+                let w = f32::cast_from(mlp[kk * WIDTH + j]);
                 #[unroll]
                 for r in 0..r_tile {
                     acc[r] += w * delta[cb + r * WIDTH + j];
@@ -613,11 +614,11 @@ pub fn train_tiles<T: Float>(
 
 /// Inference over packed query rows: radiance `act(o) · factor` into `out` (`[n][3]`).
 #[cube(launch_unchecked)]
-pub fn infer_tiles<T: Float>(
+pub fn infer_tiles<T: Float, M: Float>(
     rows: &[f32],
     table: &[T],
     info: &[u32],
-    mlp: &[f32],
+    mlp: &[M],
     out: &mut [f32],
     n: u32,
     n_parts: u32,
@@ -638,12 +639,12 @@ pub fn infer_tiles<T: Float>(
     let u = UNIT_POS as usize;
     let n = n as usize;
     let tiles = n.div_ceil(r_tile);
-    let mut act = Shared::<[f32]>::new_slice(act_len);
+    let mut act = Shared::<[M]>::new_slice(act_len);
     let mut small = Shared::<[f32]>::new_slice(r_tile * 7);
     let mut t = CUBE_POS;
     while t < tiles {
         let first = t * r_tile;
-        forward_tile::<T>(
+        forward_tile::<T, M>(
             rows, table, info, mlp, &mut act, &mut small, first, n, n_parts, r_tile, k, hidden,
             levels, features, stride, row_len, grid_in, grid_out, unpadded,
         );
@@ -861,13 +862,14 @@ fn adam(
 /// The MLP's update: the cubes' gradient partials summed (in cube order), Adam, the EMA; unit 0
 /// also writes the step's mean loss to `losses[step_index]`.
 #[cube(launch)]
-pub fn mlp_adam(
+pub fn mlp_adam<S: Float>(
     wpart: &[f32],
     lpart: &[f32],
     w: &mut [f32],
     m: &mut [f32],
     v: &mut [f32],
     ema: &mut [f32],
+    half: &mut [S],
     losses: &mut [f32],
     cubes: u32,
     w_total: u32,
@@ -881,6 +883,7 @@ pub fn mlp_adam(
     inv_bc2: f32,
     alpha: f32,
     #[comptime] with_ema: bool,
+    #[comptime] with_half: bool,
 ) {
     let i = ABSOLUTE_POS;
     if i == 0 {
@@ -904,6 +907,9 @@ pub fn mlp_adam(
         v[i] = mv[1];
         if with_ema {
             ema[i] = alpha * ema[i] + (1.0f32 - alpha) * wn;
+        }
+        if with_half {
+            half[i] = S::cast_from(wn.clamp(-HALF_MAX, HALF_MAX));
         }
     }
 }

@@ -193,6 +193,12 @@ pub struct Layout {
     /// Raw inputs per row (the reflectance factor follows them; in a training row the target
     /// and the weight follow that).
     pub raw_dims: usize,
+    /// The MLP in half precision: its weights read from an f16 copy and its activations (the
+    /// encoded inputs and every hidden layer's outputs) kept in f16 in workgroup memory, every
+    /// product summed in f32; the loss, the backward's deltas, the gradients and Adam's master
+    /// weights stay f32 (tiny-cuda-nn's mixed precision without its f16 backward, which needs
+    /// loss scaling). Needs f16 arithmetic ([`supports_f16`]).
+    pub half_mlp: bool,
 }
 
 impl Layout {
@@ -328,14 +334,15 @@ impl Atomics {
     }
 }
 
-/// Rows per tile for `layout` within the device's workgroup memory, and the floats of the
+/// Rows per tile for `layout` within the device's workgroup memory, and the values of the
 /// activation buffer at that size: the largest of 32, 16, 8, 4, 2, 1 that fits.
 pub fn tile_rows(client: &Client, layout: &Layout) -> Result<(usize, usize), String> {
     let limit = client.properties().hardware.max_shared_memory_size;
+    let act_bytes = if layout.half_mlp { 2 } else { 4 };
     for r in [32usize, 16, 8, 4, 2, 1] {
         let act = r * layout.inputs + layout.hidden * r * WIDTH;
-        // act + small (7 per row) + delta (2 × 64 per row), f32.
-        let bytes = 4 * (act + 7 * r + 2 * r * WIDTH);
+        // act (f16 with a half-precision MLP) + small (7 per row) + delta (2 × 64 per row), f32.
+        let bytes = act_bytes * act + 4 * (7 * r + 2 * r * WIDTH);
         if bytes <= limit {
             return Ok((r, act));
         }
@@ -526,6 +533,10 @@ pub struct State<'a> {
     pub mlp_v: &'a CubeTensor,
     /// The raw EMA.
     pub mlp_ema: &'a CubeTensor,
+    /// The MLP's weights rounded to f16, which the tile pass reads instead of `mlp` where
+    /// present (a layout with [`Layout::half_mlp`]); every update keeps it equal to `mlp`
+    /// rounded.
+    pub mlp_half: Option<&'a CubeTensor>,
 }
 
 /// A run of training steps on one batch: the rows uploaded once, the scratch allocated once,
@@ -650,34 +661,50 @@ impl Trainer {
             .as_ref()
             .map_or(&self.no_table, |t| t.half.unwrap_or(t.w));
         let n = self.n;
+        assert_eq!(
+            state.mlp_half.is_some(),
+            l.half_mlp,
+            "the MLP's f16 copy is given exactly when the layout has a half-precision MLP"
+        );
+        let mlp = state.mlp_half.unwrap_or(state.mlp);
         if n > 0 {
-            self.launch_tiles(table, state.mlp, loss, levels, features, grid_in, grid_out);
+            self.launch_tiles(table, mlp, loss, levels, features, grid_in, grid_out);
         }
         let w_total = l.mlp_len();
-        kernels::mlp_adam::launch(
-            client,
-            elementwise_count(w_total),
-            CubeDim::new_1d(ELEMENTWISE),
-            buffer(&self.wpart),
-            buffer(&self.lpart),
-            buffer(state.mlp),
-            buffer(state.mlp_m),
-            buffer(state.mlp_v),
-            buffer(state.mlp_ema),
-            buffer(&self.losses),
-            if n > 0 { self.cubes as u32 } else { 0 },
-            w_total as u32,
-            index as u32,
-            1.0 / (3.0 * n.max(1) as f32),
-            adam.beta1,
-            adam.beta2,
-            adam.epsilon,
-            adam.l2,
-            adam.step_size,
-            adam.inv_bc2,
-            adam.ema.unwrap_or(0.0),
-            adam.ema.is_some(),
-        );
+        macro_rules! mlp_adam {
+            ($h:ty, $half:expr, $with_half:expr) => {
+                kernels::mlp_adam::launch::<$h>(
+                    client,
+                    elementwise_count(w_total),
+                    CubeDim::new_1d(ELEMENTWISE),
+                    buffer(&self.wpart),
+                    buffer(&self.lpart),
+                    buffer(state.mlp),
+                    buffer(state.mlp_m),
+                    buffer(state.mlp_v),
+                    buffer(state.mlp_ema),
+                    buffer($half),
+                    buffer(&self.losses),
+                    if n > 0 { self.cubes as u32 } else { 0 },
+                    w_total as u32,
+                    index as u32,
+                    1.0 / (3.0 * n.max(1) as f32),
+                    adam.beta1,
+                    adam.beta2,
+                    adam.epsilon,
+                    adam.l2,
+                    adam.step_size,
+                    adam.inv_bc2,
+                    adam.ema.unwrap_or(0.0),
+                    adam.ema.is_some(),
+                    $with_half,
+                )
+            };
+        }
+        match state.mlp_half {
+            Some(h) => mlp_adam!(f16, h, true),
+            None => mlp_adam!(f32, &self.no_table, false),
+        }
         counted();
         let (Some(g), Some(table), Some(grad), Some(touched)) =
             (grid, &state.table, &self.grad, &self.touched)
@@ -745,9 +772,9 @@ impl Trainer {
         // workgroup memory within the sizes `tile_rows` chose (checked by the gradient tests
         // with poisoned buffers); its loops are bounded by `n`, the tile count and the layout.
         macro_rules! tiles {
-            ($t:ty) => {
+            ($t:ty, $m:ty) => {
                 unsafe {
-                    kernels::train_tiles::launch_unchecked::<$t>(
+                    kernels::train_tiles::launch_unchecked::<$t, $m>(
                         &self.rows.client,
                         CubeCount::Static(self.cubes as u32, 1, 1),
                         CubeDim::new_1d(WIDTH as u32),
@@ -781,10 +808,11 @@ impl Trainer {
                 }
             };
         }
-        if table.dtype == DType::F16 {
-            tiles!(f16)
-        } else {
-            tiles!(f32)
+        match (table.dtype == DType::F16, mlp.dtype == DType::F16) {
+            (true, true) => tiles!(f16, f16),
+            (true, false) => tiles!(f16, f32),
+            (false, true) => tiles!(f32, f16),
+            (false, false) => tiles!(f32, f32),
         }
         counted();
     }
@@ -848,6 +876,14 @@ impl Trainer {
             .as_ref()
             .map_or((0, 0), |g| (g.in_offset, g.out_offset));
         let table = state.table.as_ref().map_or(&self.no_table, |t| t.w);
+        if state.mlp_half.is_some() != l.half_mlp {
+            return Err(
+                "the MLP's f16 copy must be given exactly when the layout has a \
+                        half-precision MLP"
+                    .into(),
+            );
+        }
+        let mlp = state.mlp_half.unwrap_or(state.mlp);
         let w_total = l.mlp_len();
         if n == 0 {
             return Ok(Gradients {
@@ -856,7 +892,7 @@ impl Trainer {
                 table: vec![0.0; l.grid.as_ref().map_or(0, |g| g.entries() * g.features)],
             });
         }
-        self.launch_tiles(table, state.mlp, loss, levels, features, grid_in, grid_out);
+        self.launch_tiles(table, mlp, loss, levels, features, grid_in, grid_out);
         if let (Some(g), Some(grad), Some(touched)) = (&l.grid, &self.grad, &self.touched) {
             self.launch_scatter(g, grad, touched, 0);
         }
@@ -920,7 +956,7 @@ fn activation_code(a: Activation) -> u32 {
 
 /// Fused inference: radiance (an `[n, 3]` tensor) of the packed query rows `rows` (`n` rows of
 /// [`Layout::query_row`] floats) with the table `table` (`[entries · F]`, plain weights) and the
-/// MLP weights `mlp`.
+/// MLP weights `mlp` (f16 exactly when the layout has [`Layout::half_mlp`]).
 pub fn infer(
     layout: &Layout,
     table: &CubeTensor,
@@ -930,6 +966,13 @@ pub fn infer(
 ) -> Result<CubeTensor, String> {
     layout.check()?;
     layout.check_rows(n)?;
+    if (mlp.dtype == DType::F16) != layout.half_mlp {
+        return Err(format!(
+            "MLP weights in {:?} for a layout whose MLP is {}",
+            mlp.dtype,
+            if layout.half_mlp { "f16" } else { "f32" }
+        ));
+    }
     let client = rows.client.clone();
     let (r_tile, act_len) = tile_rows(&client, layout)?;
     let out = empty(rows, 3 * n);
@@ -953,9 +996,9 @@ pub fn infer(
     // SAFETY: as for `train_tiles` (rows and outputs below `n`, table indices within the
     // levels, workgroup memory within `tile_rows`'s sizes).
     macro_rules! infer {
-        ($t:ty) => {
+        ($t:ty, $m:ty) => {
             unsafe {
-                kernels::infer_tiles::launch_unchecked::<$t>(
+                kernels::infer_tiles::launch_unchecked::<$t, $m>(
                     &client,
                     CubeCount::Static(cubes as u32, 1, 1),
                     CubeDim::new_1d(WIDTH as u32),
@@ -983,10 +1026,11 @@ pub fn infer(
             }
         };
     }
-    if table.dtype == DType::F16 {
-        infer!(f16)
-    } else {
-        infer!(f32)
+    match (table.dtype == DType::F16, mlp.dtype == DType::F16) {
+        (true, true) => infer!(f16, f16),
+        (true, false) => infer!(f16, f32),
+        (false, true) => infer!(f32, f16),
+        (false, false) => infer!(f32, f32),
     }
     counted();
     Ok(out)

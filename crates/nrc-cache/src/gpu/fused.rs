@@ -3,8 +3,9 @@
 //!
 //! The table is read in f16 where the configuration asks for it and the device has f16
 //! arithmetic (the training forward from an f16 copy of the weights that every update keeps,
-//! as on the CPU); everything else is f32 (bf16 MLP products are the CPU path's; the
-//! description line says which). The state is the CPU fused path's but for the table's
+//! as on the CPU); so is the MLP with `"precision": "f16"` (its weights from an f16 copy that
+//! each call makes and every update keeps, its activations in f16, f32 sums); everything else
+//! is f32 (bf16 MLP products are the CPU path's; the description line says which). The state is the CPU fused path's but for the table's
 //! layout: weights, moments and the EMA gap (see [`crate::cpu::optim`]) as four arrays in
 //! `grid`, `grid_m`, `grid_v`, `grid_ema` instead of per-entry records (each one binding: a
 //! 2^19-entry table's records would exceed WebGPU's 128 MiB per binding), so EMA conversions
@@ -17,7 +18,7 @@ use burn::backend::wgpu::{CubeBackend, CubeTensor, into_contiguous};
 use burn::tensor::DType;
 use nrc_gpu::{AdamStep, Atomics, Layout, Loss, PartKind, State, TableState, Trainer};
 
-use crate::config::OutputActivation;
+use crate::config::{MlpPrecision, OutputActivation};
 use crate::cpu::optim::{StepConstants, decay_pow, ema_rebase_interval};
 use crate::encoding::EncodingKind;
 use crate::encoding::hash_grid::TablePrecision;
@@ -70,12 +71,20 @@ pub fn compiles_spirv(device: &burn::tensor::Device) -> bool {
 /// Whether the fused path can run `layout` on `device` (the table within 32-bit indexing, a
 /// tile within the adapter's workgroup memory): the error names what stands in the way.
 pub fn check(device: &burn::tensor::Device, layout: &ModelLayout) -> Result<(), String> {
-    let l = gpu_layout(layout);
+    let client = client(device);
+    let half = client.as_ref().is_some_and(|c| half_mlp(c, layout));
+    let l = gpu_layout(layout, half);
     l.check()?;
-    if let Some(client) = client(device) {
+    if let Some(client) = client {
         nrc_gpu::tile_rows(&client, &l)?;
     }
     Ok(())
+}
+
+/// Whether the MLP computes in half precision on `client`'s device: `"precision": "f16"` and
+/// f16 arithmetic there (wgpu's `shader-f16`).
+pub fn half_mlp(client: &burn::cubecl::prelude::Client, layout: &ModelLayout) -> bool {
+    layout.mlp_precision == MlpPrecision::F16 && nrc_gpu::supports_f16(client)
 }
 
 /// How the fused path runs on `device` (for the cache's description line): the runtime, the
@@ -84,7 +93,8 @@ pub fn describe(device: &burn::tensor::Device, layout: &ModelLayout) -> String {
     let Some(client) = client(device) else {
         return "not a CubeCL device".into();
     };
-    let l = gpu_layout(layout);
+    let half = half_mlp(&client, layout);
+    let l = gpu_layout(layout, half);
     let tile = match nrc_gpu::tile_rows(&client, &l) {
         Ok((r, _)) => format!("{r} rows a tile"),
         Err(e) => e,
@@ -98,21 +108,31 @@ pub fn describe(device: &burn::tensor::Device, layout: &ModelLayout) -> String {
     };
     format!(
         "fused CubeCL kernels on {}: table read in {} by the training forward and {} by \
-         inference, f32 MLP (bf16 products are the CPU path's), {}, {tile}, {} dispatches a step",
+         inference, {}, {}, {tile}, {} dispatches a step{}",
         client.name(),
         precision(true),
         precision(false),
+        if half {
+            "f16 MLP (f16 weights and activations, f32 sums and backward)"
+        } else {
+            "f32 MLP (bf16 products are the CPU path's)"
+        },
         atomics(&client).name(),
         if l.grid.is_some() {
             nrc_gpu::STEP_DISPATCHES
         } else {
             nrc_gpu::STEP_DISPATCHES - 2
+        },
+        if half {
+            " and 1 a call (the MLP's f16 copy)"
+        } else {
+            ""
         }
     )
 }
 
-/// The model as the kernels read it.
-pub fn gpu_layout(layout: &ModelLayout) -> Layout {
+/// The model as the kernels read it, the MLP in half precision with `half_mlp`.
+pub fn gpu_layout(layout: &ModelLayout, half_mlp: bool) -> Layout {
     let enc = &layout.encoding;
     let mut grid = None;
     let mut parts = Vec::new();
@@ -168,6 +188,7 @@ pub fn gpu_layout(layout: &ModelLayout) -> Layout {
         grid,
         parts,
         raw_dims: RAW_INPUT_DIMS,
+        half_mlp,
     }
 }
 
@@ -206,15 +227,28 @@ fn table(s: &TrainState<CubeBackend>, half: bool) -> TableState<'_> {
     }
 }
 
-/// The state as the kernels take it (the table only with a grid; its f16 copy with `half`).
-fn kernel_state(s: &TrainState<CubeBackend>, grid: bool, half: bool) -> State<'_> {
+/// The state as the kernels take it (the table only with a grid; its f16 copy with `half`;
+/// the MLP's f16 copy `mlp_half`, if any).
+fn kernel_state<'a>(
+    s: &'a TrainState<CubeBackend>,
+    grid: bool,
+    half: bool,
+    mlp_half: Option<&'a CubeTensor>,
+) -> State<'a> {
     State {
         table: grid.then(|| table(s, half)),
         mlp: &s.mlp,
         mlp_m: &s.mlp_m,
         mlp_v: &s.mlp_v,
         mlp_ema: &s.mlp_ema,
+        mlp_half,
     }
+}
+
+/// The MLP's weights rounded to f16 (the copy a half-precision MLP's tile pass reads; the
+/// MLP update keeps it), or `None` for an f32 MLP: one dispatch per call, a few thousand values.
+fn mlp_copy(s: &TrainState<CubeBackend>, half_mlp: bool) -> Option<CubeTensor> {
+    half_mlp.then(|| nrc_gpu::combine_as(&s.mlp, &s.mlp, 1.0, 0.0, 1.0, true))
 }
 
 fn loss(spec: &StepSpec) -> Loss {
@@ -226,7 +260,7 @@ fn loss(spec: &StepSpec) -> Loss {
 
 /// Whether a batch of `n` rows can go through the fused GPU step (32-bit indexing).
 pub fn check_batch(layout: &ModelLayout, n: usize) -> Result<(), String> {
-    gpu_layout(layout).check_rows(n)
+    gpu_layout(layout, false).check_rows(n)
 }
 
 /// Whether `layout`'s table is read in half precision by the training forward
@@ -258,10 +292,11 @@ impl NrcFusedOps for CubeBackend {
         spec: StepSpec,
     ) -> TrainOutcome<Self> {
         let state = owned_state(state);
-        let layout = gpu_layout(&spec.layout);
         let batch = into_contiguous(batch);
-        let n = elements(&batch) / layout.train_row();
         let client = batch.client.clone();
+        let half_mlp = half_mlp(&client, &spec.layout);
+        let layout = gpu_layout(&spec.layout, half_mlp);
+        let n = elements(&batch) / layout.train_row();
         let trainer = Trainer::new(&layout, batch, n, spec.steps as usize, atomics(&client))
             .unwrap_or_else(|e| panic!("the fused GPU step cannot run: {e}"));
         let has_grid = spec.layout.grid_params > 0;
@@ -281,6 +316,7 @@ impl NrcFusedOps for CubeBackend {
         } else {
             state
         };
+        let mlp_half = mlp_copy(&state, half_mlp);
         let mut ema_base = spec.ema_base;
         for k in 1..=spec.steps {
             let done = spec.first_step + k - 1;
@@ -305,7 +341,7 @@ impl NrcFusedOps for CubeBackend {
             };
             trainer.step(
                 k as usize - 1,
-                &kernel_state(&state, has_grid, half),
+                &kernel_state(&state, has_grid, half, mlp_half.as_ref()),
                 &adam,
                 loss(&spec),
             );
@@ -322,10 +358,11 @@ impl NrcFusedOps for CubeBackend {
         batch: CubeTensor,
         spec: StepSpec,
     ) -> GradientOutcome<Self> {
-        let layout = gpu_layout(&spec.layout);
         let batch = into_contiguous(batch);
-        let n = elements(&batch) / layout.train_row();
         let client = batch.client.clone();
+        let half_mlp = half_mlp(&client, &spec.layout);
+        let layout = gpu_layout(&spec.layout, half_mlp);
+        let n = elements(&batch) / layout.train_row();
         let mut trainer = Trainer::new(&layout, batch, n, 1, atomics(&client))
             .unwrap_or_else(|e| panic!("the fused GPU step cannot run: {e}"));
         let state = TrainState {
@@ -333,7 +370,13 @@ impl NrcFusedOps for CubeBackend {
             mlp: into_contiguous(state.mlp),
             ..state
         };
-        let s = kernel_state(&state, spec.layout.grid_params > 0, false);
+        let mlp_half = mlp_copy(&state, half_mlp);
+        let s = kernel_state(
+            &state,
+            spec.layout.grid_params > 0,
+            false,
+            mlp_half.as_ref(),
+        );
         let g = trainer
             .gradients(&s, loss(&spec))
             .unwrap_or_else(|e| panic!("the fused GPU step failed: {e}"));
@@ -373,12 +416,13 @@ impl NrcFusedOps for CubeBackend {
             None => state.grid,
         };
         let mlp = into_contiguous(state.mlp);
+        let half = half_mlp(&mlp.client, &layout);
         let mlp = match average {
             Some(alpha) => {
                 let inv = 1.0 / (1.0 - decay_pow(alpha, step));
-                nrc_gpu::combine(&mlp, &into_contiguous(state.mlp_ema), 0.0, inv, 1.0)
+                nrc_gpu::combine_as(&mlp, &into_contiguous(state.mlp_ema), 0.0, inv, 1.0, half)
             }
-            None => nrc_gpu::combine(&mlp, &mlp, 1.0, 0.0, 1.0),
+            None => nrc_gpu::combine_as(&mlp, &mlp, 1.0, 0.0, 1.0, half),
         };
         InferenceWeights { grid, mlp }
     }
@@ -413,7 +457,7 @@ impl NrcFusedOps for CubeBackend {
         clock: Arc<InferClock>,
     ) -> CubeTensor {
         let _ = clock;
-        let l = gpu_layout(&layout);
+        let l = gpu_layout(&layout, mlp.dtype == DType::F16);
         let queries = into_contiguous(queries);
         let n = elements(&queries) / l.query_row();
         let grid = into_contiguous(grid);
