@@ -52,10 +52,10 @@ pub struct ReferenceArgs {
 
 /// Runs `nrc reference`.
 pub fn run(args: &ReferenceArgs) -> Result<()> {
-    if args.depth.glossy_samples > 0 {
+    if args.depth.glossy_samples > 0 || args.depth.direct_samples > 1 {
         bail!(
-            "--glossy-samples does not apply to references: they are rendered by the plain path \
-             tracer, one estimator per cache key"
+            "--glossy-samples and --direct-samples do not apply to references: they are rendered \
+             by the plain path tracer, one estimator per cache key"
         );
     }
     let scene = args.scene.load()?;

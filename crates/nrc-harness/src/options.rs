@@ -38,6 +38,14 @@ pub struct DepthArgs {
     /// reference` refuses the flag). 0: none. At most 64
     #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u32).range(0..=nrc_render::MAX_GLOSSY_SAMPLES as i64))]
     pub glossy_samples: u32,
+
+    /// Light samples of next-event estimation at each first vertex (stratified together),
+    /// weighed against BSDF sampling by MIS with the counts: unbiased, more shadow rays where
+    /// the first vertex's direct light is the noise (a window seen past its frame and blinds),
+    /// no more paths. Every method takes them where its paths' first vertex runs NEE through the
+    /// shared path step; references never do (`nrc reference` refuses the flag). At most 64
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=nrc_render::MAX_DIRECT_SAMPLES as i64))]
+    pub direct_samples: u32,
 }
 
 impl DepthArgs {
@@ -47,6 +55,7 @@ impl DepthArgs {
             max_depth: self.max_depth,
             rr_depth: self.rr_depth,
             glossy_samples: self.glossy_samples,
+            direct_samples: self.direct_samples,
             ..PathTracer::default()
         }
     }

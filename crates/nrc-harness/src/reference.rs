@@ -52,11 +52,12 @@ pub struct ReferenceRequest<'a> {
 
 impl ReferenceRequest<'_> {
     /// The estimator a reference is rendered with: the request's depths with the plain path
-    /// tracer, whatever variance-reduction options (`glossy_samples`) the methods use, so that
-    /// one key always holds the same estimator's samples.
+    /// tracer, whatever variance-reduction options (`glossy_samples`, `direct_samples`) the
+    /// methods use, so that one key always holds the same estimator's samples.
     pub fn estimator(&self) -> PathTracer {
         PathTracer {
             glossy_samples: 0,
+            direct_samples: 1,
             ..self.tracer
         }
     }

@@ -96,6 +96,25 @@ pub fn next_event(
 ) -> Vec3 {
     let u_light = sampler.next_1d();
     let u_point = sampler.next_2d();
+    next_event_from(
+        scene, si, bsdf, frame, wo, mis, counts, u_light, u_point, stats,
+    )
+}
+
+/// [`next_event`] from given numbers: `u_light` chooses the light, `u_point` the point on it.
+#[inline]
+pub fn next_event_from(
+    scene: &Scene,
+    si: &SurfaceInteraction,
+    bsdf: &Bsdf,
+    frame: &Frame,
+    wo: Vec3,
+    mis: bool,
+    counts: Counts,
+    u_light: f32,
+    u_point: glam::Vec2,
+    stats: &mut PathStats,
+) -> Vec3 {
     let at = LightContext::new(si.p, si.ns);
     let Some(ls) = scene.sample_light(&at, u_light, u_point) else {
         return Vec3::ZERO;

@@ -36,10 +36,18 @@ pub struct PathTracer {
     /// by BSDF samples alone, and each costs one ray, no further path. 0: none (with
     /// [`LightStrategy::Mis`] only).
     pub glossy_samples: u32,
-    /// The [`PathTracer::glossy_samples`] of a vertex stratified together (directions over a
-    /// grid of cells, lobe choices over strata; on by default); off: independent samples, the
-    /// baseline the tests compare with.
-    pub glossy_stratified: bool,
+    /// Light samples of next-event estimation at a walk's first vertex (at least 1; the same
+    /// first vertices as [`PathTracer::glossy_samples`], whatever their roughness), weighed
+    /// against BSDF sampling by MIS with the counts (Veach 1997, §9.2): where the first
+    /// vertex's direct light is most of the noise (a window seen past its frame and blinds),
+    /// more shadow rays and no more paths. Later vertices take the walk's own count (1, or a
+    /// pass's [`crate::transport::PathWalk::with_light_samples`], whichever is larger here).
+    pub direct_samples: u32,
+    /// The extra samples of a vertex stratified together ([`PathTracer::glossy_samples`]:
+    /// directions over a grid of cells, lobe choices over strata; [`PathTracer::direct_samples`]:
+    /// light choices over strata, points over cells; on by default); off: independent samples,
+    /// the baseline the tests compare with.
+    pub stratified: bool,
 }
 
 /// Below this roughness a walk's first vertex takes [`PathTracer::glossy_samples`] (the threshold
@@ -47,6 +55,8 @@ pub struct PathTracer {
 pub const GLOSSY_ROUGHNESS: f32 = 0.3;
 /// `--glossy-samples` at most.
 pub const MAX_GLOSSY_SAMPLES: u32 = 64;
+/// `--direct-samples` at most.
+pub const MAX_DIRECT_SAMPLES: u32 = 64;
 
 impl Default for PathTracer {
     fn default() -> Self {
@@ -55,7 +65,8 @@ impl Default for PathTracer {
             rr_depth: 5,
             strategy: LightStrategy::Mis,
             glossy_samples: 0,
-            glossy_stratified: true,
+            direct_samples: 1,
+            stratified: true,
         }
     }
 }

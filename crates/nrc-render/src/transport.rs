@@ -19,7 +19,7 @@ use glam::{Vec2, Vec3};
 use nrc_scene::bsdf::{Bsdf, BsdfSample};
 use nrc_scene::{LightContext, Ray, Scene, SurfaceInteraction, sampling::Frame, spawn_ray};
 
-use crate::nee::{Counts, emission_mis_weight, environment_mis_weight, next_event};
+use crate::nee::{Counts, emission_mis_weight, environment_mis_weight, next_event_from};
 use crate::query::RadianceQuery;
 use crate::sampler::{MAX_STRATA, PixelSampler, stratified_pairs};
 use crate::tracer::{GLOSSY_ROUGHNESS, LightStrategy, PathStats, PathTracer};
@@ -111,6 +111,10 @@ pub struct PathWalk {
     segments: u32,
     /// Light samples NEE takes at each vertex (their MIS against BSDF sampling counts them).
     light_samples: u32,
+    /// Light samples NEE took at the latest vertex: `light_samples`, or more at the walk's first
+    /// vertex ([`PathTracer::direct_samples`]; set by [`PathWalk::next_event`], read by the
+    /// next [`PathWalk::arrive`]).
+    nee_samples: u32,
     /// BSDF samples of the direct light at the latest vertex: 1, or more where
     /// [`PathTracer::glossy_samples`] applied there (set by [`PathWalk::next_event`], read by
     /// the next [`PathWalk::arrive`]).
@@ -135,6 +139,7 @@ impl PathWalk {
             prev_at: LightContext::new(Vec3::ZERO, Vec3::ZERO),
             segments: 1,
             light_samples: 1,
+            nee_samples: 1,
             bsdf_samples: 1,
             limit: tracer.segment_limit(),
             zero_throughput_ends: true,
@@ -217,8 +222,10 @@ impl PathWalk {
                 self.prev_delta || !self.use_nee,
             )
         };
-        // The new vertex's own direct light starts at one BSDF sample.
+        // The new vertex's own direct light starts at one BSDF sample and the walk's light
+        // samples.
         self.bsdf_samples = 1;
+        self.nee_samples = self.light_samples;
         Arrival::Hit(Hit {
             vertex: Vertex::new(scene, &si, si.wo),
             le,
@@ -234,6 +241,7 @@ impl PathWalk {
     pub fn with_light_samples(self, n: u32) -> Self {
         Self {
             light_samples: n.max(1),
+            nee_samples: n.max(1),
             ..self
         }
     }
@@ -244,8 +252,10 @@ impl PathWalk {
     }
 
     /// Next-event estimation at `v` (zero at delta vertices or with NEE off): the direct light
-    /// leaving `v` toward its `wo`, not yet multiplied by the throughput, the mean of the walk's
-    /// light samples. Draws three numbers per light sample always.
+    /// leaving `v` toward its `wo`, not yet multiplied by the throughput, the mean of the
+    /// vertex's light samples (the walk's, or [`PathTracer::direct_samples`] at its first
+    /// vertex, stratified together there). Draws three numbers per light sample (two for a
+    /// stratified set) whether NEE runs or not.
     pub fn next_event(
         &mut self,
         scene: &Scene,
@@ -253,41 +263,58 @@ impl PathWalk {
         sampler: &mut PixelSampler,
         stats: &mut PathStats,
     ) -> Vec3 {
-        let n = self.light_samples;
+        let first = self.segments == 1;
+        let n = if first {
+            self.light_samples.max(self.tracer.direct_samples)
+        } else {
+            self.light_samples
+        };
+        // The first vertex's own count stratified together; a pass's count elsewhere (and a
+        // set larger than the strata allow) independent, as before.
+        let stratify = first && n > self.light_samples && self.tracer.stratified && n <= MAX_STRATA;
+        self.nee_samples = n;
         let extra = self.glossy_samples_at(v);
         self.bsdf_samples = 1 + extra;
-        if self.use_nee && !v.bsdf.is_delta() {
-            let mis = self.tracer.strategy == LightStrategy::Mis;
-            let counts = self.counts();
-            let one = |sampler: &mut PixelSampler, stats: &mut PathStats| {
-                next_event(
-                    scene, &v.si, &v.bsdf, &v.frame, v.wo, mis, counts, sampler, stats,
+        let nee_runs = self.use_nee && !v.bsdf.is_delta();
+        let mis = self.tracer.strategy == LightStrategy::Mis;
+        let counts = self.counts();
+        let one = |u_light: f32, u_point: Vec2, stats: &mut PathStats| {
+            if nee_runs {
+                next_event_from(
+                    scene, &v.si, &v.bsdf, &v.frame, v.wo, mis, counts, u_light, u_point, stats,
                 )
-            };
-            let nee = if n == 1 {
-                // The path tracer's case: no averaging on its hot path.
-                one(sampler, stats)
             } else {
-                (0..n).map(|_| one(sampler, stats)).sum::<Vec3>() / n as f32
-            };
-            if extra == 0 {
-                return nee;
+                Vec3::ZERO
             }
-            nee + self.glossy_direct(scene, v, extra, sampler, stats)
+        };
+        let nee = if stratify {
+            stratified_pairs(n, sampler)
+                .map(|(u_light, u_point)| one(u_light, u_point, stats))
+                .sum::<Vec3>()
+                / n as f32
+        } else if n == 1 {
+            // The path tracer's case: no averaging on its hot path.
+            let u_light = sampler.next_1d();
+            one(u_light, sampler.next_2d(), stats)
         } else {
-            // Keep the random stream aligned whatever the strategy.
-            for _ in 0..n {
-                sampler.next_1d();
-                sampler.next_2d();
-            }
-            Vec3::ZERO
+            (0..n)
+                .map(|_| {
+                    let u_light = sampler.next_1d();
+                    one(u_light, sampler.next_2d(), stats)
+                })
+                .sum::<Vec3>()
+                / n as f32
+        };
+        if !nee_runs || extra == 0 {
+            return nee;
         }
+        nee + self.glossy_direct(scene, v, extra, sampler, stats)
     }
 
     /// The samples of each strategy at the latest vertex, for MIS.
     fn counts(&self) -> Counts {
         Counts {
-            light: self.light_samples as f32,
+            light: self.nee_samples as f32,
             bsdf: self.bsdf_samples as f32,
         }
     }
@@ -305,7 +332,7 @@ impl PathWalk {
     }
 
     /// The `extra` BSDF samples of the direct light at `v` ([`PathTracer::glossy_samples`]),
-    /// summed. Stratified (unless [`PathTracer::glossy_stratified`] is off): the directions'
+    /// summed. Stratified (unless [`PathTracer::stratified`] is off): the directions'
     /// numbers one in each of `extra` distinct cells of a `⌈√extra⌉²` grid, the lobe choices one
     /// in each of `extra` strata in random order ([`stratified_pairs`]). A sample at a random
     /// index has uniform numbers, so the sum is the independent samples' in expectation; where the lobe sees an edge (the window's bars behind a glossy table)
@@ -321,7 +348,7 @@ impl PathWalk {
     ) -> Vec3 {
         // Beyond MAX_STRATA a stratified set would be cut short while the MIS counts take
         // them all: independent samples there (the CLI allows 64).
-        if !self.tracer.glossy_stratified || extra > MAX_STRATA {
+        if !self.tracer.stratified || extra > MAX_STRATA {
             return (0..extra)
                 .map(|_| {
                     let u_lobe = sampler.next_1d();

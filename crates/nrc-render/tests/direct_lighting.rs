@@ -259,7 +259,7 @@ fn stratified_glossy_samples_agree_and_lower_the_variance_of_independent_ones() 
     let tracer = |stratified| PathTracer {
         max_depth: 2,
         glossy_samples: 16,
-        glossy_stratified: stratified,
+        stratified,
         ..PathTracer::default()
     };
     let n = 64;
@@ -303,10 +303,75 @@ fn stratified_glossy_samples_agree_and_lower_the_variance_of_independent_ones() 
     );
 }
 
+/// `--direct-samples`: more light samples at the first vertex, stratified together and weighed
+/// against the path's BSDF sample with the counts, estimate the same image as one light sample,
+/// with less variance at the same number of paths; stratified, less than independent ones; the
+/// path's BSDF sample weighed against a single light sample (the counts forgotten) is biased, and
+/// the test sees it.
+#[test]
+fn direct_samples_agree_with_mis_and_lower_the_variance() {
+    // Glossy enough that BSDF sampling finds the light often (the forgotten count matters
+    // there), with a box casting shadows on the floor.
+    let scene = scene_of(0.15, 0.25);
+    let tracer = |direct_samples, stratified| PathTracer {
+        max_depth: 2,
+        direct_samples,
+        stratified,
+        ..PathTracer::default()
+    };
+    let n = 64;
+    let reference = render_scene(&scene, &tracer(1, true), W, H, 1024, 31);
+    let plain = render_scene(&scene, &tracer(1, true), W, H, n, 33);
+    let direct = render_scene(&scene, &tracer(8, true), W, H, n, 33);
+    let indep = render_scene(&scene, &tracer(8, false), W, H, n, 33);
+    assert!(
+        direct.stats.rays.shadow_rays > 4 * plain.stats.rays.shadow_rays,
+        "{} shadow rays with 8 direct samples, {} with 1",
+        direct.stats.rays.shadow_rays,
+        plain.stats.rays.shadow_rays
+    );
+    for (name, r) in [("stratified", &direct), ("independent", &indep)] {
+        let z = image_mean_z(&reference, 1024, r, n);
+        eprintln!("8 direct samples, {name}: image-mean z {z:.2?}");
+        assert!(z.iter().all(|z| z.abs() < 4.0), "{name}: image means differ, z = {z:?}");
+        let (worst, z_max) = worst_block(&reference, 1024, r, n);
+        eprintln!("8 direct samples, {name}: worst block {worst:.2} (bound {z_max:.2})");
+        assert!(worst <= z_max, "{name}: a block is {worst:.2} standard errors off");
+    }
+    // The walk by hand agrees; with the count forgotten it does not.
+    let m = 2048;
+    let (by_hand, z_max) = worst_block(
+        &reference,
+        1024,
+        &walk_by_hand(&scene, &tracer(8, true), false, m, 37),
+        m,
+    );
+    eprintln!("the walk by hand: worst block {by_hand:.2}");
+    assert!(by_hand <= z_max, "by hand: a block is {by_hand:.2} standard errors off");
+    let forgot = worst_block(
+        &reference,
+        1024,
+        &walk_by_hand(&scene, &tracer(8, true), true, m, 37),
+        m,
+    )
+    .0;
+    eprintln!("the BSDF sample weighed against one light sample: worst block {forgot:.2}");
+    assert!(forgot > z_max, "the wrong weight passed: worst block {forgot:.2}");
+    // Less variance at the same paths; stratified less than independent.
+    let var = |r: &RenderOutput| -> f64 { channels(r.variance.as_ref().unwrap()).iter().sum() };
+    let (vp, vd, vi) = (var(&plain), var(&direct), var(&indep));
+    eprintln!(
+        "summed pixel variance: {vp:.3} with 1 light sample, {vd:.3} with 8 stratified, {vi:.3} with 8 independent"
+    );
+    assert!(vd < 0.5 * vp, "variance {vd:.3} with 8 against {vp:.3} with 1");
+    assert!(vd < vi, "stratified {vd:.3} against independent {vi:.3}");
+}
+
 /// Depth-2 renders through `PathWalk` driven by hand: the emission seen, NEE with the tracer's
-/// glossy samples, and the path's own BSDF sample. With `forget`, that last sample is drawn by a
-/// second walk that took no glossy samples, so its emission is weighed as the only BSDF sample
-/// (the bug the counts guard against). `n` samples a pixel, with the per-sample variance.
+/// glossy and direct samples, and the path's own BSDF sample. With `forget`, that last sample is
+/// drawn by a second walk that took neither, so its emission is weighed as the only BSDF sample
+/// against a single light sample (the bug the counts guard against). `n` samples a pixel, with
+/// the per-sample variance.
 fn walk_by_hand(
     scene: &nrc_scene::Scene,
     tracer: &PathTracer,
@@ -318,6 +383,7 @@ fn walk_by_hand(
     use nrc_render::transport::{Arrival, PathWalk};
     let plain = PathTracer {
         glossy_samples: 0,
+        direct_samples: 1,
         ..*tracer
     };
     let mut stats = nrc_render::PathStats::default();
