@@ -145,6 +145,12 @@ pub struct CompareArgs {
     #[arg(long)]
     pub exclude_emitters: bool,
 
+    /// Also write, per method, each pixel's MSE, bias² and variance over the runs
+    /// (METHOD-errors.exr) and its pass's state after its last frame (METHOD-view-NAME.exr:
+    /// reservoir statistics, probes); needs --runs 2 or more.
+    #[arg(long)]
+    pub diagnostics: bool,
+
     #[command(flatten)]
     pub emitters: nrc_harness::options::EmitterArgs,
 
@@ -212,6 +218,7 @@ pub(crate) fn validate(args: &CompareArgs) -> Result<Budget> {
         args.height
     );
     ensure!(args.runs >= 1, "--runs must be at least 1");
+    nrc_harness::compare::check_diagnostics(args.diagnostics, args.runs)?;
     ensure!(
         args.exposure.is_finite(),
         "--exposure must be a finite number"
@@ -390,6 +397,7 @@ pub(crate) fn comparison(
         seed: args.seed,
         exposure: args.exposure,
         exclude_emitters: args.exclude_emitters,
+        diagnostics: args.diagnostics,
         emitter_samples: args.emitters.emitter_samples,
         tracer: args.depth.tracer(),
         cache: cache_settings,

@@ -621,6 +621,81 @@ fn excluding_emitters_removes_their_error() {
     assert!(md.contains("see an emitter"), "{md}");
 }
 
+/// `--diagnostics`: each method's per-pixel MSE, bias² and variance over its runs (their image
+/// means are the report's figures) and a resampling pass's reservoir statistics after its last
+/// frame; a single run, which has no variance, is a clear error.
+#[test]
+fn diagnostics_write_each_pixels_bias_and_variance_and_the_reservoirs() {
+    let dir = tempfile::tempdir().unwrap();
+    let cache = dir.path().join("cache");
+    let out = dir.path().join("diag");
+    let scene = cornell();
+    let args = |runs: &'static str| {
+        vec![
+            "compare".to_string(),
+            "--scene".into(),
+            scene.clone(),
+            "--methods".into(),
+            "pt-1spp,restir-di".into(),
+            "--equal-spp".into(),
+            "1".into(),
+            "--width".into(),
+            "32".into(),
+            "--height".into(),
+            "32".into(),
+            "--runs".into(),
+            runs.into(),
+            "--reference-spp".into(),
+            "64".into(),
+            "--no-flip".into(),
+            "--diagnostics".into(),
+            "--cache-dir".into(),
+            cache.to_str().unwrap().into(),
+            "--out".into(),
+            out.to_str().unwrap().into(),
+        ]
+    };
+    fn argv(v: &[String]) -> Vec<&str> {
+        v.iter().map(String::as_str).collect()
+    }
+    assert_clean_error(&nrc(&argv(&args("1"))), &["--diagnostics", "--runs"]);
+    assert_ok(&nrc(&argv(&args("4"))));
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    for (k, method) in ["pt-1spp", "restir-di"].iter().enumerate() {
+        let errors = Image::read_exr(&out.join(format!("{method}-errors.exr"))).unwrap();
+        let n = errors.data.len() as f64;
+        let mean = |c: usize| errors.data.iter().map(|p| p[c] as f64).sum::<f64>() / n;
+        let bv = &report["rows"][k]["bias_variance"];
+        let (bias, var) = (
+            bv["bias_sq"].as_f64().unwrap(),
+            bv["variance"].as_f64().unwrap(),
+        );
+        assert!(var > 0.0, "{method}: no variance");
+        for (c, want) in [(0, bias + var), (1, bias), (2, var)] {
+            assert!(
+                (mean(c) - want).abs() <= 1e-4 * var,
+                "{method}: channel {c} averages {} where the report says {want}",
+                mean(c)
+            );
+        }
+    }
+    assert!(
+        !out.join("pt-1spp-view-reservoir-m.exr").exists(),
+        "the path tracer has no reservoirs"
+    );
+    // ReSTIR DI's final reservoirs merge its neighbours' and the previous frame's: M > 1 on
+    // average, and the contributions of lit pixels are positive and finite.
+    let m = Image::read_exr(&out.join("restir-di-view-reservoir-m.exr")).unwrap();
+    let mean_m = m.data.iter().map(|p| p.x as f64).sum::<f64>() / m.data.len() as f64;
+    assert!(mean_m > 1.0, "mean M {mean_m}");
+    let w = Image::read_exr(&out.join("restir-di-view-reservoir-contribution.exr")).unwrap();
+    assert!(w.data.iter().all(|p| p.x.is_finite() && p.x >= 0.0));
+    assert!(w.data.iter().filter(|p| p.x > 0.0).count() > w.data.len() / 2);
+    let md = std::fs::read_to_string(out.join("report.md")).unwrap();
+    assert!(md.contains("Diagnostics: METHOD-errors.exr"), "{md}");
+}
+
 /// A run file names the comparison; a list flag given on the command line replaces the file's
 /// list (it does not add to it), and `--run=FILE` reads the file as `--run FILE` does.
 #[test]

@@ -130,6 +130,48 @@ impl BiasVarianceAccumulator {
         self.weighted(reference, reference_variance, |_| 1.0)
     }
 
+    /// The decomposition per pixel (the channels averaged): red the estimated MSE of one
+    /// render, `bias² + variance`; green `bias²` (corrected as [`BiasVarianceAccumulator::finish`]
+    /// corrects it, so it can be slightly negative where a pixel is unbiased); blue the
+    /// variance of one render. The image mean of each channel is `finish`'s figure: where the
+    /// error of an estimator is, and whether it is its bias or its noise.
+    pub fn per_pixel(
+        &self,
+        reference: &ImageView<'_>,
+        reference_variance: Option<&ImageView<'_>>,
+    ) -> Result<RgbImage> {
+        if let Some(rv) = reference_variance {
+            check_pair(rv, reference)?;
+        }
+        let denom = self.variance_denominator()?;
+        check_pair(&self.mean_image().view("mean of renders"), reference)?;
+        let r = self.count as f64;
+        let pixels = self
+            .mean
+            .iter()
+            .zip(&self.m2)
+            .enumerate()
+            .map(|(i, (m, m2))| {
+                let y = reference.pixels()[i];
+                let (mut bias_sq, mut var) = (0.0f64, 0.0f64);
+                for c in 0..3 {
+                    let d = m[c] - y[c] as f64;
+                    let v = m2[c] / denom;
+                    let rv = reference_variance.map_or(0.0, |rv| rv.pixels()[i][c] as f64);
+                    bias_sq += d * d - v / r - rv;
+                    var += v;
+                }
+                let (b, v) = (bias_sq / 3.0, var / 3.0);
+                [(b + v) as f32, b as f32, v as f32]
+            })
+            .collect();
+        Ok(RgbImage {
+            width: self.width,
+            height: self.height,
+            pixels,
+        })
+    }
+
     /// The same in relMSE's units: every pixel and channel's terms divided by `y² + epsilon`
     /// (`y` the reference), so that `bias_sq` is the relMSE a render would have without its
     /// variance: the part of relMSE the method's bias makes, which more samples do not remove.

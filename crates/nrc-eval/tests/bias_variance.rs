@@ -218,3 +218,66 @@ fn relative_bias_is_the_bias_in_rel_mse_units_without_the_variance() {
         .unwrap_err();
     assert!(err.to_string().contains("epsilon"), "{err}");
 }
+
+/// The per-pixel decomposition: its image means are the image-averaged figures, and a pixel
+/// given a bias carries it in its green channel while the unbiased ones stay near zero; a
+/// decomposition that forgot the variance's correction (the raw `(x̄ − y)²`) would put
+/// `σ²/R` into every pixel's bias, which the unbiased pixels' mean shows (the control).
+#[test]
+fn per_pixel_decomposition_averages_to_the_image_figures_and_finds_a_biased_pixel() {
+    let y = reference();
+    let mut rs = renders(&y, 0.0, 0.2, 91);
+    // Pixel 100 biased by 0.5 in every render.
+    for r in &mut rs {
+        r[100] = r[100].map(|v| v + 0.5);
+    }
+    let mut acc = BiasVarianceAccumulator::new(W, H);
+    for r in &rs {
+        acc.add(&ImageView::new("render", W, H, r).unwrap())
+            .unwrap();
+    }
+    let reference = ImageView::new("reference", W, H, &y).unwrap();
+    let whole = acc.finish(&reference, None).unwrap();
+    let px = acc.per_pixel(&reference, None).unwrap();
+    let n = (W * H) as f64;
+    let mean = |c: usize| px.pixels.iter().map(|p| p[c] as f64).sum::<f64>() / n;
+    assert!(
+        (mean(1) - whole.bias_sq).abs() < 1e-6,
+        "{} vs {}",
+        mean(1),
+        whole.bias_sq
+    );
+    assert!(
+        (mean(2) - whole.variance).abs() < 1e-6,
+        "{} vs {}",
+        mean(2),
+        whole.variance
+    );
+    assert!((mean(0) - whole.bias_sq - whole.variance).abs() < 1e-6);
+    // The biased pixel: 0.25 of bias², within 5 standard errors of its mean's noise.
+    let (sigma, r) = (0.2f64, R as f64);
+    let se = (2.0 * 0.5 * sigma / r.sqrt() + sigma * sigma / r) * 5.0;
+    let b = px.pixels[100][1] as f64;
+    assert!((b - 0.25).abs() < se, "the biased pixel's bias² {b}");
+    // The others: mean bias² near zero (its standard error over the pixels, ×5), where the
+    // uncorrected (x̄ − y)² would be σ²/R = 6.25e-4.
+    let others: f64 = px
+        .pixels
+        .iter()
+        .enumerate()
+        .filter(|(i, _)| *i != 100)
+        .map(|(_, p)| p[1] as f64)
+        .sum::<f64>()
+        / (n - 1.0);
+    let v = sigma * sigma / r;
+    let bound = 5.0 * v * (2.0f64 / (3.0 * (n - 1.0))).sqrt();
+    assert!(
+        others.abs() < bound,
+        "unbiased pixels' mean bias² {others:e} (bound {bound:e})"
+    );
+    let raw = others + v;
+    assert!(
+        raw.abs() > bound,
+        "the control: the raw estimate {raw:e} would pass"
+    );
+}

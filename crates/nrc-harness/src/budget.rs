@@ -20,7 +20,7 @@ use glam::{DVec3, Vec3};
 use nrc_scene::{Camera, Image, Scene};
 
 use nrc_render::pass_seed;
-use nrc_render::passes::PhaseTimes;
+use nrc_render::passes::{PassView, PhaseTimes};
 
 use crate::error::HarnessError;
 
@@ -94,6 +94,13 @@ pub trait Method: Send {
         height: u32,
         seed: u64,
     ) -> Estimate;
+
+    /// The images of its pass's state after its last frame (a resampling pass's reservoir
+    /// statistics, probes, VPLs: [`nrc_render::passes::RenderPass::debug_views`]), for
+    /// `nrc compare --diagnostics`. Default: none.
+    fn debug_views(&self) -> Vec<PassView> {
+        Vec::new()
+    }
 }
 
 /// How much a frame may spend.

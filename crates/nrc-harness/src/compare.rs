@@ -63,6 +63,10 @@ pub struct Comparison {
     pub exposure: f32,
     /// Leave the pixels that see an emitter (and their neighbours) out of the errors.
     pub exclude_emitters: bool,
+    /// Write each method's per-pixel error decomposition (`METHOD-errors.exr`) and its pass's
+    /// state after its last frame (`METHOD-view-NAME.exr`: reservoir statistics, probes);
+    /// needs 2 runs or more.
+    pub diagnostics: bool,
     /// Extra camera rays at the outline of emitters, every method alike
     /// ([`nrc_render::emitters::supersample`]; 0: none).
     pub emitter_samples: u32,
@@ -334,6 +338,7 @@ pub fn compare_runs(
         stored.is_none() || (c.sweep_steps.is_none() && c.converge.is_none()),
         "a comparison from stored runs has no sweep and no frames-to-error measurement"
     );
+    check_diagnostics(c.diagnostics, c.runs)?;
     let (w, h) = (c.width, c.height);
     let budget = c.budget;
     let Reference {
@@ -465,6 +470,16 @@ pub fn compare_runs(
                 first = Some((frame, m));
             }
             progress(Progress::Frame);
+        }
+        if c.diagnostics {
+            write_diagnostics(
+                c,
+                &name,
+                &acc,
+                &ref_view,
+                ref_var_view.as_ref(),
+                method.as_deref(),
+            )?;
         }
         let (first_frame, first_metrics) = first.expect("at least one run");
         let n = c.runs as f64;
@@ -618,6 +633,17 @@ pub fn compare_runs(
             report.time_to_error.push(table);
         }
     }
+    if c.diagnostics {
+        report.notes.push(
+            "Diagnostics: METHOD-errors.exr holds each pixel's error over the runs, the channels \
+             averaged: red the MSE of one run (bias² + variance), green bias² (corrected for the \
+             runs' and the reference's noise, so slightly negative where unbiased), blue the \
+             variance of one run; METHOD-view-NAME.exr the pass's state after its last frame \
+             (reservoir-m: the final reservoirs' mean M; reservoir-contribution: their mean W·p̂, \
+             where fireflies start; probes; vpls)."
+                .into(),
+        );
+    }
     let invalid: u64 = runs.iter().map(|r| r.invalid_samples).sum();
     report.notes.push(format!(
         "Budget: {mode}; a pass is one estimate at the method's stated spp. Errors are means over {} run(s) with \
@@ -697,6 +723,40 @@ fn reference_error_note(
         nrc_eval::report::fmt_num(rel / n),
         nrc_eval::report::fmt_num(mape / n)
     )
+}
+
+/// Whether `--diagnostics` can be written with `runs` runs (a pixel's bias and variance come
+/// from its runs: two at least).
+pub fn check_diagnostics(diagnostics: bool, runs: u32) -> Result<()> {
+    anyhow::ensure!(
+        !diagnostics || runs >= 2,
+        "--diagnostics needs --runs 2 or more (a pixel's bias and variance come from its runs)"
+    );
+    Ok(())
+}
+
+/// `--diagnostics`: the per-pixel bias and variance of `name`'s runs and its pass's views.
+fn write_diagnostics(
+    c: &Comparison,
+    name: &str,
+    runs: &BiasVarianceAccumulator,
+    reference: &ImageView<'_>,
+    reference_variance: Option<&ImageView<'_>>,
+    method: Option<&dyn Method>,
+) -> Result<()> {
+    let px = runs.per_pixel(reference, reference_variance)?;
+    let data = px
+        .pixels
+        .iter()
+        .map(|p| glam::Vec3::from_array(*p))
+        .collect();
+    let image = Image::from_data(px.width, px.height, data).context("the error image's size")?;
+    image.write_exr(&c.out.join(format!("{name}-errors.exr")))?;
+    for view in method.map(|m| m.debug_views()).unwrap_or_default() {
+        view.image
+            .write_exr(&c.out.join(format!("{name}-view-{}.exr", view.name)))?;
+    }
+    Ok(())
 }
 
 /// The rendered frame (EXR and PNG preview) and its false-colour error maps.

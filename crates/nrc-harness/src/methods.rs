@@ -446,6 +446,10 @@ impl Method for PassMethod {
         Ok(())
     }
 
+    fn debug_views(&self) -> Vec<nrc_render::passes::PassView> {
+        self.pass.debug_views()
+    }
+
     fn render_estimate(
         &mut self,
         scene: &Scene,
@@ -670,6 +674,13 @@ impl Method for CacheMethod {
             self.trainer(scene, camera, width, height)?;
         }
         Ok(())
+    }
+
+    fn debug_views(&self) -> Vec<nrc_render::passes::PassView> {
+        self.trainer
+            .as_ref()
+            .map(|t| t.pass_views())
+            .unwrap_or_default()
     }
 
     fn render_estimate(

@@ -30,6 +30,7 @@ fn a_sequence_reports_every_frame_of_every_method() {
         seed: 1,
         exposure: 0.0,
         exclude_emitters: false,
+        diagnostics: false,
         emitter_samples: 0,
         tracer: PathTracer::default(),
         cache: CacheMethodSettings::new(CacheConfig::hash_grid_preset(), CacheDevice::Cpu),

@@ -333,10 +333,16 @@ fn direct_samples_agree_with_mis_and_lower_the_variance() {
     for (name, r) in [("stratified", &direct), ("independent", &indep)] {
         let z = image_mean_z(&reference, 1024, r, n);
         eprintln!("8 direct samples, {name}: image-mean z {z:.2?}");
-        assert!(z.iter().all(|z| z.abs() < 4.0), "{name}: image means differ, z = {z:?}");
+        assert!(
+            z.iter().all(|z| z.abs() < 4.0),
+            "{name}: image means differ, z = {z:?}"
+        );
         let (worst, z_max) = worst_block(&reference, 1024, r, n);
         eprintln!("8 direct samples, {name}: worst block {worst:.2} (bound {z_max:.2})");
-        assert!(worst <= z_max, "{name}: a block is {worst:.2} standard errors off");
+        assert!(
+            worst <= z_max,
+            "{name}: a block is {worst:.2} standard errors off"
+        );
     }
     // The walk by hand agrees; with the count forgotten it does not.
     let m = 2048;
@@ -347,7 +353,10 @@ fn direct_samples_agree_with_mis_and_lower_the_variance() {
         m,
     );
     eprintln!("the walk by hand: worst block {by_hand:.2}");
-    assert!(by_hand <= z_max, "by hand: a block is {by_hand:.2} standard errors off");
+    assert!(
+        by_hand <= z_max,
+        "by hand: a block is {by_hand:.2} standard errors off"
+    );
     let forgot = worst_block(
         &reference,
         1024,
@@ -356,14 +365,20 @@ fn direct_samples_agree_with_mis_and_lower_the_variance() {
     )
     .0;
     eprintln!("the BSDF sample weighed against one light sample: worst block {forgot:.2}");
-    assert!(forgot > z_max, "the wrong weight passed: worst block {forgot:.2}");
+    assert!(
+        forgot > z_max,
+        "the wrong weight passed: worst block {forgot:.2}"
+    );
     // Less variance at the same paths; stratified less than independent.
     let var = |r: &RenderOutput| -> f64 { channels(r.variance.as_ref().unwrap()).iter().sum() };
     let (vp, vd, vi) = (var(&plain), var(&direct), var(&indep));
     eprintln!(
         "summed pixel variance: {vp:.3} with 1 light sample, {vd:.3} with 8 stratified, {vi:.3} with 8 independent"
     );
-    assert!(vd < 0.5 * vp, "variance {vd:.3} with 8 against {vp:.3} with 1");
+    assert!(
+        vd < 0.5 * vp,
+        "variance {vd:.3} with 8 against {vp:.3} with 1"
+    );
     assert!(vd < vi, "stratified {vd:.3} against independent {vi:.3}");
 }
 

@@ -965,7 +965,7 @@ impl RenderPass for DdgiRestirPass {
         let Some(h) = &self.history else {
             return Vec::new();
         };
-        let mut views = vec![h.m_view()];
+        let mut views = h.views();
         if let Some(v) = &self.volume {
             views.push(super::ddgi_terminated::probe_view(v, &h.g.camera, h.g.width, h.g.height));
         }

@@ -385,7 +385,7 @@ impl RenderPass for RestirDiPass {
     }
 
     fn debug_views(&self) -> Vec<super::frame::PassView> {
-        self.history.iter().map(|h| h.m_view()).collect()
+        self.history.iter().flat_map(|h| h.views()).collect()
     }
 
     fn trace(&mut self, input: &FrameInput) -> Vec<RadianceQuery> {

@@ -650,7 +650,7 @@ impl RenderPass for RestirGiPass {
     }
 
     fn debug_views(&self) -> Vec<super::frame::PassView> {
-        self.history.iter().map(|h| h.screen.m_view()).collect()
+        self.history.iter().flat_map(|h| h.screen.views()).collect()
     }
 
     fn trace(&mut self, input: &FrameInput) -> Vec<RadianceQuery> {

@@ -213,17 +213,38 @@ pub struct History<S> {
 }
 
 impl<S> History<S> {
-    /// The viewer's view of the reservoirs: each pixel's mean `M` (the candidates its final
-    /// reservoirs stand for, after the M cap), in red.
-    pub fn m_view(&self) -> super::frame::PassView {
+    /// The reservoirs' statistics, per pixel over its samples, in red: `reservoir-m`, the mean
+    /// `M` (the candidates the final reservoirs stand for, after the M cap); and
+    /// `reservoir-contribution`, the mean `W · p̂(y)` of the selected samples (0 for an empty
+    /// reservoir): the luminance the resampled sample carries into the pixel before its
+    /// visibility and shading, large where a pass's fireflies start. For the viewer
+    /// (`nrc view --view`) and `nrc compare --diagnostics`.
+    pub fn views(&self) -> Vec<super::frame::PassView> {
+        vec![
+            self.view("reservoir-m", |r| r.m),
+            self.view("reservoir-contribution", |r| {
+                if r.sample.is_some() {
+                    r.w * r.target
+                } else {
+                    0.0
+                }
+            }),
+        ]
+    }
+
+    fn view(
+        &self,
+        name: &'static str,
+        value: impl Fn(&Reservoir<S>) -> f32,
+    ) -> super::frame::PassView {
         let spp = self.g.spp.max(1) as usize;
         let data = self
             .res
             .chunks(spp)
-            .map(|r| Vec3::new(r.iter().map(|r| r.m).sum::<f32>() / spp as f32, 0.0, 0.0))
+            .map(|r| Vec3::new(r.iter().map(&value).sum::<f32>() / spp as f32, 0.0, 0.0))
             .collect();
         super::frame::PassView {
-            name: "reservoir-m",
+            name,
             scalar: true,
             image: nrc_scene::Image::from_data(self.g.width as usize, self.g.height as usize, data)
                 .unwrap_or_else(|| {
