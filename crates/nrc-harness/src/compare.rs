@@ -636,7 +636,9 @@ pub fn compare_runs(
     if c.diagnostics {
         report.notes.push(
             "Diagnostics: METHOD-errors.exr holds each pixel's error over the runs, the channels \
-             averaged: red the MSE of one run (bias² + variance), green bias² (corrected for the \
+             averaged: red the expected squared error of one run against the true image (bias² + \
+             variance: the reference's own noise removed, so its mean is a little below the \
+             table's MSE), green bias² (corrected for the \
              runs' and the reference's noise, so slightly negative where unbiased), blue the \
              variance of one run; METHOD-view-NAME.exr the pass's state after its last frame \
              (reservoir-m: the final reservoirs' mean M; reservoir-contribution: their mean W·p̂, \
