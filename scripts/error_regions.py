@@ -79,8 +79,12 @@ def main():
             line += f"; the rest ({rest.sum()} px) {mse[rest].sum() / total:.0%} of the error"
         view = os.path.join(a.out, f"{method}-view-reservoir-contribution.exr")
         if os.path.exists(view):
-            c = read_rgb(view)[..., 0]
-            top = c >= np.percentile(c, 100.0 - a.top)
+            c = read_rgb(view)[..., 0].ravel()
+            # The top `--top` percent by rank (ties broken by position), at least one pixel.
+            k = max(1, int(round(c.size * a.top / 100.0)))
+            top = np.zeros(c.size, bool)
+            top[np.argsort(c, kind="stable")[-k:]] = True
+            top = top.reshape(mse.shape)
             line += f"; top {a.top:g} % reservoir contributions {mse[top].sum() / total:.0%} of the error"
         print(line)
 

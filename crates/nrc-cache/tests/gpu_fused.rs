@@ -641,6 +641,23 @@ fn an_f16_mlp_follows_the_f32_kernels_within_half_precision() {
                 "{name}: {description}"
             );
             assert_eq!(gpu.mlp_arithmetic(), "f16");
+            // Half-size activations: at least as many rows a tile as the f32 MLP's.
+            let rows = |d: &str| -> usize {
+                d.split(" rows a tile")
+                    .next()
+                    .and_then(|s| s.rsplit(' ').next())
+                    .and_then(|n| n.parse().ok())
+                    .unwrap_or_else(|| panic!("no rows a tile in {d}"))
+            };
+            let (r16, r32) = (
+                rows(&description),
+                rows(&cache(&config, CacheDevice::Wgpu).describe()),
+            );
+            println!("{name}, {hidden} hidden: {r16} rows a tile with the f16 MLP, {r32} with f32");
+            assert!(
+                r16 >= r32,
+                "{name}: {r16} rows a tile with f16, {r32} with f32"
+            );
             // Inference weights before any step: the weights themselves, the MLP rounded to f16.
             let (grid, mlp16) = gpu.inference_weights_host();
             let mut gpu32 = cache(&config, CacheDevice::Wgpu);

@@ -30,6 +30,14 @@ pub const LEVEL_WORDS: usize = 5;
 /// dimensions, output offset, bins or frequencies, wrap, scale bits, offset bits.
 pub const PART_WORDS: usize = 8;
 
+/// An activation stored as `M` (f32, or f16 for a half-precision MLP): clamped to `M`'s finite
+/// range first (WGSL leaves an out-of-range conversion to f16 undefined), NaN kept.
+#[cube]
+fn to_act<M: Float>(v: f32) -> M {
+    let hi = f32::cast_from(M::max_value());
+    M::cast_from(select(v > hi, hi, select(v < -hi, -hi, v)))
+}
+
 /// `x` clamped to [0, 1], NaN to 0 (as `hash_grid::clamp01`).
 #[cube]
 fn clamp01(x: f32) -> f32 {
@@ -160,18 +168,18 @@ fn encode_tile<T: Float, M: Float>(
                         let mut left = blob_cdf_sum(0.0f32, x, bins, wrap);
                         for b in 0..count {
                             let right = blob_cdf_sum(f32::cast_from(b + 1) / bins, x, bins, wrap);
-                            act[at + b] = M::cast_from(right - left);
+                            act[at + b] = to_act::<M>(right - left);
                             left = right;
                         }
                     } else if kind == 2u32 {
                         let at = base + out_off + dim * count;
                         let mut freq = 1.0f32;
                         for b in 0..count {
-                            act[at + b] = M::cast_from(tri(freq * x));
+                            act[at + b] = to_act::<M>(tri(freq * x));
                             freq *= 2.0f32;
                         }
                     } else {
-                        act[base + out_off + dim] = M::cast_from(x * sc + of);
+                        act[base + out_off + dim] = to_act::<M>(x * sc + of);
                     }
                 }
             }
@@ -221,7 +229,7 @@ fn encode_tile<T: Float, M: Float>(
                 }
                 #[unroll]
                 for f in 0..features {
-                    act[o + f] = M::cast_from(acc[f]);
+                    act[o + f] = to_act::<M>(acc[f]);
                 }
             } else {
                 #[unroll]
@@ -261,7 +269,7 @@ fn dense_forward<M: Float>(
     }
     #[unroll]
     for r in 0..r_tile {
-        act[out_base + r * WIDTH + j] = M::cast_from(acc[r].max(0.0f32));
+        act[out_base + r * WIDTH + j] = to_act::<M>(acc[r].max(0.0f32));
     }
 }
 

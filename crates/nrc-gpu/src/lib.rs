@@ -337,6 +337,12 @@ impl Atomics {
 /// Rows per tile for `layout` within the device's workgroup memory, and the values of the
 /// activation buffer at that size: the largest of 32, 16, 8, 4, 2, 1 that fits.
 pub fn tile_rows(client: &Client, layout: &Layout) -> Result<(usize, usize), String> {
+    if layout.half_mlp && !supports_f16(client) {
+        return Err(
+            "the half-precision MLP needs f16 arithmetic (shader-f16), which the adapter lacks"
+                .into(),
+        );
+    }
     let limit = client.properties().hardware.max_shared_memory_size;
     let act_bytes = if layout.half_mlp { 2 } else { 4 };
     for r in [32usize, 16, 8, 4, 2, 1] {
@@ -662,9 +668,10 @@ impl Trainer {
             .map_or(&self.no_table, |t| t.half.unwrap_or(t.w));
         let n = self.n;
         assert_eq!(
-            state.mlp_half.is_some(),
-            l.half_mlp,
-            "the MLP's f16 copy is given exactly when the layout has a half-precision MLP"
+            state.mlp_half.map(|h| h.dtype == DType::F16),
+            l.half_mlp.then_some(true),
+            "the MLP's f16 copy (an f16 tensor) is given exactly when the layout has a \
+             half-precision MLP"
         );
         let mlp = state.mlp_half.unwrap_or(state.mlp);
         if n > 0 {
@@ -876,7 +883,7 @@ impl Trainer {
             .as_ref()
             .map_or((0, 0), |g| (g.in_offset, g.out_offset));
         let table = state.table.as_ref().map_or(&self.no_table, |t| t.w);
-        if state.mlp_half.is_some() != l.half_mlp {
+        if state.mlp_half.map(|h| h.dtype == DType::F16) != l.half_mlp.then_some(true) {
             return Err(
                 "the MLP's f16 copy must be given exactly when the layout has a \
                         half-precision MLP"

@@ -39,11 +39,13 @@ pub struct DepthArgs {
     #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u32).range(0..=nrc_render::MAX_GLOSSY_SAMPLES as i64))]
     pub glossy_samples: u32,
 
-    /// Light samples of next-event estimation at each first vertex (stratified together),
-    /// weighed against BSDF sampling by MIS with the counts: unbiased, more shadow rays where
-    /// the first vertex's direct light is the noise (a window seen past its frame and blinds),
-    /// no more paths. Every method takes them where its paths' first vertex runs NEE through the
-    /// shared path step; references never do (`nrc reference` refuses the flag). At most 64
+    /// Light samples of next-event estimation at the first vertex of each walk (stratified
+    /// together), weighed against BSDF sampling by MIS with the counts: unbiased, more shadow
+    /// rays where the first vertex's direct light is the noise (a window seen past its frame and
+    /// blinds), no more paths. Every walk that runs NEE through the shared path step takes them
+    /// at its first vertex: camera paths, and equally training paths, VPLs and light-tracing
+    /// targets (their cost counts in equal-time comparisons); references never do (`nrc
+    /// reference` refuses the flag). At most 64
     #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=nrc_render::MAX_DIRECT_SAMPLES as i64))]
     pub direct_samples: u32,
 }

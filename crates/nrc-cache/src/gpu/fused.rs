@@ -114,6 +114,8 @@ pub fn describe(device: &burn::tensor::Device, layout: &ModelLayout) -> String {
         precision(false),
         if half {
             "f16 MLP (f16 weights and activations, f32 sums and backward)"
+        } else if layout.mlp_precision == MlpPrecision::F16 {
+            "f32 MLP (the configured f16 needs shader-f16, which this adapter lacks)"
         } else {
             "f32 MLP (bf16 products are the CPU path's)"
         },

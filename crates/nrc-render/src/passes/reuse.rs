@@ -216,8 +216,9 @@ impl<S> History<S> {
     /// The reservoirs' statistics, per pixel over its samples, in red: `reservoir-m`, the mean
     /// `M` (the candidates the final reservoirs stand for, after the M cap); and
     /// `reservoir-contribution`, the mean `W · p̂(y)` of the selected samples (0 for an empty
-    /// reservoir): the luminance the resampled sample carries into the pixel before its
-    /// visibility and shading, large where a pass's fireflies start. For the viewer
+    /// reservoir): the luminance the resampled sample carries into the pixel (its target
+    /// includes the shading) before the final visibility test, large where a pass's fireflies
+    /// start. For the viewer
     /// (`nrc view --view`) and `nrc compare --diagnostics`.
     pub fn views(&self) -> Vec<super::frame::PassView> {
         vec![
