@@ -10,8 +10,16 @@ of it that is bias², and for each box (pixels x0 <= x < x1, y0 <= y < y1) the b
 MSE and of the bias². Where the method has `METHOD-view-reservoir-contribution.exr` (a
 resampling pass's mean W·p̂ after its last frame), also the share of the MSE in the pixels whose
 contribution is in the top `--top` percent: how much of the error sits where the reservoirs
-carry the largest weights. Needs numpy and OpenEXR (`pip install numpy OpenEXR`).
+carry the largest weights. With `--footprint REF`, a reference folder (`nrc reference`: mean.exr
+and variance.exr) of the same view at k times the resolution, also each box's footprint variance:
+the variance of the radiance over a pixel's area, from its k × k sub-pixels' means (their own
+noise removed: a lower bound, finer detail adds to it), against the method's variance per sample
+(blue × the samples per pixel of report.json): the part of a camera sample's noise that only
+more camera rays through the pixel remove. Needs numpy and OpenEXR (`pip install numpy
+OpenEXR`).
 """
+
+import json
 
 import argparse
 import glob
@@ -54,7 +62,15 @@ def main():
     ap.add_argument("out")
     ap.add_argument("--box", type=parse_box, action="append", default=[])
     ap.add_argument("--top", type=float, default=1.0)
+    ap.add_argument("--footprint", metavar="REF")
     a = ap.parse_args()
+    footprint = None
+    spp = {}
+    if a.footprint:
+        hi = read_rgb(os.path.join(a.footprint, "mean.exr"))
+        hv = read_rgb(os.path.join(a.footprint, "variance.exr"))
+        report = json.load(open(os.path.join(a.out, "report.json")))
+        spp = {r["method"]: r["samples_per_pixel"] for r in report["rows"]}
     files = sorted(glob.glob(os.path.join(a.out, "*-errors.exr")))
     if not files:
         sys.exit(f"error: no METHOD-errors.exr in {a.out} (run nrc compare with --diagnostics)")
@@ -62,6 +78,14 @@ def main():
         method = os.path.basename(path)[: -len("-errors.exr")]
         e = read_rgb(path)
         mse, bias, total = e[..., 0], e[..., 1], e[..., 0].sum()
+        if a.footprint and footprint is None:
+            h, w = mse.shape
+            k = hi.shape[0] // h
+            if hi.shape[:2] != (h * k, w * k) or k < 2:
+                sys.exit(f"error: the footprint reference is {hi.shape[1]}x{hi.shape[0]}, not a multiple of {w}x{h}")
+            blocks = hi.reshape(h, k, w, k, 3)
+            noise = hv.reshape(h, k, w, k, 3).mean(axis=(1, 3))
+            footprint = (blocks.var(axis=(1, 3), ddof=1) - noise).mean(-1)
         line = (
             f"{method}: bias² + variance {mse.mean():.4g}, bias² {bias.mean():.4g}"
             f" ({bias.sum() / total:.0%})"
@@ -72,6 +96,13 @@ def main():
                 f"; {name} ({inside.size} px) {inside.sum() / total:.0%} of the error,"
                 f" bias² {bias[y0:y1, x0:x1].sum() / total:.0%}"
             )
+            if footprint is not None and method in spp:
+                per_sample = e[y0:y1, x0:x1, 2].mean() * spp[method]
+                fp = footprint[y0:y1, x0:x1].mean()
+                line += (
+                    f", variance per sample {per_sample:.4g} against the footprint's {fp:.4g}"
+                    f" ({fp / per_sample:.0%})"
+                )
         if a.box:
             rest = np.ones(mse.shape, bool)
             for _, (x0, y0, x1, y1) in a.box:
