@@ -876,7 +876,8 @@ fn render_call(
 /// the pass `pass_` names. Returns an `(height, width, 3)` float32 array of linear radiance.
 /// Other keyword options: `max_depth`, `rr_depth`, `strategy`, `termination`,
 /// `emitter_samples` (extra camera rays at the outline of emitters), `glossy_samples` (more BSDF
-/// samples of the direct light at glossy first vertices), `allow_other_scene`.
+/// samples of the direct light at glossy first vertices), `direct_samples` (light samples of NEE
+/// at first vertices), `allow_other_scene`.
 #[pyfunction]
 #[pyo3(signature = (scene, pass_=None, spp=1, width=128, height=128, cache=None, seed=1, **options))]
 #[allow(clippy::too_many_arguments)]

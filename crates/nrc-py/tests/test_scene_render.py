@@ -102,6 +102,24 @@ def test_light_tree_renders_as_the_program(tmp_path):
         nrc.Scene.load(hall, light_sampler="bvh")
 
 
+def test_direct_samples_render_as_the_program(cornell, tmp_path):
+    """`direct_samples=4` takes four stratified light samples at each first vertex as
+    `nrc render --direct-samples 4` does (the same bits); the image differs from one light
+    sample's; a count out of its range (1 to 64) is refused."""
+    out = tmp_path / "direct.exr"
+    nrc.cli([
+        "render", "--scene", str(SCENES / "cornell-box.gltf"), "--direct-samples", "4",
+        "--spp", "1", "--width", "24", "--height", "24", "--seed", "5", "--out", str(out),
+    ])
+    four = nrc.render(cornell, spp=1, width=24, height=24, seed=5, direct_samples=4)
+    assert np.array_equal(four, nrc.read_exr(out))
+    one = nrc.render(cornell, spp=1, width=24, height=24, seed=5)
+    assert np.any(four != one)
+    for bad in (0, 1000):
+        with pytest.raises(ValueError, match="direct-samples"):
+            nrc.render(cornell, spp=1, width=8, height=8, direct_samples=bad)
+
+
 def test_emitter_samples_render_as_the_program(cornell, tmp_path):
     """`emitter_samples=8` takes the extra camera rays at the outline of the Cornell box's
     light as `nrc render --emitter-samples 8` does (the same bits); the image differs from the
