@@ -9,7 +9,6 @@ use nrc_scene::{
     sampling::{Frame, power_heuristic},
 };
 
-use crate::sampler::PixelSampler;
 use crate::tracer::PathStats;
 
 /// How many samples each strategy took at the previous vertex: `light` NEE samples and `bsdf`
@@ -81,29 +80,10 @@ pub fn environment_mis_weight(
 /// contribution `f · L_i · |cos| / pdf`, weighted against BSDF sampling by the power heuristic
 /// when `mis` (else weight 1; delta lights always have weight 1, BSDF sampling cannot find
 /// them), as one of `counts.light` such samples (the caller averages them; the heuristic counts
-/// them and the `counts.bsdf` BSDF samples). Draws three numbers from `sampler` always.
+/// them and the `counts.bsdf` BSDF samples). `u_light` chooses the light, `u_point` the point on
+/// it (callers draw them whether or not NEE runs, so that their random streams stay aligned).
 #[inline]
 pub fn next_event(
-    scene: &Scene,
-    si: &SurfaceInteraction,
-    bsdf: &Bsdf,
-    frame: &Frame,
-    wo: Vec3,
-    mis: bool,
-    counts: Counts,
-    sampler: &mut PixelSampler,
-    stats: &mut PathStats,
-) -> Vec3 {
-    let u_light = sampler.next_1d();
-    let u_point = sampler.next_2d();
-    next_event_from(
-        scene, si, bsdf, frame, wo, mis, counts, u_light, u_point, stats,
-    )
-}
-
-/// [`next_event`] from given numbers: `u_light` chooses the light, `u_point` the point on it.
-#[inline]
-pub fn next_event_from(
     scene: &Scene,
     si: &SurfaceInteraction,
     bsdf: &Bsdf,

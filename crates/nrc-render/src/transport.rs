@@ -19,7 +19,7 @@ use glam::{Vec2, Vec3};
 use nrc_scene::bsdf::{Bsdf, BsdfSample};
 use nrc_scene::{LightContext, Ray, Scene, SurfaceInteraction, sampling::Frame, spawn_ray};
 
-use crate::nee::{Counts, emission_mis_weight, environment_mis_weight, next_event_from};
+use crate::nee::{Counts, emission_mis_weight, environment_mis_weight, next_event};
 use crate::query::RadianceQuery;
 use crate::sampler::{MAX_STRATA, PixelSampler, stratified_pairs};
 use crate::tracer::{GLOSSY_ROUGHNESS, LightStrategy, PathStats, PathTracer};
@@ -280,7 +280,7 @@ impl PathWalk {
         let counts = self.counts();
         let one = |u_light: f32, u_point: Vec2, stats: &mut PathStats| {
             if nee_runs {
-                next_event_from(
+                next_event(
                     scene, &v.si, &v.bsdf, &v.frame, v.wo, mis, counts, u_light, u_point, stats,
                 )
             } else {

@@ -218,30 +218,12 @@ fn glossy_samples_agree_with_mis_and_lower_the_variance_of_glossy_pixels() {
     // BSDF sample, as a pass that continued from a walk of its own would), fails.
     // (2,048 samples a pixel: the wrong weight's bias lies in the few pixels of the glossy
     // highlights, and the blocks must see it beyond the Bonferroni bound.)
-    let m = 2048;
-    let by_hand = worst_block(
+    counts_matter(
+        &scene,
         &reference,
-        1024,
-        &walk_by_hand(&scene, &tracer(4), false, m, 17),
-        m,
-    )
-    .0;
-    eprintln!("the walk by hand: worst block {by_hand:.2}");
-    assert!(
-        by_hand <= z_max,
-        "by hand: a block is {by_hand:.2} standard errors off"
-    );
-    let forgot = worst_block(
-        &reference,
-        1024,
-        &walk_by_hand(&scene, &tracer(4), true, m, 17),
-        m,
-    )
-    .0;
-    eprintln!("the path sample weighed as the only BSDF sample: worst block {forgot:.2}");
-    assert!(
-        forgot > z_max,
-        "the wrong weight passed: worst block {forgot:.2}"
+        &tracer(4),
+        17,
+        "the path sample weighed as the only BSDF sample",
     );
     // Less variance: the summed pixel variance at equal samples.
     let var = |r: &RenderOutput| -> f64 { channels(r.variance.as_ref().unwrap()).iter().sum() };
@@ -345,29 +327,12 @@ fn direct_samples_agree_with_mis_and_lower_the_variance() {
         );
     }
     // The walk by hand agrees; with the count forgotten it does not.
-    let m = 2048;
-    let (by_hand, z_max) = worst_block(
+    counts_matter(
+        &scene,
         &reference,
-        1024,
-        &walk_by_hand(&scene, &tracer(8, true), false, m, 37),
-        m,
-    );
-    eprintln!("the walk by hand: worst block {by_hand:.2}");
-    assert!(
-        by_hand <= z_max,
-        "by hand: a block is {by_hand:.2} standard errors off"
-    );
-    let forgot = worst_block(
-        &reference,
-        1024,
-        &walk_by_hand(&scene, &tracer(8, true), true, m, 37),
-        m,
-    )
-    .0;
-    eprintln!("the BSDF sample weighed against one light sample: worst block {forgot:.2}");
-    assert!(
-        forgot > z_max,
-        "the wrong weight passed: worst block {forgot:.2}"
+        &tracer(8, true),
+        37,
+        "the BSDF sample weighed against one light sample",
     );
     // Less variance at the same paths; stratified less than independent.
     let var = |r: &RenderOutput| -> f64 { channels(r.variance.as_ref().unwrap()).iter().sum() };
@@ -380,6 +345,43 @@ fn direct_samples_agree_with_mis_and_lower_the_variance() {
         "variance {vd:.3} with 8 against {vp:.3} with 1"
     );
     assert!(vd < vi, "stratified {vd:.3} against independent {vi:.3}");
+}
+
+/// The walk driven by hand with `tracer` (2,048 samples a pixel, seed `seed`) agrees with
+/// `reference` (1,024 samples) in every 4×4 block within the Bonferroni bound, and the same walk
+/// whose path sample forgets the extra samples in its MIS counts (`control` says how) does not:
+/// the counts' bias lies in a few pixels, which the blocks must see at this sample count.
+fn counts_matter(
+    scene: &nrc_scene::Scene,
+    reference: &RenderOutput,
+    tracer: &PathTracer,
+    seed: u64,
+    control: &str,
+) {
+    let m = 2048;
+    let (by_hand, z_max) = worst_block(
+        reference,
+        1024,
+        &walk_by_hand(scene, tracer, false, m, seed),
+        m,
+    );
+    eprintln!("the walk by hand: worst block {by_hand:.2}");
+    assert!(
+        by_hand <= z_max,
+        "by hand: a block is {by_hand:.2} standard errors off"
+    );
+    let forgot = worst_block(
+        reference,
+        1024,
+        &walk_by_hand(scene, tracer, true, m, seed),
+        m,
+    )
+    .0;
+    eprintln!("{control}: worst block {forgot:.2}");
+    assert!(
+        forgot > z_max,
+        "the wrong weight passed: worst block {forgot:.2}"
+    );
 }
 
 /// Depth-2 renders through `PathWalk` driven by hand: the emission seen, NEE with the tracer's

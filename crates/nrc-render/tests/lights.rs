@@ -437,7 +437,8 @@ fn a_masked_quad_casts_the_masked_shadow() {
             frame.to_local(si.wo),
             true,
             nrc_render::nee::Counts::ONE,
-            &mut sampler,
+            sampler.next_1d(),
+            sampler.next_2d(),
             &mut PathStats::default(),
         )
     };

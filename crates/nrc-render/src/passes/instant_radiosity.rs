@@ -966,7 +966,8 @@ impl RenderPass for InstantRadiosityPass {
                         v.wo,
                         false,
                         crate::nee::Counts::ONE,
-                        &mut sampler,
+                        sampler.next_1d(),
+                        sampler.next_2d(),
                         &mut stats,
                     );
                 }
