@@ -59,6 +59,7 @@ pub fn trace_bench(
         spp,
         seed: 1,
         variance: false,
+        sequence: None,
     };
 
     let mut rows = vec![

@@ -19,8 +19,8 @@ use std::time::{Duration, Instant};
 use glam::{DVec3, Vec3};
 use nrc_scene::{Camera, Image, Scene};
 
-use nrc_render::pass_seed;
 use nrc_render::passes::{PassView, PhaseTimes};
+use nrc_render::{PixelSequence, pass_seed};
 
 use crate::error::HarnessError;
 
@@ -85,7 +85,8 @@ pub trait Method: Send {
     }
 
     /// Renders one pass of `width × height` pixels from `camera`; `seed` chooses the random
-    /// streams, so passes with different seeds are independent estimates.
+    /// streams, so passes with different seeds are independent estimates; `sequence`, where
+    /// given, places the pass's camera rays ([`nrc_render::FrameInput::sequence`]).
     fn render_estimate(
         &mut self,
         scene: &Scene,
@@ -93,6 +94,7 @@ pub trait Method: Send {
         width: u32,
         height: u32,
         seed: u64,
+        sequence: Option<PixelSequence>,
     ) -> Estimate;
 
     /// The images of its pass's state after its last frame (a resampling pass's reservoir
@@ -134,6 +136,30 @@ impl Budget {
     }
 }
 
+/// Where a run's frames put their camera rays in each pixel (`nrc compare --camera-offsets`).
+#[derive(
+    clap::ValueEnum,
+    Clone,
+    Copy,
+    Debug,
+    Default,
+    PartialEq,
+    Eq,
+    serde::Serialize,
+    serde::Deserialize,
+)]
+#[serde(rename_all = "kebab-case")]
+pub enum CameraOffsets {
+    /// Each pass's offsets independent of the others' (uniform random in the pixel).
+    #[default]
+    Independent,
+    /// The passes of a run take consecutive points of one Owen-scrambled Sobol sequence per
+    /// pixel ([`nrc_render::PixelSequence`]), scrambled anew for each run: every offset still
+    /// uniform in the pixel, so each pass stays unbiased, and a run's passes stratify the
+    /// pixel's footprint together.
+    Sobol,
+}
+
 /// What to render.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct FrameRequest {
@@ -142,6 +168,10 @@ pub struct FrameRequest {
     /// Seed of the frame; pass `p` uses [`pass_seed`]`(seed, p)`.
     pub seed: u64,
     pub budget: Budget,
+    /// Where the passes put their camera rays in each pixel: with [`CameraOffsets::Sobol`],
+    /// pass `p` takes the points `p · samples per pass, …` of each pixel's sequence seeded by
+    /// `seed`.
+    pub offsets: CameraOffsets,
 }
 
 /// A rendered frame: the average of its passes, and what it cost.
@@ -208,7 +238,18 @@ pub fn render_frame(
     let mut rays = 0;
     let mut phases = PhaseTimes::default();
     loop {
-        let pass = method.render_estimate(scene, camera, w, h, pass_seed(request.seed, passes));
+        let sequence = (request.offsets == CameraOffsets::Sobol).then(|| PixelSequence {
+            seed: request.seed,
+            first: passes.wrapping_mul(method.samples_per_pass()),
+        });
+        let pass = method.render_estimate(
+            scene,
+            camera,
+            w,
+            h,
+            pass_seed(request.seed, passes),
+            sequence,
+        );
         if passes == 0 {
             warm_frames = pass.warm_frames;
         }
@@ -256,6 +297,18 @@ mod tests {
     struct Fake {
         passes: u32,
         sleep: Duration,
+        /// The camera offsets' sequence each pass was given.
+        sequences: Vec<Option<PixelSequence>>,
+    }
+
+    impl Fake {
+        fn new(sleep: Duration) -> Self {
+            Self {
+                passes: 0,
+                sleep,
+                sequences: Vec::new(),
+            }
+        }
     }
 
     impl Method for Fake {
@@ -272,8 +325,10 @@ mod tests {
             width: u32,
             height: u32,
             _: u64,
+            sequence: Option<PixelSequence>,
         ) -> Estimate {
             std::thread::sleep(self.sleep);
+            self.sequences.push(sequence);
             self.passes += 1;
             let image = Image::from_data(
                 width as usize,
@@ -307,15 +362,13 @@ mod tests {
     #[test]
     fn equal_passes_average_all_passes() {
         let scene = empty_scene();
-        let mut m = Fake {
-            passes: 0,
-            sleep: Duration::ZERO,
-        };
+        let mut m = Fake::new(Duration::ZERO);
         let req = FrameRequest {
             width: 2,
             height: 3,
             seed: 1,
             budget: Budget::Passes(4),
+            offsets: CameraOffsets::Independent,
         };
         let f = render_frame(&mut m, &scene, &scene.camera, &req).unwrap();
         assert_eq!((f.passes, f.samples_per_pixel), (4, 12));
@@ -334,16 +387,14 @@ mod tests {
     fn equal_time_stops_within_one_pass_of_the_budget() {
         let scene = empty_scene();
         for (sleep_ms, budget_ms) in [(2u64, 30u64), (7, 30), (40, 30)] {
-            let mut m = Fake {
-                passes: 0,
-                sleep: Duration::from_millis(sleep_ms),
-            };
+            let mut m = Fake::new(Duration::from_millis(sleep_ms));
             let budget = Duration::from_millis(budget_ms);
             let req = FrameRequest {
                 width: 2,
                 height: 2,
                 seed: 1,
                 budget: Budget::Time(budget),
+                offsets: CameraOffsets::Independent,
             };
             let f = render_frame(&mut m, &scene, &scene.camera, &req).unwrap();
             let diff = f.elapsed.abs_diff(budget);
@@ -353,6 +404,34 @@ mod tests {
             if sleep_ms > budget_ms {
                 assert_eq!(f.passes, 1);
             }
+        }
+    }
+
+    /// With Sobol offsets pass `p` of a frame takes its pixels' points from `p × samples per
+    /// pass` of the sequence seeded by the frame's seed (so a run's passes continue one
+    /// sequence); with independent offsets none is given.
+    #[test]
+    fn sobol_offsets_continue_one_sequence_over_the_passes() {
+        let scene = empty_scene();
+        for offsets in [CameraOffsets::Sobol, CameraOffsets::Independent] {
+            let mut m = Fake::new(Duration::ZERO);
+            let req = FrameRequest {
+                width: 2,
+                height: 2,
+                seed: 11,
+                budget: Budget::Passes(4),
+                offsets,
+            };
+            render_frame(&mut m, &scene, &scene.camera, &req).unwrap();
+            let want: Vec<Option<PixelSequence>> = (0..4)
+                .map(|p| {
+                    (offsets == CameraOffsets::Sobol).then_some(PixelSequence {
+                        seed: 11,
+                        first: 3 * p,
+                    })
+                })
+                .collect();
+            assert_eq!(m.sequences, want, "{offsets:?}");
         }
     }
 

@@ -38,7 +38,7 @@ use nrc_render::{PathTracer, pass_seed};
 use nrc_scene::{Image, Scene};
 use serde::{Deserialize, Serialize};
 
-use crate::budget::{Budget, Frame, FrameRequest, Method, render_frame};
+use crate::budget::{Budget, CameraOffsets, Frame, FrameRequest, Method, render_frame};
 use crate::methods::{CacheMethodSettings, MethodSpec};
 use crate::reference::Reference;
 
@@ -70,6 +70,8 @@ pub struct Comparison {
     /// Extra camera rays at the outline of emitters, every method alike
     /// ([`nrc_render::emitters::supersample`]; 0: none).
     pub emitter_samples: u32,
+    /// Where a run's passes put their camera rays in each pixel, every method alike.
+    pub camera_offsets: CameraOffsets,
     /// Depth limit and Russian roulette shared by every method and the reference.
     pub tracer: PathTracer,
     /// How cache methods are set up.
@@ -276,7 +278,7 @@ pub fn ready_method(c: &Comparison, scene: &Scene, spec: &MethodSpec) -> Result<
         .prepare(scene, &scene.camera, w, h)
         .map_err(|e| anyhow::anyhow!("{spec}: {e}"))?;
     if !method.warm_after_prepare() {
-        method.render_estimate(scene, &scene.camera, w.min(16), h.min(16), u64::MAX);
+        method.render_estimate(scene, &scene.camera, w.min(16), h.min(16), u64::MAX, None);
     }
     Ok(method)
 }
@@ -303,6 +305,7 @@ pub fn run_frame(c: &Comparison, scene: &Scene, method: &mut dyn Method, r: u32)
             height: c.height,
             seed,
             budget: c.budget,
+            offsets: c.camera_offsets,
         },
     )?)
 }
@@ -426,6 +429,7 @@ pub fn compare_runs(
                     height: h,
                     seed,
                     budget,
+                    offsets: c.camera_offsets,
                 },
             )?;
             evaluate(frame)

@@ -441,6 +441,7 @@ impl Method for PassMethod {
                 width,
                 height,
                 nrc_render::pass_seed(!seed, f),
+                None,
             );
         }
         Ok(())
@@ -457,6 +458,7 @@ impl Method for PassMethod {
         width: u32,
         height: u32,
         seed: u64,
+        sequence: Option<nrc_render::PixelSequence>,
     ) -> Estimate {
         let input = FrameInput {
             scene,
@@ -466,6 +468,7 @@ impl Method for PassMethod {
             spp: self.spp,
             seed,
             emitter_samples: self.emitter_samples,
+            sequence,
         };
         let warm = self.warmth.count(&input);
         let out = passes::run(self.pass.as_mut(), &input, &ZeroSource);
@@ -690,6 +693,7 @@ impl Method for CacheMethod {
         width: u32,
         height: u32,
         seed: u64,
+        sequence: Option<nrc_render::PixelSequence>,
     ) -> Estimate {
         let online = self.settings.online;
         let name = self.name.clone();
@@ -726,6 +730,7 @@ impl Method for CacheMethod {
             spp,
             seed,
             emitter_samples,
+            sequence,
         });
         Estimate {
             image: out.image,

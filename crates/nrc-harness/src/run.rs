@@ -244,6 +244,7 @@ pub fn render(job: RenderJob) -> Result<Rendered> {
                 nrc_render::pass_seed(job.seed, f as u32)
             },
             emitter_samples: job.emitter_samples,
+            sequence: None,
         };
         out = Some(match job.cache {
             Some(c) => passes::run(pass.as_mut(), &input, &nrc_train::CacheSource::new(c)),

@@ -169,6 +169,7 @@ pub fn compare_sequence(
                 spp: seq.reference_spp,
                 seed: 0x5e9 + f as u64,
                 variance: false,
+                sequence: None,
             },
             &|_| {},
         )
@@ -187,6 +188,7 @@ pub fn compare_sequence(
                     height: h,
                     seed: Stream::SequenceFrame(f as u32).seed(c.seed),
                     budget: c.budget,
+                    offsets: c.camera_offsets,
                 },
             )?;
             let view = ImageView::of_scene_image(&run.row.method, &frame.image)?;

@@ -67,6 +67,7 @@ fn online_loop_is_deterministic_and_snapshots_render_identically() {
         spp: 2,
         seed: 99,
         emitter_samples: 0,
+        sequence: None,
     };
     let before = a.render(&input).image;
     let mut pass = a.settings.pass.build(&a.settings.tracer);
@@ -212,6 +213,7 @@ fn reference_of(scene: &Scene, (w, h): (u32, u32), spp: u32) -> (nrc_scene::Imag
             spp,
             seed: 3,
             variance: false,
+            sequence: None,
         },
         &|_| {},
     )
@@ -245,6 +247,7 @@ fn long_run(
         spp,
         seed: 17,
         emitter_samples: 0,
+        sequence: None,
     };
     let error = |t: &mut OnlineTrainer| cache_error(t, &input, renders, (reference, mask));
     let mut run = LongRun {
@@ -558,6 +561,7 @@ fn errors_with(scene: &Scene, producer: &str, mut s: CacheMethodSettings) -> [f6
         spp: 4,
         seed: 17,
         emitter_samples: 0,
+        sequence: None,
     };
     let mut errors = [0.0; 2];
     for f in 1..=100 {
@@ -727,6 +731,7 @@ fn drift_study() {
         spp: env_or("NRC_DRIFT_SPP", "256").parse().unwrap(),
         seed: 17,
         emitter_samples: 0,
+        sequence: None,
     };
     let lum = |p: &glam::Vec3| nrc_scene::sampling::luminance(*p) as f64;
     let first = PassSpec::from(nrc_render::passes::CacheTerminatedSettings {
@@ -920,6 +925,7 @@ fn small_frame(scene: &Scene) -> FrameInput<'_> {
         spp: 1,
         seed: 3,
         emitter_samples: 0,
+        sequence: None,
     }
 }
 

@@ -32,6 +32,7 @@ fn a_sequence_reports_every_frame_of_every_method() {
         exclude_emitters: false,
         diagnostics: false,
         emitter_samples: 0,
+        camera_offsets: Default::default(),
         tracer: PathTracer::default(),
         cache: CacheMethodSettings::new(CacheConfig::hash_grid_preset(), CacheDevice::Cpu),
         converge: None,

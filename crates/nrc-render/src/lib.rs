@@ -40,6 +40,6 @@ pub mod transport;
 pub use passes::{FrameInput, PassOutput, PassSpec, PassStats, RenderPass, Termination};
 pub use path_tracer::{LightStrategy, PathStats, PathTracer};
 pub use render::{Moments, RenderOutput, RenderSettings, RenderStats, render, render_moments};
-pub use sampler::{PixelSampler, pass_seed};
+pub use sampler::{PixelSampler, PixelSequence, pass_seed};
 pub use source::{PathTracedSource, RadianceQuery, RadianceSource, ZeroSource};
 pub use tracer::{GLOSSY_ROUGHNESS, MAX_DIRECT_SAMPLES, MAX_GLOSSY_SAMPLES};

@@ -7,7 +7,7 @@ use glam::{Vec2, Vec3};
 use nrc_scene::{Camera, Image, Scene};
 
 use crate::path_tracer::{PathStats, PathTracer};
-use crate::sampler::PixelSampler;
+use crate::sampler::{PixelSampler, PixelSequence, camera_offset};
 use crate::tiles::map_pixels;
 
 /// What to render: image size, samples per pixel and the seed of the random streams.
@@ -22,6 +22,8 @@ pub struct RenderSettings {
     pub seed: u64,
     /// Also compute the per-pixel sample variance.
     pub variance: bool,
+    /// The camera offsets' sequence ([`PixelSequence`]; `None`: independent offsets).
+    pub sequence: Option<PixelSequence>,
 }
 
 /// A rendered frame and what it cost.
@@ -165,7 +167,7 @@ pub fn render_seen(
         camera,
         tracer,
         (settings.width, settings.height),
-        settings.seed,
+        (settings.seed, settings.sequence),
         0..spp,
         progress,
     );
@@ -192,7 +194,15 @@ pub fn render_moments(
     samples: std::ops::Range<u32>,
     progress: &(dyn Fn(u64) + Sync),
 ) -> (Moments, RenderStats) {
-    let (moments, stats, _) = trace_pixels(scene, camera, tracer, (w, h), seed, samples, progress);
+    let (moments, stats, _) = trace_pixels(
+        scene,
+        camera,
+        tracer,
+        (w, h),
+        (seed, None),
+        samples,
+        progress,
+    );
     (moments, stats)
 }
 
@@ -202,7 +212,7 @@ fn trace_pixels(
     camera: &Camera,
     tracer: &PathTracer,
     (w, h): (u32, u32),
-    seed: u64,
+    (seed, sequence): (u64, Option<PixelSequence>),
     samples: std::ops::Range<u32>,
     progress: &(dyn Fn(u64) + Sync),
 ) -> (Moments, RenderStats, Vec<Vec3>) {
@@ -216,8 +226,8 @@ fn trace_pixels(
             let index = y as u64 * w as u64 + x as u64;
             for s in samples.clone() {
                 let mut sampler = PixelSampler::new(seed, index, s as u64);
-                let film = Vec2::new(x as f32, y as f32) + sampler.next_2d();
-                let ray = camera.generate_ray(film, w, h);
+                let offset = camera_offset(sequence, index, s, sampler.next_2d());
+                let ray = camera.generate_ray(Vec2::new(x as f32, y as f32) + offset, w, h);
                 let (mut l, mut seen) =
                     tracer.camera_sample(scene, ray, &mut sampler, &mut acc.rays);
                 if !l.is_finite() {

@@ -154,6 +154,89 @@ pub fn stratified_pairs(n: u32, s: &mut PixelSampler) -> impl Iterator<Item = (f
     stratified_1d(n, s.split()).zip(points)
 }
 
+/// Where a frame's camera rays lie in their pixels' low-discrepancy sequences: the frames of
+/// one run share `seed`, so that each pixel's camera offsets over the run are consecutive
+/// points of one Owen-scrambled Sobol sequence ([`owen_sobol_2d`]) and stratify the pixel's
+/// footprint together, as a real-time renderer's jitter sequence or a progressive renderer's
+/// low-discrepancy sampler does. Every offset is still uniform over the pixel (the scramble is
+/// random per run and pixel), so each frame stays an unbiased estimate; only the frames'
+/// errors are no longer independent: their mean's is lower where the image varies within a
+/// pixel (edges, textures, a glossy reflection of a window's bars).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct PixelSequence {
+    /// Seed of the pixels' scrambles: the same for all frames that stratify together.
+    pub seed: u64,
+    /// Index in the sequence of this frame's first sample (the run's samples per pixel
+    /// before it).
+    pub first: u32,
+}
+
+impl PixelSequence {
+    /// The camera offset in its pixel of sample `s` of pixel `pixel` (any unique index).
+    pub fn offset(&self, pixel: u64, s: u32) -> Vec2 {
+        let scramble = mix64(mix64(self.seed ^ SOBOL) ^ pixel.wrapping_mul(0xD1B5_4A32_D192_ED03));
+        owen_sobol_2d(self.first.wrapping_add(s), scramble)
+    }
+}
+
+/// A camera ray's offset in its pixel: `sequence`'s point for sample `s` of `pixel`, or
+/// `independent` (the pass's own random numbers, already drawn so that its later numbers stay
+/// where they were) without a sequence.
+pub fn camera_offset(
+    sequence: Option<PixelSequence>,
+    pixel: u64,
+    s: u32,
+    independent: Vec2,
+) -> Vec2 {
+    match sequence {
+        Some(q) => q.offset(pixel, s),
+        None => independent,
+    }
+}
+
+/// Point `index` of the first two dimensions of Sobol's sequence, Owen-scrambled by
+/// `scramble` (Burley 2020, "Practical Hash-based Owen Scrambling": a hash on the reversed
+/// bits stands for the nested uniform permutation). Each point is uniform over the unit square
+/// whatever the index, and points `0..2^m` of one scramble form a `(0, m, 2)`-net: one point
+/// in each elementary interval of area `2^-m` (`m`-strata in x, y, and every split between).
+/// So a pixel's camera offsets drawn with one scramble at consecutive indices (its frames)
+/// stratify its footprint over the frames, where independent offsets do not.
+pub fn owen_sobol_2d(index: u32, scramble: u64) -> Vec2 {
+    // Dimension 0: the van der Corput sequence (bit reversal); dimension 1: the direction
+    // numbers of the polynomial x + 1 (v_1 = 2^31, v_k = v_(k-1) ^ (v_(k-1) >> 1)).
+    let (mut y, mut v) = (0u32, 1u32 << 31);
+    let mut i = index;
+    while i != 0 {
+        if i & 1 == 1 {
+            y ^= v;
+        }
+        i >>= 1;
+        v ^= v >> 1;
+    }
+    let seeds = mix64(scramble ^ SOBOL);
+    let to_unit = |x: u32| ((x >> 8) as f32 * (1.0 / (1u32 << 24) as f32)).min(BELOW_ONE);
+    Vec2::new(
+        to_unit(owen_scramble(index.reverse_bits(), seeds as u32)),
+        to_unit(owen_scramble(y, (seeds >> 32) as u32)),
+    )
+}
+
+/// Salt of [`owen_sobol_2d`]'s scramble seeds.
+const SOBOL: u64 = 0x2545_F491_4F6C_DD1D;
+
+/// A nested uniform scramble of `x`'s bits (most significant first): each bit is flipped by a
+/// hash of `seed` and the bits above it (Laine and Karras 2011's permutation on the reversed
+/// bits, with Burley's constants), so intervals `[k 2^-m, (k+1) 2^-m)` map onto each other.
+fn owen_scramble(x: u32, seed: u32) -> u32 {
+    let mut x = x.reverse_bits();
+    x = x.wrapping_add(seed);
+    x ^= x.wrapping_mul(0x6c50_b47c);
+    x ^= x.wrapping_mul(0xb82f_1e52);
+    x ^= x.wrapping_mul(0xc7af_e638);
+    x ^= x.wrapping_mul(0x8d22_f6e6);
+    x.reverse_bits()
+}
+
 /// The seed of pass (or frame) `pass` of a run seeded `seed`: a bijective mix (SplitMix64's
 /// finaliser) of both, so passes of a frame, and frames of nearby seeds, get unrelated random
 /// streams.
@@ -245,6 +328,93 @@ mod tests {
             all.dedup();
             assert_eq!(all.len(), n, "seed {seed}: two streams coincide");
         }
+    }
+
+    /// Whether `points` (2^m of them) form a (0, m, 2)-net: one point in every elementary
+    /// interval of area 2^-m (2^a × 2^(m−a) cells, every a).
+    fn is_net(points: &[Vec2], m: u32) -> bool {
+        (0..=m).all(|a| {
+            let (nx, ny) = (1usize << a, 1usize << (m - a));
+            let mut seen = vec![false; nx * ny];
+            points.iter().all(|p| {
+                let c = (p.y * ny as f32) as usize * nx + (p.x * nx as f32) as usize;
+                !std::mem::replace(&mut seen[c], true)
+            })
+        })
+    }
+
+    /// A pixel's first 2^m offsets of one scramble form a net (stratified in x, y and every
+    /// split between), for every m up to 8 and several scrambles; independent offsets (the
+    /// control) do not.
+    #[test]
+    fn owen_sobol_points_of_one_scramble_form_nets() {
+        for scramble in [0u64, 1, 0xDEAD_BEEF, u64::MAX] {
+            for m in 0..=8 {
+                let pts: Vec<Vec2> = (0..1u32 << m).map(|i| owen_sobol_2d(i, scramble)).collect();
+                assert!(is_net(&pts, m), "scramble {scramble}, m {m}");
+                // Any aligned block of 2^m consecutive indices is a net too (a run's later
+                // frames keep stratifying).
+                let later: Vec<Vec2> = (0..1u32 << m)
+                    .map(|i| owen_sobol_2d((5 << m) + i, scramble))
+                    .collect();
+                assert!(is_net(&later, m), "scramble {scramble}, m {m}, block 5");
+            }
+        }
+        let mut s = PixelSampler::new(3, 4, 5);
+        let random: Vec<Vec2> = (0..16).map(|_| s.next_2d()).collect();
+        assert!(!is_net(&random, 4), "independent points are not a net");
+    }
+
+    /// χ² on an 8 × 8 grid of one index's point over 8,192 scrambles (63 degrees of freedom).
+    fn chi2_over_scrambles(index: u32, scramble: impl Fn(u64) -> u64) -> f64 {
+        const N: usize = 8192;
+        let mut cells = [0u32; 64];
+        for k in 0..N as u64 {
+            let p = owen_sobol_2d(index, scramble(k));
+            cells[(p.y * 8.0) as usize * 8 + (p.x * 8.0) as usize] += 1;
+        }
+        let e = N as f64 / 64.0;
+        cells.iter().map(|&c| (c as f64 - e).powi(2) / e).sum()
+    }
+
+    /// Each offset is uniform over the pixel whatever its index (so a frame at any point of
+    /// the sequence is unbiased): χ² over scrambles below the 10⁻⁴ critical value of 63
+    /// degrees of freedom (113.6, Bonferroni over the 5 indices: 10⁻³ overall). The control,
+    /// scrambles drawn from only 16 seeds (a scramble too narrow to randomise), fails.
+    #[test]
+    fn owen_sobol_points_are_uniform_over_scrambles() {
+        const CRITICAL: f64 = 113.6;
+        for index in [0u32, 1, 7, 100, 65_537] {
+            let chi2 = chi2_over_scrambles(index, |k| mix64(k ^ 0x1234));
+            assert!(chi2 < CRITICAL, "index {index}: χ² {chi2:.1}");
+        }
+        let narrow = chi2_over_scrambles(7, |k| k % 16);
+        assert!(
+            narrow > CRITICAL,
+            "the narrow scramble's χ² {narrow:.1} should fail"
+        );
+    }
+
+    /// A pixel sequence's offsets are its scrambled Sobol points at `first + s`, a new scramble
+    /// per pixel and per seed, and `camera_offset` without one passes the independent offset
+    /// through.
+    #[test]
+    fn pixel_sequences_index_and_scramble_by_pixel_and_seed() {
+        let q = PixelSequence { seed: 9, first: 12 };
+        let later = PixelSequence { seed: 9, first: 14 };
+        assert_eq!(q.offset(3, 2), later.offset(3, 0));
+        assert_ne!(q.offset(3, 0), q.offset(4, 0));
+        assert_ne!(
+            q.offset(3, 0),
+            PixelSequence {
+                seed: 10,
+                first: 12
+            }
+            .offset(3, 0)
+        );
+        let own = Vec2::new(0.25, 0.75);
+        assert_eq!(camera_offset(None, 3, 0, own), own);
+        assert_eq!(camera_offset(Some(q), 3, 0, own), q.offset(3, 0));
     }
 
     #[test]

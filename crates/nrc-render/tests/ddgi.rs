@@ -243,6 +243,7 @@ fn render_frames(
             spp: 4,
             seed: nrc_render::pass_seed(7, f),
             emitter_samples: 0,
+            sequence: None,
         };
         last = Some(nrc_render::passes::run(p.as_mut(), &input, &nrc_render::ZeroSource).image);
     }

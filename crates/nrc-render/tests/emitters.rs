@@ -5,7 +5,7 @@
 
 mod common;
 
-use common::{Mesh, SceneBuilder, mat, per_pixel_z_floored, render_scene};
+use common::{per_pixel_z_floored, render_scene, window};
 use glam::Vec3;
 use nrc_render::emitters::{outline, outline_of, supersample};
 use nrc_render::passes::{self, FrameInput, PassSpec};
@@ -18,56 +18,6 @@ const H: u32 = 16;
 const REF_SPP: u32 = 8192;
 const RUNS: u32 = 128;
 const EXTRA: u32 = 8;
-
-/// A diffuse wall with a bright emissive rectangle on it, turned 17° so that its edges cross
-/// pixels at every coverage, a thin diffuse bar in front of it and a sill below that it lights
-/// (a window, its mullion and its sill, small).
-fn window() -> Scene {
-    let mut b = SceneBuilder::new();
-    let wall = b.material(mat::diffuse(Vec3::splat(0.5)));
-    let light = b.material(mat::emissive(Vec3::ZERO, Vec3::new(12.0, 10.0, 8.0), false));
-    let bar = b.material(mat::diffuse(Vec3::splat(0.3)));
-    b.mesh(
-        &Mesh::quad(
-            Vec3::ZERO,
-            Vec3::new(3.0, 0.0, 0.0),
-            Vec3::new(0.0, 3.0, 0.0),
-        ),
-        wall,
-        false,
-    );
-    let (s, c) = 17f32.to_radians().sin_cos();
-    b.mesh(
-        &Mesh::quad(
-            Vec3::new(0.1, 0.05, 0.01),
-            Vec3::new(c, s, 0.0) * 0.9,
-            Vec3::new(-s, c, 0.0) * 0.55,
-        ),
-        light,
-        false,
-    );
-    b.mesh(
-        &Mesh::quad(
-            Vec3::new(0.13, 0.0, 0.5),
-            Vec3::new(0.03, 0.0, 0.0),
-            Vec3::new(0.0, 1.2, 0.0),
-        ),
-        bar,
-        false,
-    );
-    // A sill below, lit by the emitter (the direct light of the depth-2 renders).
-    b.mesh(
-        &Mesh::quad(
-            Vec3::new(0.0, -0.75, 0.8),
-            Vec3::new(0.0, 0.0, 0.8),
-            Vec3::new(1.5, 0.0, 0.0),
-        ),
-        wall,
-        false,
-    );
-    b.camera(Vec3::new(0.0, 0.5, 3.0), Vec3::new(0.0, -0.1, 0.0), 50.0);
-    b.build()
-}
 
 /// The camera's view alone: emission seen directly (depth 1).
 fn seen_only() -> PathTracer {
@@ -97,6 +47,7 @@ fn pass_runs(scene: &Scene, spec: &str, tracer: &PathTracer, spp: u32, extra: u3
                 spp,
                 seed: 900 + r as u64,
                 emitter_samples: extra,
+                sequence: None,
             };
             passes::run(pass.as_mut(), &input, &ZeroSource).image
         })
@@ -114,6 +65,7 @@ fn manual_runs(scene: &Scene, flags: Option<fn(&[Vec3]) -> Vec<bool>>) -> Vec<Im
                 spp: 1,
                 seed: 500 + r as u64,
                 variance: false,
+                sequence: None,
             };
             let (mut out, seen) =
                 render_seen(scene, &scene.camera, &seen_only(), &settings, &|_| {});
@@ -272,6 +224,7 @@ fn the_extra_rays_are_counted_and_only_the_outline_changes() {
             spp: 1,
             seed: 31,
             emitter_samples: extra,
+            sequence: None,
         };
         passes::run(spec.build(&tracer).as_mut(), &input, &ZeroSource)
     };
@@ -281,6 +234,7 @@ fn the_extra_rays_are_counted_and_only_the_outline_changes() {
         spp: 1,
         seed: 31,
         variance: false,
+        sequence: None,
     };
     let (_, seen) = render_seen(&scene, &scene.camera, &tracer, &settings, &|_| {});
     let o = outline_of(&scene, &scene.camera, (W, H), &seen);

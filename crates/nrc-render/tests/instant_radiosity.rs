@@ -46,6 +46,7 @@ fn ir_means(scene: &Scene, vpls: u32, clamp: f32, residual: bool, runs: u32) -> 
                 spp: 1,
                 seed: 1000 + r as u64,
                 emitter_samples: 0,
+                sequence: None,
             };
             let img = passes::run(&mut pass, &input, &ZeroSource).image;
             img.data.iter().map(|p| f64::from(p.x)).sum::<f64>() / img.data.len() as f64
@@ -197,6 +198,7 @@ fn vpl_changes_per_frame(m_max: u32) -> Vec<usize> {
             spp: 1,
             seed: f,
             emitter_samples: 0,
+            sequence: None,
         };
         let out = passes::run(&mut pass, &input, &ZeroSource);
         assert!(out.image.data.iter().all(|p| p.is_finite()));
@@ -239,6 +241,7 @@ fn a_fixed_vpl_set_renders_a_static_scene_identically() {
         spp: 1,
         seed: 3,
         emitter_samples: 0,
+        sequence: None,
     };
     let first = passes::run(&mut pass, &input, &ZeroSource).image;
     assert!(

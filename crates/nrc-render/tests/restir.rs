@@ -458,6 +458,7 @@ fn temporal_reuse_follows_a_moving_camera() {
                         spp: 1,
                         seed: nrc_render::pass_seed(300 + run, f),
                         emitter_samples: 0,
+                        sequence: None,
                     };
                     img = Some(passes::run(pass.as_mut(), &input, &ZeroSource).image);
                 }
@@ -505,6 +506,7 @@ fn restir_gi_nrc_refreshes_its_history_from_the_source() {
                 spp: 1,
                 seed: 500 + f,
                 emitter_samples: 0,
+                sequence: None,
             };
             let c = if f < 15 { first } else { 2.0 };
             out = Some(passes::run(p.as_mut(), &input, &Constant(glam::Vec3::splat(c))).image);

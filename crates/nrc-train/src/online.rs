@@ -438,6 +438,7 @@ impl OnlineTrainer {
                 spp: s.spp,
                 seed: Stream::TrainingRender.seed(seed),
                 emitter_samples: s.emitter_samples,
+                sequence: None,
             };
             let source = CacheSource {
                 cache: &self.cache,

@@ -103,6 +103,7 @@ fn cache_pass(
         spp,
         seed,
         emitter_samples: 0,
+        sequence: None,
     };
     passes::run(pass.as_mut(), &input, source)
 }
@@ -259,6 +260,7 @@ impl Check {
                 spp: self.ref_spp,
                 seed,
                 variance: false,
+                sequence: None,
             };
             render(scene, &scene.camera, &tracer, &s, &|_| {}).mean
         });

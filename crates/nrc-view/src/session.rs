@@ -484,6 +484,7 @@ impl Session {
                 spp: s.spp,
                 seed: Stream::TrainingRender.seed(seed),
                 emitter_samples: s.emitter_samples,
+                sequence: None,
             };
             self.render_only_frames += 1;
             let t = Instant::now();
@@ -561,6 +562,7 @@ impl Session {
                     spp: 1,
                     seed: pass_seed(0x5eed, 0),
                     emitter_samples: 0,
+                    sequence: None,
                 };
                 let source = CacheSource::new(&self.trainer.cache);
                 let out = passes::run(self.cache_pass.as_mut(), &input, &source);

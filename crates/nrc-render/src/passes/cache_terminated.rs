@@ -375,7 +375,8 @@ impl RenderPass for CacheTerminatedPass {
                     let index = y as u64 * width as u64 + x as u64;
                     (0..spp).map(move |s| {
                         let mut sampler = PixelSampler::new(seed, index, s as u64);
-                        let film = Vec2::new(x as f32, y as f32) + sampler.next_2d();
+                        let offset = input.camera_offset(index, s, sampler.next_2d());
+                        let film = Vec2::new(x as f32, y as f32) + offset;
                         let ray = camera.generate_ray(film, width, input.height);
                         this.trace_sample(scene, camera.position, ray, &mut sampler)
                     })

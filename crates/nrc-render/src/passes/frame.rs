@@ -3,10 +3,11 @@
 
 use std::time::Instant;
 
-use glam::Vec3;
+use glam::{Vec2, Vec3};
 use nrc_scene::{Camera, Image, Scene};
 
 use crate::emitters::Supersampled;
+use crate::sampler::PixelSequence;
 use crate::source::{RadianceQuery, RadianceSource};
 
 /// Where an inference path ended in the source: the vertex and the point the segment reaching
@@ -33,9 +34,19 @@ pub struct FrameInput<'a> {
     /// camera sees ([`crate::emitters::supersample`]; 0: none). Passes whose camera rays go
     /// through pixel centres (tests at fixed primary rays) take none.
     pub emitter_samples: u32,
+    /// Where the frame's camera rays lie in their pixels' sequences ([`PixelSequence`]:
+    /// frames of a run stratifying each pixel's footprint together); `None`: independent
+    /// offsets from the frame's seed. Passes whose camera rays go through pixel centres ignore
+    /// it.
+    pub sequence: Option<PixelSequence>,
 }
 
 impl FrameInput<'_> {
+    /// The camera offset of sample `s` of pixel `pixel` ([`crate::sampler::camera_offset`]).
+    pub fn camera_offset(&self, pixel: u64, s: u32, independent: Vec2) -> Vec2 {
+        crate::sampler::camera_offset(self.sequence, pixel, s, independent)
+    }
+
     /// The emitters' anti-aliasing of this frame ([`crate::emitters::supersample`] with its
     /// `emitter_samples` and seed) for a pass whose `taken` camera rays a pixel saw `seen`
     /// directly (pixel means, row-major); `None` when the frame takes no extra rays.

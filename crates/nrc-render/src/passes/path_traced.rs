@@ -104,6 +104,7 @@ impl RenderPass for PathTracedPass {
             spp: input.spp,
             seed: input.seed,
             variance: self.variance,
+            sequence: input.sequence,
         };
         let progress = |n: u64| {
             if let Some(p) = &self.progress {

@@ -99,7 +99,11 @@ impl GBuffer {
                     (pixel / width as usize) as f32,
                 );
                 let offset = if jitter {
-                    stream(seed, i, Phase::Camera).next_2d()
+                    input.camera_offset(
+                        pixel as u64,
+                        (i % spp as usize) as u32,
+                        stream(seed, i, Phase::Camera).next_2d(),
+                    )
                 } else {
                     Vec2::splat(0.5)
                 };

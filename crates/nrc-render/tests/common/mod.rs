@@ -245,6 +245,7 @@ pub fn render_scene(
         spp,
         seed,
         variance: true,
+        sequence: None,
     };
     render(scene, &scene.camera, tracer, &settings, &|_| {})
 }
@@ -389,6 +390,7 @@ pub fn accumulate_frames(
             spp: 1,
             seed: nrc_render::pass_seed(seed, f),
             emitter_samples: 0,
+            sequence: None,
         };
         let img = passes::run(pass, &input, source).image;
         for (s, p) in sum.iter_mut().zip(&img.data) {
@@ -519,5 +521,55 @@ pub fn enclosure(target: Vec3) -> Scene {
         false,
     )
     .camera(Vec3::ZERO, target, 60.0);
+    b.build()
+}
+
+/// A diffuse wall with a bright emissive rectangle on it, turned 17° so that its edges cross
+/// pixels at every coverage, a thin diffuse bar in front of it and a sill below that it lights
+/// (a window, its mullion and its sill, small).
+pub fn window() -> Scene {
+    let mut b = SceneBuilder::new();
+    let wall = b.material(mat::diffuse(Vec3::splat(0.5)));
+    let light = b.material(mat::emissive(Vec3::ZERO, Vec3::new(12.0, 10.0, 8.0), false));
+    let bar = b.material(mat::diffuse(Vec3::splat(0.3)));
+    b.mesh(
+        &Mesh::quad(
+            Vec3::ZERO,
+            Vec3::new(3.0, 0.0, 0.0),
+            Vec3::new(0.0, 3.0, 0.0),
+        ),
+        wall,
+        false,
+    );
+    let (s, c) = 17f32.to_radians().sin_cos();
+    b.mesh(
+        &Mesh::quad(
+            Vec3::new(0.1, 0.05, 0.01),
+            Vec3::new(c, s, 0.0) * 0.9,
+            Vec3::new(-s, c, 0.0) * 0.55,
+        ),
+        light,
+        false,
+    );
+    b.mesh(
+        &Mesh::quad(
+            Vec3::new(0.13, 0.0, 0.5),
+            Vec3::new(0.03, 0.0, 0.0),
+            Vec3::new(0.0, 1.2, 0.0),
+        ),
+        bar,
+        false,
+    );
+    // A sill below, lit by the emitter (the direct light of the depth-2 renders).
+    b.mesh(
+        &Mesh::quad(
+            Vec3::new(0.0, -0.75, 0.8),
+            Vec3::new(0.0, 0.0, 0.8),
+            Vec3::new(1.5, 0.0, 0.0),
+        ),
+        wall,
+        false,
+    );
+    b.camera(Vec3::new(0.0, 0.5, 3.0), Vec3::new(0.0, -0.1, 0.0), 50.0);
     b.build()
 }

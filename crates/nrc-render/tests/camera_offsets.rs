@@ -1,0 +1,130 @@
+//! Camera offsets from a per-pixel Owen-scrambled Sobol sequence (`nrc_render::PixelSequence`,
+//! `nrc compare --camera-offsets sobol`): the passes of a run that take consecutive points of
+//! it stay unbiased per pixel, and their mean has less variance than independent passes' where
+//! the image varies within a pixel (an emitter's edges, the light it throws). The controls: a
+//! sequence that does not advance between passes loses the gain, and one whose scramble is
+//! not renewed per run is biased (every run shares its offsets' error).
+
+mod common;
+
+use common::{per_pixel_z, render_scene, window};
+use glam::Vec3;
+use nrc_render::{PathTracer, PixelSequence, RenderSettings, pass_seed, render};
+use nrc_scene::{Image, Scene};
+
+const W: u32 = 20;
+const H: u32 = 16;
+const REF_SPP: u32 = 8192;
+const RUNS: u32 = 128;
+/// Passes of one sample a pixel in a run.
+const PASSES: u32 = 8;
+
+/// The emission seen and the direct light (depth 2).
+fn tracer() -> PathTracer {
+    PathTracer {
+        max_depth: 2,
+        ..PathTracer::default()
+    }
+}
+
+/// How a run's passes place their camera rays.
+#[derive(Clone, Copy, Debug)]
+enum Offsets {
+    Independent,
+    /// Pass `p` at point `p` of the run's sequence (what `nrc compare` does).
+    Sobol,
+    /// The control: every pass at point 0.
+    Stuck,
+    /// The control: the same scramble in every run.
+    SharedScramble,
+}
+
+/// `RUNS` runs, each the mean of `PASSES` one-sample passes.
+fn runs(scene: &Scene, offsets: Offsets) -> Vec<Image> {
+    (0..RUNS)
+        .map(|r| {
+            let run_seed = pass_seed(31, r);
+            let mut sum = vec![Vec3::ZERO; (W * H) as usize];
+            for p in 0..PASSES {
+                let sequence = match offsets {
+                    Offsets::Independent => None,
+                    Offsets::Sobol => Some(PixelSequence {
+                        seed: run_seed,
+                        first: p,
+                    }),
+                    Offsets::Stuck => Some(PixelSequence {
+                        seed: run_seed,
+                        first: 0,
+                    }),
+                    Offsets::SharedScramble => Some(PixelSequence { seed: 5, first: p }),
+                };
+                let settings = RenderSettings {
+                    width: W,
+                    height: H,
+                    spp: 1,
+                    seed: pass_seed(run_seed, p),
+                    variance: false,
+                    sequence,
+                };
+                let out = render(scene, &scene.camera, &tracer(), &settings, &|_| {});
+                for (s, v) in sum.iter_mut().zip(&out.mean.data) {
+                    *s += *v / PASSES as f32;
+                }
+            }
+            Image::from_data(W as usize, H as usize, sum).unwrap()
+        })
+        .collect()
+}
+
+/// The runs' variance of a pixel channel, summed over the image.
+fn summed_variance(runs: &[Image]) -> f64 {
+    let n = runs.len() as f64;
+    (0..runs[0].data.len())
+        .flat_map(|p| (0..3).map(move |c| (p, c)))
+        .map(|(p, c)| {
+            let xs: Vec<f64> = runs.iter().map(|r| r.data[p][c] as f64).collect();
+            let mean = xs.iter().sum::<f64>() / n;
+            xs.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1.0)
+        })
+        .sum()
+}
+
+#[test]
+fn sobol_offsets_are_unbiased_per_pixel_and_stratify_a_runs_passes() {
+    let scene = window();
+    let reference = render_scene(&scene, &tracer(), W, H, REF_SPP, 4242);
+    let ref_var = reference.variance.expect("variance at 8192 spp");
+
+    let sobol = runs(&scene, Offsets::Sobol);
+    let (worst, beyond, bound) = per_pixel_z(&sobol, &reference.mean, &ref_var, REF_SPP);
+    eprintln!("sobol: worst |z| {worst:.2} (bound {bound:.2}), {beyond} beyond");
+    assert_eq!(
+        beyond, 0,
+        "sobol offsets: worst |z| {worst:.2} against {bound:.2}"
+    );
+
+    let shared = runs(&scene, Offsets::SharedScramble);
+    let (worst_shared, beyond_shared, _) = per_pixel_z(&shared, &reference.mean, &ref_var, REF_SPP);
+    eprintln!("shared scramble (control): worst |z| {worst_shared:.2}, {beyond_shared} beyond");
+    assert!(
+        beyond_shared > 0,
+        "a scramble shared by every run should show its offsets' error (worst |z| {worst_shared:.2})"
+    );
+
+    let (v_sobol, v_indep, v_stuck) = (
+        summed_variance(&sobol),
+        summed_variance(&runs(&scene, Offsets::Independent)),
+        summed_variance(&runs(&scene, Offsets::Stuck)),
+    );
+    eprintln!(
+        "variance of a run: sobol {v_sobol:.4}, independent {v_indep:.4}, stuck {v_stuck:.4}"
+    );
+    assert!(
+        v_sobol < 0.6 * v_indep,
+        "sobol {v_sobol:.4} against independent {v_indep:.4}"
+    );
+    assert!(
+        v_stuck > v_indep,
+        "a sequence stuck at one point should not stratify: {v_stuck:.4} against {v_indep:.4}"
+    );
+}
