@@ -154,13 +154,8 @@ pub struct CompareArgs {
     #[command(flatten)]
     pub emitters: nrc_harness::options::EmitterArgs,
 
-    /// Where a run's passes put their camera rays in each pixel, every method alike:
-    /// `independent` (each pass's offsets uniform and independent) or `sobol` (a run's passes
-    /// take consecutive points of one Owen-scrambled Sobol sequence per pixel, scrambled anew
-    /// each run: each pass stays unbiased, and together they stratify the pixel's footprint,
-    /// as a real-time renderer's jitter sequence does).
-    #[arg(long, value_enum, default_value_t = nrc_harness::budget::CameraOffsets::Independent)]
-    pub camera_offsets: nrc_harness::budget::CameraOffsets,
+    #[command(flatten)]
+    pub offsets: nrc_harness::options::OffsetArgs,
 
     /// Cache methods: frames of online training before measurement (untimed).
     #[arg(long, default_value_t = 64)]
@@ -407,7 +402,7 @@ pub(crate) fn comparison(
         exclude_emitters: args.exclude_emitters,
         diagnostics: args.diagnostics,
         emitter_samples: args.emitters.emitter_samples,
-        camera_offsets: args.camera_offsets,
+        camera_offsets: args.offsets.camera_offsets,
         tracer: args.depth.tracer(),
         cache: cache_settings,
         scene_name: args

@@ -62,6 +62,9 @@ pub struct RenderArgs {
     #[command(flatten)]
     pub emitters: nrc_harness::options::EmitterArgs,
 
+    #[command(flatten)]
+    pub offsets: nrc_harness::options::OffsetArgs,
+
     /// Render from a saved cache (a snapshot written by `nrc train --snapshot`): camera
     /// paths end in the cache by --termination instead of being traced to the end.
     #[arg(long)]
@@ -148,6 +151,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
             spp: args.spp,
             seed: args.seed,
             emitter_samples: args.emitters.emitter_samples,
+            camera_offsets: args.offsets.camera_offsets,
             variance: args.variance.is_some(),
             progress: Some(Box::new(move |n| counter.inc(n))),
         })

@@ -295,7 +295,23 @@ fn bad_options_are_errors() {
         ]),
         "camera",
     );
+    // The sample variance is not that of stratified samples.
+    let var = dir.path().join("v.exr");
+    assert_clean_error(
+        &with(&[
+            "--camera-offsets",
+            "sobol",
+            "--variance",
+            var.to_str().unwrap(),
+            "--spp",
+            "2",
+        ]),
+        "--camera-offsets sobol",
+    );
     // Value syntax errors come from the argument parser: non-zero, no panic.
+    let out = with(&["--camera-offsets", "halton"]);
+    assert!(!out.status.success());
+    assert!(text(&out.stderr).contains("--camera-offsets"));
     let out = with(&["--camera-pos", "1,2"]);
     assert!(!out.status.success());
     assert!(!text(&out.stderr).contains("panicked"));

@@ -661,6 +661,14 @@ pub fn compare_runs(
             .notes
             .push(format!("Equal-time tolerance: {TOLERANCE}."));
     }
+    if c.camera_offsets == CameraOffsets::Sobol {
+        report.notes.push(
+            "Camera offsets: sobol (each run's passes take consecutive points of one \
+             Owen-scrambled Sobol sequence per pixel; --converge frames and sweep steps each \
+             start a sequence of their own)."
+                .into(),
+        );
+    }
     if c.sweep_steps.is_some() {
         report.notes.push(format!(
             "Sweep: each method at the budget × 1, 2, …, {} (one frame each; the first is run 0).",

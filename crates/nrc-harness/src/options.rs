@@ -12,6 +12,7 @@ use nrc_render::{LightStrategy, PathTracer, Termination};
 use nrc_scene::{Camera, Scene};
 use nrc_train::mix::ProducerOptions;
 
+use crate::budget::CameraOffsets;
 use crate::error::HarnessError;
 use crate::methods::CacheMethodSettings;
 use nrc_render::error::TerminationError;
@@ -71,6 +72,19 @@ pub struct EmitterArgs {
     /// own camera rays: unbiased, and cheap (one ray each, no shading); 0: none. At most 256
     #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u32).range(0..=nrc_render::emitters::MAX_EXTRA as i64))]
     pub emitter_samples: u32,
+}
+
+/// Where camera rays lie in their pixels (`render`, `compare`, the Python module's `render`).
+#[derive(clap::Args, Debug, Clone, Copy, Default)]
+pub struct OffsetArgs {
+    /// Where camera rays lie in their pixels: `independent` (uniform and independent), or
+    /// `sobol`: a pixel's samples (a render's, or every pass of a comparison's run, every
+    /// method alike) take consecutive points of one Owen-scrambled Sobol sequence, scrambled
+    /// anew per pixel and run. Each sample is still uniform in the pixel, so every estimate
+    /// stays unbiased; together they stratify the pixel's footprint, as a real-time renderer's
+    /// jitter sequence does, which lowers the noise of edges, textures and sharp reflections
+    #[arg(long, value_enum, default_value_t = CameraOffsets::Independent)]
+    pub camera_offsets: CameraOffsets,
 }
 
 /// Direct-illumination estimators, as named on the command line.

@@ -13,6 +13,8 @@ use nrc_render::passes::{
 };
 use nrc_render::{LightStrategy, PathTracer, Termination, ZeroSource};
 use nrc_scene::{Camera, Scene};
+
+use crate::budget::CameraOffsets;
 use nrc_train::schedule::Phase;
 use nrc_train::{FrameStats, OnlineTrainer, QueryMaker};
 
@@ -190,6 +192,9 @@ pub struct RenderJob<'a> {
     pub seed: u64,
     /// Extra camera rays at the outline of emitters ([`nrc_render::emitters::supersample`]).
     pub emitter_samples: u32,
+    /// Where the camera rays lie in their pixels: with [`CameraOffsets::Sobol`] each frame's
+    /// samples are the first points of its pixels' sequences, seeded by the frame's seed.
+    pub camera_offsets: CameraOffsets,
     /// The path tracer's per-pixel variance (pt passes only).
     pub variance: bool,
     /// Told of the pixels done as the path tracer's tiles finish (pt passes only).
@@ -216,6 +221,12 @@ pub fn render(job: RenderJob) -> Result<Rendered> {
              changes: give one of them"
         );
     }
+    if job.variance && job.camera_offsets == CameraOffsets::Sobol {
+        bail!(
+            "--variance is the variance of one independent sample, which stratified \
+             --camera-offsets sobol samples are not: give one of them"
+        );
+    }
     let mut pass: Box<dyn RenderPass> = match job.pass.get::<PathTracedSettings>() {
         Some(&PathTracedSettings { strategy }) => {
             let mut p = PathTracedPass::new(PathTracer {
@@ -232,19 +243,21 @@ pub fn render(job: RenderJob) -> Result<Rendered> {
     let start = std::time::Instant::now();
     let mut out = None;
     for (f, camera) in job.cameras.iter().enumerate() {
+        let seed = if frames == 1 {
+            job.seed
+        } else {
+            nrc_render::pass_seed(job.seed, f as u32)
+        };
         let input = FrameInput {
             scene: job.scene,
             camera,
             width: job.width,
             height: job.height,
             spp: job.spp,
-            seed: if frames == 1 {
-                job.seed
-            } else {
-                nrc_render::pass_seed(job.seed, f as u32)
-            },
+            seed,
             emitter_samples: job.emitter_samples,
-            sequence: None,
+            sequence: (job.camera_offsets == CameraOffsets::Sobol)
+                .then_some(nrc_render::PixelSequence { seed, first: 0 }),
         };
         out = Some(match job.cache {
             Some(c) => passes::run(pass.as_mut(), &input, &nrc_train::CacheSource::new(c)),

@@ -776,6 +776,8 @@ struct RenderOptions {
     tracer: TracerArgs,
     #[command(flatten)]
     emitters: nrc_harness::options::EmitterArgs,
+    #[command(flatten)]
+    offsets: nrc_harness::options::OffsetArgs,
     #[arg(long, default_value = "spread", value_parser = nrc_harness::options::parse_termination)]
     termination: Termination,
     #[arg(long)]
@@ -791,6 +793,7 @@ struct RenderCall {
     spp: u32,
     seed: u64,
     emitter_samples: u32,
+    camera_offsets: nrc_harness::budget::CameraOffsets,
 }
 
 impl RenderCall {
@@ -811,6 +814,7 @@ impl RenderCall {
             spp: self.spp,
             seed: self.seed,
             emitter_samples: self.emitter_samples,
+            camera_offsets: self.camera_offsets,
             variance: false,
             progress: None,
         })?;
@@ -866,6 +870,7 @@ fn render_call(
             spp,
             seed,
             emitter_samples: parsed.emitters.emitter_samples,
+            camera_offsets: parsed.offsets.camera_offsets,
         },
         parsed,
     ))
@@ -877,7 +882,8 @@ fn render_call(
 /// Other keyword options: `max_depth`, `rr_depth`, `strategy`, `termination`,
 /// `emitter_samples` (extra camera rays at the outline of emitters), `glossy_samples` (more BSDF
 /// samples of the direct light at glossy first vertices), `direct_samples` (light samples of NEE
-/// at first vertices), `allow_other_scene`.
+/// at first vertices), `camera_offsets` (`"independent"` or `"sobol"`: a pixel's samples
+/// stratified together by one Owen-scrambled Sobol sequence), `allow_other_scene`.
 #[pyfunction]
 #[pyo3(signature = (scene, pass_=None, spp=1, width=128, height=128, cache=None, seed=1, **options))]
 #[allow(clippy::too_many_arguments)]

@@ -120,6 +120,23 @@ def test_direct_samples_render_as_the_program(cornell, tmp_path):
             nrc.render(cornell, spp=1, width=8, height=8, direct_samples=bad)
 
 
+def test_sobol_camera_offsets_render_as_the_program(cornell, tmp_path):
+    """`camera_offsets="sobol"` stratifies a pixel's samples by one scrambled Sobol sequence as
+    `nrc render --camera-offsets sobol` does (the same bits); the image differs from the
+    independent offsets'; an unknown kind of offsets is refused."""
+    out = tmp_path / "sobol.exr"
+    nrc.cli([
+        "render", "--scene", str(SCENES / "cornell-box.gltf"), "--camera-offsets", "sobol",
+        "--spp", "4", "--width", "24", "--height", "24", "--seed", "5", "--out", str(out),
+    ])
+    sobol = nrc.render(cornell, spp=4, width=24, height=24, seed=5, camera_offsets="sobol")
+    assert np.array_equal(sobol, nrc.read_exr(out))
+    independent = nrc.render(cornell, spp=4, width=24, height=24, seed=5)
+    assert np.any(sobol != independent)
+    with pytest.raises(ValueError, match="camera-offsets"):
+        nrc.render(cornell, spp=1, width=8, height=8, camera_offsets="halton")
+
+
 def test_emitter_samples_render_as_the_program(cornell, tmp_path):
     """`emitter_samples=8` takes the extra camera rays at the outline of the Cornell box's
     light as `nrc render --emitter-samples 8` does (the same bits); the image differs from the
