@@ -102,17 +102,24 @@ def test_light_tree_renders_as_the_program(tmp_path):
         nrc.Scene.load(hall, light_sampler="bvh")
 
 
+def program_render(tmp_path, flags, spp, size, seed=5):
+    """`nrc render` of the Cornell box with `flags` at `spp` and `size` (width, height), read
+    back: what the module's `render` with the same options must equal bit for bit."""
+    out = tmp_path / "program.exr"
+    nrc.cli([
+        "render", "--scene", str(SCENES / "cornell-box.gltf"), *flags, "--spp", str(spp),
+        "--width", str(size[0]), "--height", str(size[1]), "--seed", str(seed), "--out", str(out),
+    ])
+    return nrc.read_exr(out)
+
+
 def test_direct_samples_render_as_the_program(cornell, tmp_path):
     """`direct_samples=4` takes four stratified light samples at each first vertex as
     `nrc render --direct-samples 4` does (the same bits); the image differs from one light
     sample's; a count out of its range (1 to 64) is refused."""
-    out = tmp_path / "direct.exr"
-    nrc.cli([
-        "render", "--scene", str(SCENES / "cornell-box.gltf"), "--direct-samples", "4",
-        "--spp", "1", "--width", "24", "--height", "24", "--seed", "5", "--out", str(out),
-    ])
+    program = program_render(tmp_path, ["--direct-samples", "4"], 1, (24, 24))
     four = nrc.render(cornell, spp=1, width=24, height=24, seed=5, direct_samples=4)
-    assert np.array_equal(four, nrc.read_exr(out))
+    assert np.array_equal(four, program)
     one = nrc.render(cornell, spp=1, width=24, height=24, seed=5)
     assert np.any(four != one)
     for bad in (0, 1000):
@@ -124,13 +131,9 @@ def test_sobol_camera_offsets_render_as_the_program(cornell, tmp_path):
     """`camera_offsets="sobol"` stratifies a pixel's samples by one scrambled Sobol sequence as
     `nrc render --camera-offsets sobol` does (the same bits); the image differs from the
     independent offsets'; an unknown kind of offsets is refused."""
-    out = tmp_path / "sobol.exr"
-    nrc.cli([
-        "render", "--scene", str(SCENES / "cornell-box.gltf"), "--camera-offsets", "sobol",
-        "--spp", "4", "--width", "24", "--height", "24", "--seed", "5", "--out", str(out),
-    ])
+    program = program_render(tmp_path, ["--camera-offsets", "sobol"], 4, (24, 24))
     sobol = nrc.render(cornell, spp=4, width=24, height=24, seed=5, camera_offsets="sobol")
-    assert np.array_equal(sobol, nrc.read_exr(out))
+    assert np.array_equal(sobol, program)
     independent = nrc.render(cornell, spp=4, width=24, height=24, seed=5)
     assert np.any(sobol != independent)
     with pytest.raises(ValueError, match="camera-offsets"):
@@ -141,13 +144,9 @@ def test_emitter_samples_render_as_the_program(cornell, tmp_path):
     """`emitter_samples=8` takes the extra camera rays at the outline of the Cornell box's
     light as `nrc render --emitter-samples 8` does (the same bits); the image differs from the
     one without them only near the light; an out-of-range count is refused."""
-    out = tmp_path / "aa.exr"
-    nrc.cli([
-        "render", "--scene", str(SCENES / "cornell-box.gltf"), "--emitter-samples", "8",
-        "--spp", "1", "--width", "32", "--height", "32", "--seed", "5", "--out", str(out),
-    ])
+    program = program_render(tmp_path, ["--emitter-samples", "8"], 1, (32, 32))
     aa = nrc.render(cornell, spp=1, width=32, height=32, seed=5, emitter_samples=8)
-    assert np.array_equal(aa, nrc.read_exr(out))
+    assert np.array_equal(aa, program)
     plain = nrc.render(cornell, spp=1, width=32, height=32, seed=5)
     changed = np.any(aa != plain, axis=2)
     assert 0 < changed.sum() < 0.25 * changed.size

@@ -22,7 +22,9 @@ pub struct RenderSettings {
     pub seed: u64,
     /// Also compute the per-pixel sample variance.
     pub variance: bool,
-    /// The camera offsets' sequence ([`PixelSequence`]; `None`: independent offsets).
+    /// The camera offsets' sequence ([`PixelSequence`]; `None`: independent offsets). With
+    /// one, `variance` is the spread of the pixel's stratified samples, not the variance of
+    /// one independent sample (`nrc render` refuses the pair).
     pub sequence: Option<PixelSequence>,
 }
 
