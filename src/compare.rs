@@ -101,7 +101,7 @@ pub struct CompareArgs {
     /// the scene posed at `frame / fps` seconds (glTF node animation), its state carried over,
     /// each against its own reference (path traced at --reference-spp); writes `sequence.md`,
     /// `sequence.json` and `sequence-mape.png` with |E| and |E′| of Hedman et al. §5.2.
-    #[arg(long, value_name = "FRAMES", conflicts_with_all = ["converge", "sweep", "reference"])]
+    #[arg(long, value_name = "FRAMES", conflicts_with_all = ["converge", "sweep", "reference", "interleave"])]
     pub sequence: Option<u32>,
 
     /// Frames per second of scene time in a --sequence.
@@ -151,6 +151,14 @@ pub struct CompareArgs {
     #[arg(long)]
     pub diagnostics: bool,
 
+    /// Render the runs interleaved across methods: for each run, every method restarted (its
+    /// untimed warm-up), then their timed frames back to back, in alternating order, so that a
+    /// slow moment of a shared machine falls on every method of a run alike instead of on one
+    /// method's runs. Each frame keeps its seeds and state (at --equal-spp the same frames as
+    /// without); every method's state is held at once (memory).
+    #[arg(long)]
+    pub interleave: bool,
+
     #[command(flatten)]
     pub emitters: nrc_harness::options::EmitterArgs,
 
@@ -177,7 +185,7 @@ pub struct CompareArgs {
     /// it: reference chunks and one job per method and run, run by `nrc job DIR K` (or the Ray
     /// driver, or a Slurm array: `scripts/ray_study.py`, `scripts/slurm_study.sh`), then
     /// assembled by `nrc compare --merge DIR`.
-    #[arg(long, value_name = "DIR", conflicts_with_all = ["sweep", "converge", "sequence"])]
+    #[arg(long, value_name = "DIR", conflicts_with_all = ["sweep", "converge", "sequence", "interleave"])]
     pub plan: Option<PathBuf>,
 
     /// With --plan: jobs the reference's samples are split into (merged exactly).
@@ -403,6 +411,7 @@ pub(crate) fn comparison(
         diagnostics: args.diagnostics,
         emitter_samples: args.emitters.emitter_samples,
         camera_offsets: args.offsets.camera_offsets,
+        interleave: args.interleave,
         tracer: args.depth.tracer(),
         cache: cache_settings,
         scene_name: args

@@ -800,6 +800,24 @@ fn converge_counts_frames_to_the_targets_first_frame_error() {
     assert_clean_error(&run(args("pt-4spp")), &["--converge-target", "pt-4spp"]);
 }
 
+/// A trained cache's comparison kept small: 3 training frames, a coarse model, 24 × 24 pixels, a
+/// 16-spp reference.
+const SMALL_RUN: [&str; 13] = [
+    "--train-frames",
+    "3",
+    "--records",
+    "1024",
+    "--resolution",
+    "64",
+    "--width",
+    "24",
+    "--height",
+    "24",
+    "--reference-spp",
+    "16",
+    "--no-flip",
+];
+
 /// Every stateful method's first timed frame of every run sees a history warmed by as many
 /// frames as `--train-frames`, at the comparison's size: the resampling passes that read no
 /// cache (their untimed warm-up per run) and those that read one (their pass rendered every
@@ -809,34 +827,27 @@ fn converge_counts_frames_to_the_targets_first_frame_error() {
 fn stateful_methods_start_every_run_warm() {
     let dir = tempfile::tempdir().unwrap();
     let (cache, out) = (dir.path().join("cache"), dir.path().join("out"));
-    let o = nrc(&[
-        "compare",
-        "--scene",
-        &cornell(),
-        "--methods",
-        "pt-1spp,restir-di,restir-gi-nrc,nrc-restir,nrc-pt-sl",
-        "--equal-spp",
-        "1",
-        "--runs",
-        "2",
-        "--train-frames",
-        "3",
-        "--records",
-        "1024",
-        "--resolution",
-        "64",
-        "--width",
-        "24",
-        "--height",
-        "24",
-        "--reference-spp",
-        "16",
-        "--no-flip",
-        "--cache-dir",
-        cache.to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-    ]);
+    let scene = cornell();
+    let args = [
+        &[
+            "compare",
+            "--scene",
+            &scene,
+            "--methods",
+            "pt-1spp,restir-di,restir-gi-nrc,nrc-restir,nrc-pt-sl",
+            "--equal-spp",
+            "1",
+            "--runs",
+            "2",
+            "--cache-dir",
+            cache.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ][..],
+        &SMALL_RUN[..],
+    ]
+    .concat();
+    let o = nrc(&args);
     assert_ok(&o);
     let runs = read_runs(&out).runs;
     for method in ["restir-di", "restir-gi-nrc", "nrc-restir"] {
@@ -859,6 +870,82 @@ fn stateful_methods_start_every_run_warm() {
     {
         assert_eq!(rec.warm_frames, None, "{}", rec.method);
     }
+}
+
+/// `--interleave` renders each run's methods back to back, after restarting them all, and
+/// renders the same frames as method by method: every run's errors agree to the bit, stateful
+/// methods and a trained cache included, while the runs differ from each other (so agreement
+/// is not of constant images), and the report says how the runs were rendered.
+#[test]
+fn interleaved_runs_render_the_same_frames_as_method_by_method() {
+    let dir = tempfile::tempdir().unwrap();
+    let cache = dir.path().join("cache");
+    let scene = cornell();
+    let run = |out: &Path, extra: &[&str]| {
+        let mut args = vec![
+            "compare",
+            "--scene",
+            &scene,
+            "--methods",
+            "pt-1spp,restir-gi,nrc-restir",
+            "--equal-spp",
+            "2",
+            "--runs",
+            "3",
+            "--camera-offsets",
+            "sobol",
+        ];
+        args.extend_from_slice(&SMALL_RUN);
+        let cache = cache.to_str().unwrap().to_string();
+        let out = out.to_str().unwrap().to_string();
+        args.push("--cache-dir");
+        args.push(&cache);
+        args.push("--out");
+        args.push(&out);
+        args.extend_from_slice(extra);
+        let o = nrc(&args);
+        assert_ok(&o);
+    };
+    let (plain, interleaved) = (dir.path().join("plain"), dir.path().join("interleaved"));
+    run(&plain, &[]);
+    run(&interleaved, &["--interleave"]);
+    let (a, b) = (read_runs(&plain).runs, read_runs(&interleaved).runs);
+    assert_eq!(a.len(), 9);
+    assert_eq!(b.len(), 9);
+    for x in &a {
+        let y = b
+            .iter()
+            .find(|y| y.method == x.method && y.run == x.run)
+            .unwrap_or_else(|| panic!("{} run {:?} interleaved", x.method, x.run));
+        assert_eq!(
+            (x.seed, x.passes, x.warm_frames),
+            (y.seed, y.passes, y.warm_frames)
+        );
+        assert_eq!(
+            x.metrics.mse.to_bits(),
+            y.metrics.mse.to_bits(),
+            "{} run {:?}: {} method by method, {} interleaved",
+            x.method,
+            x.run,
+            x.metrics.mse,
+            y.metrics.mse
+        );
+    }
+    // The control: each method's runs are distinct estimates.
+    for m in ["pt-1spp", "restir-gi", "nrc-restir"] {
+        let mut mses: Vec<u64> = a
+            .iter()
+            .filter(|x| x.method == m)
+            .map(|x| x.metrics.mse.to_bits())
+            .collect();
+        mses.sort_unstable();
+        mses.dedup();
+        assert_eq!(mses.len(), 3, "{m}: runs with equal errors");
+    }
+    let report = std::fs::read_to_string(interleaved.join("report.md")).unwrap();
+    assert!(report.contains("Runs interleaved"), "{report}");
+    let report = std::fs::read_to_string(plain.join("report.md")).unwrap();
+    assert!(!report.contains("Runs interleaved"), "{report}");
 }
 
 /// `--cache-kind hash` makes the cache methods train the spatial-hash cache: `nrc-pt-sl` runs

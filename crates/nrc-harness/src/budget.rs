@@ -290,7 +290,7 @@ pub fn render_frame(
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
 
     /// A method whose passes are constant images worth `pass index + 1` and take a fixed time.
@@ -330,23 +330,26 @@ mod tests {
             std::thread::sleep(self.sleep);
             self.sequences.push(sequence);
             self.passes += 1;
-            let image = Image::from_data(
-                width as usize,
-                height as usize,
-                vec![Vec3::splat(self.passes as f32); (width * height) as usize],
-            )
-            .unwrap();
-            Estimate {
-                image,
-                invalid_samples: 0,
-                warm_frames: None,
-                rays: 0,
-                phases: PhaseTimes::default(),
-            }
+            constant_estimate(width, height, self.passes as f32)
         }
     }
 
-    fn empty_scene() -> Scene {
+    /// An estimate whose every pixel is `value`.
+    pub(crate) fn constant_estimate(width: u32, height: u32, value: f32) -> Estimate {
+        let n = (width * height) as usize;
+        let image =
+            Image::from_data(width as usize, height as usize, vec![Vec3::splat(value); n]).unwrap();
+        Estimate {
+            image,
+            invalid_samples: 0,
+            warm_frames: None,
+            rays: 0,
+            phases: PhaseTimes::default(),
+        }
+    }
+
+    /// One triangle and nothing else (for methods that do not trace it).
+    pub(crate) fn empty_scene() -> Scene {
         Scene::from_description(nrc_scene::SceneDescription {
             positions: vec![Vec3::ZERO, Vec3::X, Vec3::Y],
             triangles: vec![[0, 1, 2]],

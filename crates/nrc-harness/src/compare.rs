@@ -72,6 +72,11 @@ pub struct Comparison {
     pub emitter_samples: u32,
     /// Where a run's passes put their camera rays in each pixel, every method alike.
     pub camera_offsets: CameraOffsets,
+    /// Render the runs interleaved across methods ([`interleaved_frames`]): run `r` of every
+    /// method restarted first, then their timed frames back to back, so that a slow moment of
+    /// a shared machine falls on every method of that run alike. Every method's state is held
+    /// at once. Runs from `stored` frames, sweeps and frames to error are not interleaved.
+    pub interleave: bool,
     /// Depth limit and Russian roulette shared by every method and the reference.
     pub tracer: PathTracer,
     /// How cache methods are set up.
@@ -98,7 +103,8 @@ pub struct Converge {
 /// What the comparison loop reports as it goes.
 #[derive(Clone, Copy, Debug)]
 pub enum Progress<'a> {
-    /// A method starts (after its untimed preparation).
+    /// A method starts (after its untimed preparation), or with `--interleave` a method's
+    /// run starts its untimed warm-up.
     Method(&'a str),
     /// A frame is done.
     Frame,
@@ -291,11 +297,22 @@ pub fn method_seed(c: &Comparison, name: &str) -> u64 {
 /// Run `r` of a ready method: restarted (its state reset, untimed warm-up included) and one
 /// frame rendered within the comparison's budget.
 pub fn run_frame(c: &Comparison, scene: &Scene, method: &mut dyn Method, r: u32) -> Result<Frame> {
+    restart_run(c, scene, method, r)?;
+    timed_frame(c, scene, method, r)
+}
+
+/// The untimed half of [`run_frame`]: the method's state reset and warmed up for run `r`.
+fn restart_run(c: &Comparison, scene: &Scene, method: &mut dyn Method, r: u32) -> Result<()> {
     let name = method.name().to_string();
     let seed = pass_seed(method_seed(c, &name), r);
     method
         .restart(scene, &scene.camera, c.width, c.height, r, seed)
-        .map_err(|e| anyhow::anyhow!("{name}: {e}"))?;
+        .map_err(|e| anyhow::anyhow!("{name}: {e}"))
+}
+
+/// The timed half of [`run_frame`]: run `r`'s frame of a restarted method.
+fn timed_frame(c: &Comparison, scene: &Scene, method: &mut dyn Method, r: u32) -> Result<Frame> {
+    let seed = pass_seed(method_seed(c, method.name()), r);
     Ok(render_frame(
         method,
         scene,
@@ -308,6 +325,38 @@ pub fn run_frame(c: &Comparison, scene: &Scene, method: &mut dyn Method, r: u32)
             offsets: c.camera_offsets,
         },
     )?)
+}
+
+/// Every run of every method, interleaved (`--interleave`): for each run, every method is
+/// restarted (its untimed warm-up), then their timed frames are rendered back to back. Even runs
+/// go in the methods' order, odd ones in reverse, restarts and frames alike, so that over a
+/// pair of runs each position in the run (first or last timed, timed soonest after its own
+/// warm-up) is taken by the methods at the two ends in turn, and a steady drift of the
+/// machine's speed does not favour the first methods. Each frame has the seed and state that
+/// [`run_frame`] gives it method by method (at equal samples the same frame, bit for bit);
+/// only when it is timed changes. `frames[i][r]` is method `i`'s run `r`.
+pub fn interleaved_frames(
+    c: &Comparison,
+    scene: &Scene,
+    methods: &mut [Box<dyn Method>],
+    progress: &dyn Fn(Progress<'_>),
+) -> Result<Vec<Vec<Frame>>> {
+    let mut frames: Vec<Vec<Frame>> = methods.iter().map(|_| Vec::new()).collect();
+    for r in 0..c.runs {
+        let mut order: Vec<usize> = (0..methods.len()).collect();
+        if r % 2 == 1 {
+            order.reverse();
+        }
+        for &i in &order {
+            progress(Progress::Method(methods[i].name()));
+            restart_run(c, scene, methods[i].as_mut(), r)?;
+        }
+        for &i in &order {
+            frames[i].push(timed_frame(c, scene, methods[i].as_mut(), r)?);
+            progress(Progress::Frame);
+        }
+    }
+    Ok(frames)
 }
 
 /// Run frames rendered elsewhere (the jobs of a study, [`crate::study`]): method `i`'s name
@@ -390,11 +439,29 @@ pub fn compare_runs(
     let mut plot_series = Vec::new();
     let mut target_error: Option<f64> = None;
 
+    // --interleave: every method built and its runs rendered first (then taken in turn).
+    let mut ready: Vec<Option<Box<dyn Method>>> = Vec::new();
+    let mut rendered: Vec<std::vec::IntoIter<Frame>> = Vec::new();
+    if c.interleave && stored.is_none() {
+        let mut built = c
+            .methods
+            .iter()
+            .map(|spec| ready_method(c, scene, spec))
+            .collect::<Result<Vec<_>>>()?;
+        rendered = interleaved_frames(c, scene, &mut built, progress)?
+            .into_iter()
+            .map(Vec::into_iter)
+            .collect();
+        ready = built.into_iter().map(Some).collect();
+    }
+
     for (index, spec) in c.methods.iter().enumerate() {
-        let mut method = match stored {
-            None => Some(ready_method(c, scene, spec)?),
-            Some(_) => None,
+        let mut method = match (stored, ready.get_mut(index).and_then(Option::take)) {
+            (None, Some(m)) => Some(m),
+            (None, None) => Some(ready_method(c, scene, spec)?),
+            (Some(_), _) => None,
         };
+        let mut pre_rendered = rendered.get_mut(index);
         let name = match (&method, stored) {
             (Some(m), _) => m.name().to_string(),
             (None, Some(s)) => s.name(index)?,
@@ -444,10 +511,13 @@ pub fn compare_runs(
         let mut first: Option<(Frame, ErrorMetrics)> = None;
         for r in 0..c.runs {
             let seed = pass_seed(base, r);
-            let frame = match (&mut method, stored) {
-                (Some(m), _) => run_frame(c, scene, m.as_mut(), r)?,
-                (None, Some(s)) => s.frame(index, r)?,
-                (None, None) => unreachable!("a method is built where no runs are stored"),
+            let frame = match (&mut method, stored, pre_rendered.as_mut()) {
+                (_, _, Some(frames)) => frames.next().context("an interleaved run per run")?,
+                (Some(m), _, None) => run_frame(c, scene, m.as_mut(), r)?,
+                (None, Some(s), None) => s.frame(index, r)?,
+                (None, None, None) => {
+                    unreachable!("a method is built where no runs are stored")
+                }
             };
             let (frame, m, flip_map, spread) = evaluate(frame)?;
             spreads.push(spread);
@@ -473,7 +543,9 @@ pub fn compare_runs(
                 write_images(c, &name, &frame.image, &ref_view, flip_map.as_ref())?;
                 first = Some((frame, m));
             }
-            progress(Progress::Frame);
+            if pre_rendered.is_none() {
+                progress(Progress::Frame);
+            }
         }
         if c.diagnostics {
             write_diagnostics(
@@ -669,6 +741,14 @@ pub fn compare_runs(
                 .into(),
         );
     }
+    if c.interleave && stored.is_none() {
+        report.notes.push(
+            "Runs interleaved: for each run every method was restarted (its untimed warm-up), \
+             then their timed frames rendered back to back, in the methods' order on even runs \
+             and in reverse on odd ones (sweeps and frames to error are not interleaved)."
+                .into(),
+        );
+    }
     if c.sweep_steps.is_some() {
         report.notes.push(format!(
             "Sweep: each method at the budget × 1, 2, …, {} (one frame each; the first is run 0).",
@@ -802,4 +882,150 @@ fn write_images(
         )?;
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use std::sync::{Arc, Mutex};
+
+    use nrc_cache::{CacheConfig, CacheDevice};
+    use nrc_render::PixelSequence;
+    use nrc_scene::Camera;
+
+    use super::*;
+    use crate::budget::Estimate;
+    use crate::budget::tests::{constant_estimate, empty_scene};
+    use crate::error::HarnessError;
+
+    /// A method that logs its restarts and passes (`"restart NAME RUN"`, `"pass NAME"`) and
+    /// renders a constant image.
+    struct Logged {
+        name: String,
+        /// Its place in the list: its frames are worth `10 · index + run`.
+        index: u32,
+        run: u32,
+        log: Arc<Mutex<Vec<String>>>,
+    }
+
+    impl Method for Logged {
+        fn name(&self) -> &str {
+            &self.name
+        }
+        fn samples_per_pass(&self) -> u32 {
+            1
+        }
+        fn restart(
+            &mut self,
+            _: &Scene,
+            _: &Camera,
+            _: u32,
+            _: u32,
+            run: u32,
+            _: u64,
+        ) -> Result<(), HarnessError> {
+            let line = format!("restart {} {run}", self.name);
+            self.log.lock().unwrap().push(line);
+            self.run = run;
+            Ok(())
+        }
+        fn render_estimate(
+            &mut self,
+            _: &Scene,
+            _: &Camera,
+            width: u32,
+            height: u32,
+            _: u64,
+            _: Option<PixelSequence>,
+        ) -> Estimate {
+            self.log.lock().unwrap().push(format!("pass {}", self.name));
+            constant_estimate(width, height, (10 * self.index + self.run) as f32)
+        }
+    }
+
+    fn comparison(runs: u32) -> Comparison {
+        Comparison {
+            methods: Vec::new(),
+            budget: Budget::Passes(1),
+            width: 2,
+            height: 2,
+            runs,
+            sweep_steps: None,
+            flip: false,
+            out: PathBuf::new(),
+            seed: 1,
+            exposure: 0.0,
+            exclude_emitters: false,
+            diagnostics: false,
+            emitter_samples: 0,
+            camera_offsets: CameraOffsets::Independent,
+            interleave: true,
+            tracer: PathTracer::default(),
+            cache: CacheMethodSettings::new(CacheConfig::hash_grid_preset(), CacheDevice::Cpu),
+            converge: None,
+            scene_name: String::new(),
+            scene_path: String::new(),
+        }
+    }
+
+    /// Each run restarts every method before any of them renders, then renders them back to
+    /// back, in turn forwards and backwards (restarts too); method i's frames are its runs', in
+    /// run order.
+    /// (Method by method, [`run_frame`] restarts and renders each in one go: the control.)
+    #[test]
+    fn interleaved_runs_restart_all_then_time_all_in_alternating_order() {
+        let scene = empty_scene();
+        let log = Arc::new(Mutex::new(Vec::new()));
+        let mut methods: Vec<Box<dyn Method>> = ["a", "b", "c"]
+            .iter()
+            .enumerate()
+            .map(|(index, n)| {
+                Box::new(Logged {
+                    name: n.to_string(),
+                    index: index as u32,
+                    run: 0,
+                    log: log.clone(),
+                }) as Box<dyn Method>
+            })
+            .collect();
+        let c = comparison(3);
+        let frames = interleaved_frames(&c, &scene, &mut methods, &|_| {}).unwrap();
+        // Method i's run r is its frame worth 10 i + r.
+        assert_eq!(frames.len(), 3);
+        for (i, f) in frames.iter().enumerate() {
+            let values: Vec<f32> = f.iter().map(|x| x.image.data[0].x).collect();
+            let expected: Vec<f32> = (0..3).map(|r| (10 * i + r) as f32).collect();
+            assert_eq!(values, expected, "method {i}");
+        }
+        let expected: Vec<String> = [
+            "restart a 0",
+            "restart b 0",
+            "restart c 0",
+            "pass a",
+            "pass b",
+            "pass c",
+            "restart c 1",
+            "restart b 1",
+            "restart a 1",
+            "pass c",
+            "pass b",
+            "pass a",
+            "restart a 2",
+            "restart b 2",
+            "restart c 2",
+            "pass a",
+            "pass b",
+            "pass c",
+        ]
+        .iter()
+        .map(|s| s.to_string())
+        .collect();
+        assert_eq!(*log.lock().unwrap(), expected);
+
+        // The control: method by method, each run restarts and renders one method at a time.
+        log.lock().unwrap().clear();
+        for m in methods.iter_mut() {
+            run_frame(&c, &scene, m.as_mut(), 0).unwrap();
+        }
+        assert_ne!(log.lock().unwrap()[..6], expected[..6]);
+    }
 }

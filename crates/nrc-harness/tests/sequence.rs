@@ -33,6 +33,7 @@ fn a_sequence_reports_every_frame_of_every_method() {
         diagnostics: false,
         emitter_samples: 0,
         camera_offsets: Default::default(),
+        interleave: false,
         tracer: PathTracer::default(),
         cache: CacheMethodSettings::new(CacheConfig::hash_grid_preset(), CacheDevice::Cpu),
         converge: None,
