@@ -74,7 +74,24 @@ impl PathTracer {
         sampler: &mut PixelSampler,
         stats: &mut PathStats,
     ) -> Vec3 {
-        let walk = PathWalk::from_vertex(scene, self, segments);
+        self.reflected_after(scene, si, wo, segments, Vec3::ONE, sampler, stats)
+    }
+
+    /// [`PathTracer::reflected`] for a path whose throughput on reaching `si` is `prefix`:
+    /// Russian roulette follows the whole path's throughput ([`PathWalk::with_prefix`]), as
+    /// it would along one path traced from the camera.
+    #[allow(clippy::too_many_arguments)]
+    pub fn reflected_after(
+        &self,
+        scene: &Scene,
+        si: &SurfaceInteraction,
+        wo: Vec3,
+        segments: u32,
+        prefix: Vec3,
+        sampler: &mut PixelSampler,
+        stats: &mut PathStats,
+    ) -> Vec3 {
+        let walk = PathWalk::from_vertex(scene, self, segments).with_prefix(prefix);
         let v = Vertex::new(scene, si, wo);
         continue_path(scene, walk, v, Vec3::ZERO, sampler, stats)
     }

@@ -103,6 +103,10 @@ pub struct PathWalk {
     use_nee: bool,
     ray: Ray,
     throughput: Vec3,
+    /// The throughput of the path before the walk's start (1 for a camera ray): Russian
+    /// roulette's survival probability follows `prefix · throughput`, the whole path's, so
+    /// that a walk continuing another path's vertex is as long as the path tracer's would be.
+    prefix: Vec3,
     prev_pdf: f32,
     prev_delta: bool,
     /// The previous scattering vertex, for the light sampler's density there.
@@ -134,6 +138,7 @@ impl PathWalk {
             use_nee: tracer.strategy != LightStrategy::BsdfOnly && scene.light_count() > 0,
             ray,
             throughput: Vec3::ONE,
+            prefix: Vec3::ONE,
             prev_pdf: 0.0,
             prev_delta: true,
             prev_at: LightContext::new(Vec3::ZERO, Vec3::ZERO),
@@ -165,7 +170,16 @@ impl PathWalk {
         }
     }
 
-    /// The throughput of the path up to its latest vertex (or segment in flight).
+    /// The same walk continuing a path whose throughput at the walk's start is `prefix`:
+    /// Russian roulette weighs the whole path's throughput (any survival probability keeps
+    /// the estimate unbiased; a walk restarted at 1 at a later vertex would survive longer
+    /// than the path tracer's, at the cost of more rays).
+    pub fn with_prefix(self, prefix: Vec3) -> Self {
+        Self { prefix, ..self }
+    }
+
+    /// The throughput of the path up to its latest vertex (or segment in flight), from the
+    /// walk's start.
     pub fn throughput(&self) -> Vec3 {
         self.throughput
     }
@@ -411,7 +425,7 @@ impl PathWalk {
         let mut weight = bs.weight;
         // Scattering events so far (segments − 1) at least rr_depth.
         if self.segments > self.tracer.rr_depth {
-            let q = self.throughput.max_element().min(0.95);
+            let q = (self.prefix * self.throughput).max_element().min(0.95);
             if q.is_nan() || q <= 0.0 || sampler.next_1d() >= q {
                 return None;
             }

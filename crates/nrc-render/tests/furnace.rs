@@ -128,6 +128,77 @@ fn emissive_enclosure_depth_follows_mitsuba_convention() {
     }
 }
 
+/// Russian roulette on the whole path's throughput ([`PathTracer::reflected_after`], what
+/// `wsrestir-gi` uses for the tails it restarts at a later vertex): in the enclosure the
+/// radiance reflected at a wall is `ρ / (1 − ρ)` whatever the throughput the path arrived
+/// with, and a walk that arrived with less is shorter. The same check must reject a walk cut
+/// at a depth limit (its mean is `ρ + … + ρ^(k−1)`, 9 % low here).
+#[test]
+fn roulette_on_the_arriving_throughput_stays_exact_with_shorter_walks() {
+    let rho = 0.8;
+    let scene = emissive_enclosure(Vec3::splat(rho));
+    let ray = nrc_scene::Ray::new(Vec3::ZERO, Vec3::new(0.3, -0.2, 1.0).normalize());
+    let hit = scene.intersect(&ray).expect("inside the box");
+    let si = scene.interaction(&ray, &hit);
+    let expected = rho / (1.0 - rho);
+    let n = 40_000u64;
+    // Mean, its standard error and rays per walk of `reflected_after` with `prefix`.
+    let walk = |tracer: &PathTracer, prefix: f32| {
+        let (mut sum, mut sum2, mut stats) = (0.0f64, 0.0f64, nrc_render::PathStats::default());
+        for j in 0..n {
+            let mut s = nrc_render::PixelSampler::new(5, 0, j);
+            let l = tracer.reflected_after(
+                &scene,
+                &si,
+                si.wo,
+                1,
+                Vec3::splat(prefix),
+                &mut s,
+                &mut stats,
+            );
+            sum += l.x as f64;
+            sum2 += (l.x as f64).powi(2);
+        }
+        let mean = sum / n as f64;
+        let se = ((sum2 / n as f64 - mean * mean) / n as f64).sqrt();
+        (mean, se, stats.rays() as f64 / n as f64)
+    };
+    let within = |(mean, se, _): (f64, f64, f64)| (mean - expected as f64).abs() <= 4.0 * se;
+    let tracer = PathTracer {
+        rr_depth: 2,
+        ..PathTracer::default()
+    };
+    let whole = walk(&tracer, 1.0);
+    let arrived_dim = walk(&tracer, 0.2);
+    assert!(within(whole), "prefix 1: {whole:?}, expected {expected}");
+    assert!(
+        within(arrived_dim),
+        "prefix 0.2: {arrived_dim:?}, expected {expected}"
+    );
+    assert!(
+        arrived_dim.2 < 0.8 * whole.2,
+        "a walk arriving with throughput 0.2 should trace fewer rays: {:.2} against {:.2}",
+        arrived_dim.2,
+        whole.2
+    );
+    // Negative control: cut at 12 segments, the walk misses ρ¹² / (1 − ρ) = 0.34 of 4.
+    let cut = walk(
+        &PathTracer {
+            max_depth: 12,
+            rr_depth: 100,
+            ..tracer
+        },
+        1.0,
+    );
+    println!(
+        "(mean, standard error, rays a walk): prefix 1 {whole:?}, prefix 0.2 {arrived_dim:?}, cut {cut:?}"
+    );
+    assert!(
+        !within(cut),
+        "a walk cut at 12 segments passed: {cut:?}, expected {expected}"
+    );
+}
+
 /// A lossless world under a uniform background of radiance 1: a white Lambertian sphere,
 /// a smooth glass sphere and a perfect mirror sphere (Fresnel reflectance 1) over a white
 /// diffuse floor. Flat facets throughout: interpolated normals would scatter some rays into

@@ -1268,21 +1268,25 @@ impl RenderPass for DdgiRestirPass {
         let temporal = reuse::temporal(&frame, seed, history.as_ref(), cap, false, &spatial);
         times.temporal_ms = t.elapsed().as_secs_f64() * 1e3;
 
-        // 4. Shading: one shadow ray.
+        // 4. Shading: one shadow ray, where reuse replaced the pixel's own sample (which was
+        // shadow-tested, or found by its BSDF ray).
         let t = Instant::now();
         let eye = input.camera.position;
         let recursion = self.volume.as_ref().filter(|_| set.footprint > 0.0);
         let shaded: Vec<(Vec3, DdgiReservoir, PathStats)> = par_map(n, |i| {
             let (mut r, mut stats) = temporal[i];
-            let (_, aux, st0) = initial[i];
+            let (own, aux, st0) = initial[i];
             stats.add(&st0);
             let mut l = g.emitted[i];
             if let Some(p) = &g.primary[i] {
                 if usable(&g.primary[i], set.smooth).is_some() {
                     l += aux + traced[i].direct;
                     if let Some(y) = r.sample {
+                        let seen = |stats: &mut PathStats| {
+                            own.sample == Some(y) || sees(scene, &p.v, &y, stats)
+                        };
                         match contribution(&ctx, &p.v, &y) {
-                            Some(c) if sees(scene, &p.v, &y, &mut stats) => {
+                            Some(c) if seen(&mut stats) => {
                                 // Eqs. 7–8 at shading (the paper's use (iii)): the chosen
                                 // point's radiance through the near-specular recursion.
                                 let c = match (y, recursion) {

@@ -435,7 +435,8 @@ impl RenderPass for RestirDiPass {
         let spatial = reuse::spatial(&frame, &g, seed, k, radius, &temporal);
         times.spatial_ms = t.elapsed().as_secs_f64() * 1e3;
 
-        // 4. Shading, and the rest of the path.
+        // 4. Shading, and the rest of the path. The shadow ray only where spatial reuse took
+        // the sample from a neighbour: the temporal step's was shadow-tested.
         let t = Instant::now();
         let shaded: Vec<(Vec3, DiReservoir, PathStats)> = par_map(n, |i| {
             let (mut r, mut stats) = spatial[i];
@@ -445,7 +446,9 @@ impl RenderPass for RestirDiPass {
                 if frame.usable(i).is_some() {
                     if let Some(y) = r.sample {
                         let c = contribution(&p.v, &y).expect("a selected sample lights its owner");
-                        if sees(scene, &p.v, &y, &c.inc, &mut stats) {
+                        if temporal[i].0.sample == Some(y)
+                            || sees(scene, &p.v, &y, &c.inc, &mut stats)
+                        {
                             l += c.c * r.w;
                         } else {
                             r.clear_sample();

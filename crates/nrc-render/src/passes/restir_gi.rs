@@ -15,7 +15,9 @@
 //! - **Shading vertex `x₁`**: `restir-gi` uses the primary vertex (non-delta; delta primaries
 //!   fall back to the path tracer); `wsrestir-gi` the first vertex of roughness ≥ 0.2 (§4.1),
 //!   the path traced through the specular ones before it (their NEE and emission counted as
-//!   the path tracer counts them).
+//!   the path tracer counts them). A traced tail `L` is one walk from `y` on, Russian roulette
+//!   on its throughput from `y` (not restarted at the vertex after `y`, whose sample the grid
+//!   also holds).
 //! - **Temporal reuse** (both): the previous frame's final reservoir at the reprojected pixel
 //!   (normals within 25°, depths within 10 %), `M` capped at `m_cap`; only where `x₁` is the
 //!   primary vertex.
@@ -28,7 +30,9 @@
 //!   from the first non-specular one on), so a vertex also reuses paths that passed it at
 //!   their second bounce.
 //! - **Shift**: the donor's `y` and `L` kept, `W` carried by the reconnection Jacobian
-//!   [`reconnection_jacobian`]; visibility from the receiver tested by the final shadow ray.
+//!   [`reconnection_jacobian`]; visibility from the receiver tested by the final shadow ray
+//!   where the sample came from another vertex (the pixel's own candidate was found by a ray
+//!   from `x₁`; a history sample the temporal step took was shadow-tested there).
 //! - **Bias**: unbiased (default) — pairwise MIS ([`reuse::Merge`]: each input weighed against
 //!   the receiver's own by its target and visibility, a shadow ray per input; `pairwise=0`:
 //!   `Z` sums the `M` of the inputs whose owner has `p̂ > 0` for `y` and sees it); `-biased`:
@@ -575,11 +579,16 @@ impl RestirGiPass {
         match walk.arrive(scene, stats) {
             Arrival::Escaped { le, mis } => (nee + bs.weight * le * mis, rough.then_some(None)),
             Arrival::Hit(h) => {
-                let l3 = self.tracer.reflected(
+                // The walk goes on from x₃ with Russian roulette on its throughput from `y`
+                // (restarted at 1 there, paths ran longer than the path tracer's: 0.5 rays
+                // more a pixel sample on the kitchen). Not on the throughput from the camera:
+                // `L` is reused at other receivers, and must not depend on who found it.
+                let l3 = self.tracer.reflected_after(
                     scene,
                     &h.vertex.si,
                     h.vertex.wo_world,
                     segments + 1,
+                    walk.throughput(),
                     s,
                     stats,
                 );
@@ -781,7 +790,10 @@ impl RenderPass for RestirGiPass {
         };
         times.spatial_ms = t0.elapsed().as_secs_f64() * 1e3;
 
-        // Shading: one shadow ray for the chosen sample.
+        // Shading: one shadow ray for the chosen sample where spatial reuse took it from
+        // another vertex. The temporal step's sample is known to be seen from `x₁`: the
+        // pixel's own candidate was found by a ray from it, and a history sample taken there
+        // was shadow-tested (`recheck`).
         let t0 = Instant::now();
         let shaded: Vec<(Vec3, GiReservoir, PathStats)> = par_map(n, |i| {
             let (mut r, mut stats) = spatial[i];
@@ -790,7 +802,9 @@ impl RenderPass for RestirGiPass {
             if let Some(sh) = &t.shading {
                 let mut indirect = Vec3::ZERO;
                 if let Some(y) = r.sample {
-                    if visible_between(scene, sh.v.si.p, sh.v.si.ng, y.x, y.n, &mut stats) {
+                    let seen = temporal[i].0.sample == Some(y)
+                        || visible_between(scene, sh.v.si.p, sh.v.si.ng, y.x, y.n, &mut stats);
+                    if seen {
                         indirect = contribution(&sh.v, &y).map_or(Vec3::ZERO, |c| c.0) * r.w;
                     } else {
                         r.clear_sample();
