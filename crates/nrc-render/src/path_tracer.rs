@@ -74,12 +74,12 @@ impl PathTracer {
         sampler: &mut PixelSampler,
         stats: &mut PathStats,
     ) -> Vec3 {
-        self.reflected_after(scene, si, wo, segments, Vec3::ONE, sampler, stats)
+        self.reflected_after(scene, si, wo, segments, 1.0, sampler, stats)
     }
 
-    /// [`PathTracer::reflected`] for a path whose throughput on reaching `si` is `prefix`:
-    /// Russian roulette follows the whole path's throughput ([`PathWalk::with_prefix`]), as
-    /// it would along one path traced from the camera.
+    /// [`PathTracer::reflected`] continuing a walk that reaches `si` with `prefix` (its
+    /// largest throughput channel): Russian roulette weighs the throughput since that walk's
+    /// start ([`PathWalk::with_prefix`]), as if the walk went on.
     #[allow(clippy::too_many_arguments)]
     pub fn reflected_after(
         &self,
@@ -87,7 +87,7 @@ impl PathTracer {
         si: &SurfaceInteraction,
         wo: Vec3,
         segments: u32,
-        prefix: Vec3,
+        prefix: f32,
         sampler: &mut PixelSampler,
         stats: &mut PathStats,
     ) -> Vec3 {

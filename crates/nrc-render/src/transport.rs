@@ -103,10 +103,10 @@ pub struct PathWalk {
     use_nee: bool,
     ray: Ray,
     throughput: Vec3,
-    /// The throughput of the path before the walk's start (1 for a camera ray): Russian
-    /// roulette's survival probability follows `prefix · throughput`, the whole path's, so
-    /// that a walk continuing another path's vertex is as long as the path tracer's would be.
-    prefix: Vec3,
+    /// How much of its caller's path reaches the walk's start, as one positive number (1 for
+    /// a camera ray): Russian roulette's survival probability is `prefix · max throughput`,
+    /// so that a walk continuing another walk's vertex ends as that walk would have.
+    prefix: f32,
     prev_pdf: f32,
     prev_delta: bool,
     /// The previous scattering vertex, for the light sampler's density there.
@@ -138,7 +138,7 @@ impl PathWalk {
             use_nee: tracer.strategy != LightStrategy::BsdfOnly && scene.light_count() > 0,
             ray,
             throughput: Vec3::ONE,
-            prefix: Vec3::ONE,
+            prefix: 1.0,
             prev_pdf: 0.0,
             prev_delta: true,
             prev_at: LightContext::new(Vec3::ZERO, Vec3::ZERO),
@@ -170,11 +170,19 @@ impl PathWalk {
         }
     }
 
-    /// The same walk continuing a path whose throughput at the walk's start is `prefix`:
-    /// Russian roulette weighs the whole path's throughput (any survival probability keeps
-    /// the estimate unbiased; a walk restarted at 1 at a later vertex would survive longer
-    /// than the path tracer's, at the cost of more rays).
-    pub fn with_prefix(self, prefix: Vec3) -> Self {
+    /// The same walk continuing a path that reaches its start with `prefix` (the caller's
+    /// largest throughput channel): Russian roulette weighs `prefix` times the walk's own
+    /// throughput. A walk restarted at 1 at a later vertex survives longer than the walk it
+    /// continues, at the cost of more rays. Any survival probability in (0, 1] keeps the
+    /// estimate unbiased; a scalar keeps it above 0 wherever the walk's own throughput is
+    /// (per channel, a caller lit only in red times a walk carrying only green would end
+    /// every walk). A prefix that is not positive and finite counts as 1.
+    pub fn with_prefix(self, prefix: f32) -> Self {
+        let prefix = if prefix > 0.0 && prefix.is_finite() {
+            prefix
+        } else {
+            1.0
+        };
         Self { prefix, ..self }
     }
 
@@ -412,8 +420,9 @@ impl PathWalk {
 
     /// Samples the BSDF at `v` for the next segment, updates the throughput and applies
     /// Russian roulette (Mitsuba's rule: from `rr_depth` scattering events on, continue with
-    /// probability min(max throughput, 0.95) and divide by it, which keeps the estimate
-    /// unbiased). `None`: the path ends here (no sample, zero throughput, or roulette).
+    /// probability min(max throughput, 0.95), the throughput scaled by
+    /// [`PathWalk::with_prefix`]'s, and divide by it, which keeps the estimate unbiased).
+    /// `None`: the path ends here (no sample, zero throughput, or roulette).
     pub fn scatter(&mut self, v: &Vertex, sampler: &mut PixelSampler) -> Option<Scatter> {
         let u_lobe = sampler.next_1d();
         let u_dir = sampler.next_2d();
@@ -425,7 +434,7 @@ impl PathWalk {
         let mut weight = bs.weight;
         // Scattering events so far (segments − 1) at least rr_depth.
         if self.segments > self.tracer.rr_depth {
-            let q = (self.prefix * self.throughput).max_element().min(0.95);
+            let q = (self.prefix * self.throughput.max_element()).min(0.95);
             if q.is_nan() || q <= 0.0 || sampler.next_1d() >= q {
                 return None;
             }

@@ -128,8 +128,8 @@ fn emissive_enclosure_depth_follows_mitsuba_convention() {
     }
 }
 
-/// Russian roulette on the whole path's throughput ([`PathTracer::reflected_after`], what
-/// `wsrestir-gi` uses for the tails it restarts at a later vertex): in the enclosure the
+/// Russian roulette on the throughput a walk arrives with ([`PathTracer::reflected_after`],
+/// what `wsrestir-gi` uses for the walk it continues after a reconnection vertex): in the enclosure the
 /// radiance reflected at a wall is `ρ / (1 − ρ)` whatever the throughput the path arrived
 /// with, and a walk that arrived with less is shorter. The same check must reject a walk cut
 /// at a depth limit (its mean is `ρ + … + ρ^(k−1)`, 9 % low here).
@@ -147,15 +147,7 @@ fn roulette_on_the_arriving_throughput_stays_exact_with_shorter_walks() {
         let (mut sum, mut sum2, mut stats) = (0.0f64, 0.0f64, nrc_render::PathStats::default());
         for j in 0..n {
             let mut s = nrc_render::PixelSampler::new(5, 0, j);
-            let l = tracer.reflected_after(
-                &scene,
-                &si,
-                si.wo,
-                1,
-                Vec3::splat(prefix),
-                &mut s,
-                &mut stats,
-            );
+            let l = tracer.reflected_after(&scene, &si, si.wo, 1, prefix, &mut s, &mut stats);
             sum += l.x as f64;
             sum2 += (l.x as f64).powi(2);
         }

@@ -44,7 +44,8 @@
 //!    a few pixels of the exact-source test with `direct=1,temporal=1`, where the exact
 //!    emission does not dilute it: `tests/ddgi_restir.rs`); a trained cache answers
 //!    deterministically and changes slowly.
-//! 3. **Shading** (§3.2 steps 3–4): one shadow ray to the chosen sample, `f · L · G_c · W`.
+//! 3. **Shading** (§3.2 steps 3–4): one shadow ray to the chosen sample where reuse brought
+//!    it (the pixel's own was shadow-tested, or found by its BSDF ray), `f · L · G_c · W`.
 //! 4. **Residual** (§3.6, eq. 9): the clamped-away part `max(0, 1 − G_max/G)` of the
 //!    first BSDF candidate's own estimate `f cos / p · L`, which needs no extra ray (the
 //!    paper's auxiliary BSDF sample is that candidate). A delta lobe of a mixed BSDF, which
@@ -110,7 +111,7 @@ pub const KIND: PassKind = PassKind {
             (nrc-restir) or cache-fed probes (ddgi-nrc-restir), the direct light by the path \
             tracer's NEE (direct=0: emitters and light-sampler candidates in the reservoir, \
             the paper), the geometry term clamped at 1/(clamp · diagonal)² with the residual \
-            of eq. 9; spatial reuse (temporal=1: and temporal), a shadow ray to the chosen sample",
+            of eq. 9; spatial reuse (temporal=1: and temporal), a shadow ray to a reused chosen sample",
     method: true,
     variants: || variants().into_iter().map(|(_, s)| s.into()).collect(),
     parse: |name| parse_variant(name, &variants(), DdgiRestirSettings::validate),

@@ -22,7 +22,8 @@
 //! 3. **Spatial reuse**: `spatial_neighbours` pixels in a disc of `spatial_radius` pixels,
 //!    read from the temporal step's buffer (never from one being written: deterministic
 //!    whatever the thread count).
-//! 4. **Shading**: one shadow ray for the chosen sample; `f · L · G · V · W`.
+//! 4. **Shading**: one shadow ray for the chosen sample where spatial reuse brought it (the
+//!    temporal step's sample was shadow-tested); `f · L · G · V · W`.
 //!
 //! Merging (steps 2–3), [`reuse::Merge`]: **unbiased** (default) by generalised pairwise MIS,
 //! each reused reservoir weighed against the pixel's own by how likely its domain (target and

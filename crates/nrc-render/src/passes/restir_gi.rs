@@ -582,13 +582,15 @@ impl RestirGiPass {
                 // The walk goes on from x₃ with Russian roulette on its throughput from `y`
                 // (restarted at 1 there, paths ran longer than the path tracer's: 0.5 rays
                 // more a pixel sample on the kitchen). Not on the throughput from the camera:
-                // `L` is reused at other receivers, and must not depend on who found it.
+                // `L(y)` is lent to other receivers and does not depend on which found `y`.
+                // The grid's sample at x₃ (`l3`, lent too) has its roulette scaled by `y`'s
+                // scattering: noisier where `y` is dark, unbiased either way.
                 let l3 = self.tracer.reflected_after(
                     scene,
                     &h.vertex.si,
                     h.vertex.wo_world,
                     segments + 1,
-                    walk.throughput(),
+                    walk.throughput().max_element(),
                     s,
                     stats,
                 );
