@@ -37,8 +37,10 @@ use crate::compare::StoredRuns;
 
 /// Format tag of plans and results. 2: a run's frame carries its rays and phase times, and
 /// the DDGI passes' defaults changed (probe rays sized to the frame, history cap 5), so a
-/// plan of the first format does not mix with this build's results.
-pub const FORMAT: &str = "nrc-study/2";
+/// plan of the first format does not mix with this build's results. 3: the DDGI passes'
+/// default probe counts follow the frame (updated in turn) and young probes average their
+/// first updates.
+pub const FORMAT: &str = "nrc-study/3";
 /// The plan's file name in a study folder.
 pub const PLAN_FILE: &str = "plan.json";
 const METADATA_KEY: &str = "nrc_study";

@@ -10,6 +10,15 @@
 //!   by a random rotation each frame; each ray's radiance from the chosen [`ProbeRadiance`];
 //!   each irradiance texel blends `π Σ max(0, n·ω) L / Σ max(0, n·ω)` into its history with
 //!   weight `1 − hysteresis`, each moments texel `(d, d²)` with weights `max(0, n·ω)^sharpness`.
+//!   A probe's first updates are a running mean (weight `1/(k+1)` for its `k`-th, until that
+//!   falls below `1 − hysteresis`): with the hysteresis alone its first rays, which see only
+//!   the emission the empty volume lets through, would weigh `hysteresis^k` for `k` updates.
+//! - **Sizing** ([`ProbeVolume::for_frame`]): where the settings leave the counts and rays
+//!   open, the volume holds as many probes as the frame's probe-ray budget refreshes within
+//!   [`DdgiSettings::sweep`] frames ([`auto_counts`], at most [`MAX_AUTO_PROBES`]) and each
+//!   update takes the next probes in turn (RTXGI and its successors schedule probe updates
+//!   too). Denser probes are less biased; a static scene loses nothing, a change of lighting
+//!   reaches a probe up to a sweep later.
 //! - **Query** ([`ProbeVolume::irradiance`]): the 8 probes around the point (offset along the
 //!   normal and toward the viewer, §3.5), weighted by trilinear interpolation, wrap shading
 //!   `((1 + cos)/2)² + 0.2` and the Chebyshev visibility bound from the moments (cubed, small
@@ -57,12 +66,15 @@ pub enum ProbeRadiance {
 /// A frame's probe rays between [`ProbeVolume::trace_rays`] and [`ProbeVolume::blend`].
 #[derive(Clone, Debug, Default)]
 pub struct ProbeRays {
-    /// Per probe, per ray: direction, radiance so far, hit distance.
+    /// The first probe traced; the probes traced follow it in index order (wrapping).
+    first: usize,
+    /// Per probe traced, per ray: direction, radiance so far, hit distance.
     rays: Vec<Vec<(Vec3, Vec3, f32)>>,
-    /// The queries a radiance source must answer, and the (probe, ray) each belongs to.
+    /// The queries a radiance source must answer, and the (probe's place among those traced,
+    /// ray) each belongs to.
     pub queries: Vec<RadianceQuery>,
     slots: Vec<(u32, u32)>,
-    /// Per probe, what its rays found (relocation and classification).
+    /// Per probe traced, what its rays found (relocation and classification).
     geometry: Vec<ProbeGeometry>,
     pub stats: PathStats,
 }
@@ -112,9 +124,50 @@ const MIN_AUTO_RAYS: u32 = 32;
 /// [`PROBE_RAYS_PER_PIXEL`] of `pixels` over `probes`, rounded up to a multiple of 32, in
 /// `[MIN_AUTO_RAYS, MAX_AUTO_RAYS]`.
 pub fn auto_rays(pixels: u64, probes: usize) -> u32 {
-    let per_probe = PROBE_RAYS_PER_PIXEL * pixels as f64 / probes.max(1) as f64;
+    let per_probe = ray_budget(pixels) / probes.max(1) as f64;
     let rounded = (per_probe / 32.0).ceil() * 32.0;
     rounded.clamp(MIN_AUTO_RAYS as f64, MAX_AUTO_RAYS as f64) as u32
+}
+
+/// The probe rays a frame of `pixels` affords: [`PROBE_RAYS_PER_PIXEL`] of them.
+fn ray_budget(pixels: u64) -> f64 {
+    PROBE_RAYS_PER_PIXEL * pixels as f64
+}
+
+/// The most probes a frame-sized volume holds: 4,096 (16 MB of maps). On the Country Kitchen
+/// the probes' spacing was the bias of DDGI resampling: 144 probes (8 along its longest axis)
+/// left bias² at 18 % of the pass's MSE, 4,096 took it to within its noise of zero
+/// (RESULTS.md, "Cheaper world-space ReSTIR GI frames, and what DDGI resampling's bias is").
+/// The seed paper's scenes use 2,048 (16 × 8 × 16, `ddgi-resampling.txt` §4).
+pub const MAX_AUTO_PROBES: usize = 4096;
+
+/// The fewest probes a frame-sized volume holds (a 2 × 2 × 2 grid).
+const MIN_AUTO_PROBES: usize = 8;
+
+/// The probe counts for a scene box of extent `ext` and a frame of `pixels`: as many probes
+/// as the frame's ray budget ([`PROBE_RAYS_PER_PIXEL`]) updates at 32 rays each within
+/// `sweep` frames, at most [`MAX_AUTO_PROBES`], in cells as near cubic as the box allows (at
+/// least 2 per axis).
+pub fn auto_counts(ext: Vec3, pixels: u64, sweep: u32) -> UVec3 {
+    let per_frame = (ray_budget(pixels) / MIN_AUTO_RAYS as f64).floor().max(1.0);
+    let target =
+        (per_frame * f64::from(sweep.max(1))).clamp(MIN_AUTO_PROBES as f64, MAX_AUTO_PROBES as f64);
+    let ext = ext.max(Vec3::splat(ext.max_element() * 1e-3));
+    let volume = f64::from(ext.x) * f64::from(ext.y) * f64::from(ext.z);
+    let mut side = (volume / target).cbrt() as f32;
+    if !(side > 0.0 && side.is_finite()) {
+        return UVec3::splat(2);
+    }
+    // Rounding per axis can overshoot the target: widen the cells until it fits.
+    loop {
+        let c = (ext / side).round().max(Vec3::splat(2.0)).as_uvec3();
+        if (c.x as usize) * (c.y as usize) * (c.z as usize) <= target as usize
+            || c == UVec3::splat(2)
+        {
+            return c;
+        }
+        side *= 1.02;
+    }
 }
 
 /// Above this fraction of back-face hits a probe is inside geometry (RTXGI's threshold).
@@ -123,9 +176,16 @@ const INSIDE_FRACTION: f32 = 0.25;
 /// The volume's parameters (defaults: RTXGI's and the paper's).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct DdgiSettings {
-    /// Probes per axis; `None`: from the scene's extent (8 along the longest axis, at least 2
-    /// along each).
+    /// Probes per axis; `None`: where the rays are open too, sized to the frame by
+    /// [`ProbeVolume::for_frame`] ([`auto_counts`]: as many as the frame's ray budget refreshes
+    /// within [`DdgiSettings::sweep`] frames, at most [`MAX_AUTO_PROBES`]); otherwise 8 along
+    /// the longest axis (at least 2 along each).
     pub counts: Option<UVec3>,
+    /// Where the counts and the rays are both left open: the most frames a probe waits for its
+    /// next update. A frame-sized volume updates the probes its ray budget affords, in turn;
+    /// static scenes lose nothing (each update still blends 32 rays or more), a change of the
+    /// lighting reaches a probe up to this many frames later.
+    pub sweep: u32,
     /// Rays per probe and frame; `None`: sized to the frame the volume serves
     /// ([`ProbeVolume::fit_rays_to_frame`], [`PROBE_RAYS_PER_PIXEL`]), 256 until it is told.
     pub rays_per_probe: Option<u32>,
@@ -152,6 +212,7 @@ impl Default for DdgiSettings {
     fn default() -> Self {
         Self {
             counts: None,
+            sweep: 16,
             rays_per_probe: None,
             hysteresis: 0.97,
             irradiance_texels: 8,
@@ -390,14 +451,22 @@ pub struct ProbeVolume {
     irradiance: Vec<Vec3>,
     /// Per probe, `(m + 2)²` texels of (mean distance, mean squared distance).
     moments: Vec<Vec2>,
-    /// Frames blended in so far.
+    /// Updates blended in so far.
     pub frames: u32,
-    /// Per probe: its relocation offset from its grid point, whether it is on, whether it has
-    /// a history (its first blend replaces the empty one), and the back-face fraction of its
-    /// last rays.
+    /// Probes traced and blended per update: all of them, unless the volume was sized to a
+    /// frame whose ray budget updates them in turn ([`DdgiSettings::sweep`]).
+    per_update: usize,
+    /// The first probe of the next update.
+    cursor: usize,
+    /// Whether the counts were sized to a frame (then updates may take the probes in turn).
+    frame_sized: bool,
+    /// Per probe: its relocation offset from its grid point, whether it is on, how many
+    /// updates it has blended (its `k`-th blends with weight `min(hysteresis, k / (k + 1))` on
+    /// its history: a running mean until the hysteresis takes over, so a young probe is not
+    /// held to its first, one-bounce rays), and the back-face fraction of its last rays.
     offsets: Vec<Vec3>,
     active: Vec<bool>,
-    blended: Vec<bool>,
+    updates: Vec<u32>,
     back_fraction: Vec<f32>,
 }
 
@@ -421,11 +490,37 @@ fn random_rotation(u: Vec3) -> glam::Quat {
 impl ProbeVolume {
     /// An empty volume over `bounds`.
     pub fn new(bounds: &Aabb, settings: DdgiSettings) -> Result<Self, VolumeError> {
+        Self::build(bounds, settings, None)
+    }
+
+    /// A volume over `bounds` serving frames of `pixels`: where the settings leave both the
+    /// counts and the rays open, counts from [`auto_counts`] (a count or a ray count in the
+    /// settings is kept); rays from [`ProbeVolume::fit_rays_to_frame`]. The counts stay those
+    /// of this first frame's size; later frames refit only the rays and the probes an update
+    /// takes.
+    pub fn for_frame(
+        bounds: &Aabb,
+        settings: DdgiSettings,
+        pixels: u64,
+    ) -> Result<Self, VolumeError> {
+        let sized = (settings.counts.is_none() && settings.rays_per_probe.is_none())
+            .then(|| auto_counts(bounds.max - bounds.min, pixels, settings.sweep));
+        let mut v = Self::build(bounds, settings, sized)?;
+        v.fit_rays_to_frame(pixels);
+        Ok(v)
+    }
+
+    fn build(
+        bounds: &Aabb,
+        settings: DdgiSettings,
+        sized: Option<UVec3>,
+    ) -> Result<Self, VolumeError> {
         let ext = bounds.max - bounds.min;
         if !(ext.is_finite() && ext.max_element() > 0.0) {
             return Err(VolumeError::EmptyBox);
         }
         if settings.rays_per_probe == Some(0)
+            || settings.sweep == 0
             || settings.irradiance_texels == 0
             || settings.moment_texels == 0
         {
@@ -442,7 +537,7 @@ impl ProbeVolume {
         if !(settings.attenuation >= 0.0 && settings.attenuation <= 100.0) {
             return Err(VolumeError::Attenuation(settings.attenuation));
         }
-        let counts = settings.counts.unwrap_or_else(|| {
+        let counts = settings.counts.or(sized).unwrap_or_else(|| {
             let longest = ext.max_element();
             let c = (ext / longest * 8.0).round();
             UVec3::new(c.x as u32, c.y as u32, c.z as u32).max(UVec3::splat(2))
@@ -472,20 +567,49 @@ impl ProbeVolume {
             irradiance: vec![Vec3::ZERO; n * irradiance_map.len()],
             moments: vec![Vec2::ZERO; n * moment_map.len()],
             frames: 0,
+            per_update: n,
+            cursor: 0,
+            frame_sized: sized.is_some(),
             offsets: vec![Vec3::ZERO; n],
             active: vec![true; n],
-            blended: vec![false; n],
+            updates: vec![0; n],
             back_fraction: vec![0.0; n],
         })
     }
 
     /// Sizes the rays per probe to a frame of `pixels` where the settings leave them to the
     /// volume: [`PROBE_RAYS_PER_PIXEL`] of the frame's pixels spread over the probes, in
-    /// multiples of 32 between 32 and 256. A count set in the settings is kept.
+    /// multiples of 32 between 32 and 256. A count set in the settings is kept. A volume whose
+    /// counts were sized to a frame ([`ProbeVolume::for_frame`]) and whose rays are open also
+    /// updates only the probes the budget affords at that count, in turn, but every probe at
+    /// least once in [`DdgiSettings::sweep`] updates.
     pub fn fit_rays_to_frame(&mut self, pixels: u64) {
-        if self.settings.rays_per_probe.is_none() {
-            self.rays = auto_rays(pixels, self.probe_count());
+        if self.settings.rays_per_probe.is_some() {
+            return;
         }
+        let n = self.probe_count();
+        if !self.frame_sized {
+            self.rays = auto_rays(pixels, n);
+            return;
+        }
+        // Rounded down here: every probe at the rays the budget gives each, or, where that is
+        // under the floor, the probes the budget affords at the floor.
+        let budget = ray_budget(pixels);
+        let each = ((budget / n as f64 / 32.0).floor() * 32.0) as u32;
+        self.rays = each.clamp(MIN_AUTO_RAYS, MAX_AUTO_RAYS);
+        let affordable = (budget / f64::from(self.rays)).floor() as usize;
+        let sweep = self.settings.sweep.max(1) as usize;
+        self.per_update = affordable.max(n.div_ceil(sweep)).clamp(1, n);
+    }
+
+    /// Probes traced and blended per update ([`ProbeVolume::fit_rays_to_frame`]).
+    pub fn per_update(&self) -> usize {
+        self.per_update
+    }
+
+    /// Updates probe `p` has blended (0: its maps are empty, queries skip it).
+    pub fn probe_updates(&self, p: usize) -> u32 {
+        self.updates[p]
     }
 
     /// Probes in the volume.
@@ -530,6 +654,12 @@ impl ProbeVolume {
     pub fn probe_irradiance(&self, p: usize) -> &[Vec3] {
         let l = self.irradiance_map.len();
         &self.irradiance[p * l..(p + 1) * l]
+    }
+
+    /// Probe `p`'s moments texels (bordered layout).
+    pub fn probe_moments(&self, p: usize) -> &[Vec2] {
+        let l = self.moment_map.len();
+        &self.moments[p * l..(p + 1) * l]
     }
 
     /// The irradiance stored by probe `p` for normal `n` (bilinear in its map).
@@ -589,16 +719,18 @@ impl ProbeVolume {
         let base = base.as_uvec3();
         let mut out = Vec::with_capacity(8);
         let mut total = 0.0;
-        // Classification: the probes that are off count only where all eight are.
+        // Classification: the probes that are off count only where all eight are; so do the
+        // probes not updated yet (their maps are empty).
+        let usable = |p: usize| self.active[p] && self.updates[p] > 0;
         let all_off = (0..8u32).all(|corner| {
             let off = UVec3::new(corner & 1, (corner >> 1) & 1, (corner >> 2) & 1);
-            !self.active[self.index((base + off).min(self.counts - UVec3::ONE))]
+            !usable(self.index((base + off).min(self.counts - UVec3::ONE)))
         });
         for corner in 0..8u32 {
             let off = UVec3::new(corner & 1, (corner >> 1) & 1, (corner >> 2) & 1);
             let c = (base + off).min(self.counts - UVec3::ONE);
             let p = self.index(c);
-            if !self.active[p] && !all_off {
+            if !usable(p) && !all_off {
                 continue;
             }
             let to_probe = self.probe_origin(p) - q;
@@ -612,7 +744,7 @@ impl ProbeVolume {
                 .moment_map
                 .lookup(&self.moments[p * l..(p + 1) * l], -dir);
             let mut visibility = 1.0;
-            if dist > m.x && self.frames > 0 {
+            if dist > m.x && self.updates[p] > 0 {
                 let var = (m.y - m.x * m.x).abs().max(1e-8);
                 let d = dist - m.x;
                 visibility = (var / (var + d * d)).max(0.0).powi(3);
@@ -644,7 +776,8 @@ impl ProbeVolume {
             .sum()
     }
 
-    /// One update: every probe traces its rays and blends them in. `seed` chooses the frame's
+    /// One update: every probe of the update ([`ProbeVolume::per_update`] of them, in turn)
+    /// traces its rays and blends them in. `seed` chooses the frame's
     /// rotations and light samples; the result does not depend on the thread count. Returns
     /// the rays traced. With [`ProbeRadiance::Source`] nothing answers the rays' queries here
     /// (they bring back emission only): use [`ProbeVolume::trace_rays`] and
@@ -657,9 +790,9 @@ impl ProbeVolume {
         stats
     }
 
-    /// The first half of an update: every probe's rays traced and their radiance found, except
-    /// (for [`ProbeRadiance::Source`]) the reflected radiance at the hits, left as queries for
-    /// a radiance source.
+    /// The first half of an update: the rays of the update's probes traced and their radiance
+    /// found, except (for [`ProbeRadiance::Source`]) the reflected radiance at the hits, left as
+    /// queries for a radiance source.
     pub fn trace_rays(&self, scene: &Scene, seed: u64) -> ProbeRays {
         let n_rays = self.rays;
         let radiance = self.settings.radiance;
@@ -671,9 +804,11 @@ impl ProbeVolume {
             ProbeGeometry,
             PathStats,
         );
-        let traced: Vec<Traced> = (0..self.probe_count())
+        let (n, first) = (self.probe_count(), self.cursor);
+        let traced: Vec<Traced> = (0..self.per_update)
             .into_par_iter()
-            .map(|p| {
+            .map(|i| {
+                let p = (first + i) % n;
                 let mut s = PixelSampler::new(seed, p as u64, 0);
                 let rot = random_rotation(Vec3::new(s.next_1d(), s.next_1d(), s.next_1d()));
                 let origin = this.probe_origin(p);
@@ -746,12 +881,15 @@ impl ProbeVolume {
                 (rays, queries, geo, stats)
             })
             .collect();
-        let mut out = ProbeRays::default();
-        for (p, (rays, queries, geo, st)) in traced.into_iter().enumerate() {
+        let mut out = ProbeRays {
+            first,
+            ..Default::default()
+        };
+        for (i, (rays, queries, geo, st)) in traced.into_iter().enumerate() {
             out.stats.add(&st);
             out.geometry.push(geo);
             for (r, q) in queries {
-                out.slots.push((p as u32, r));
+                out.slots.push((i as u32, r));
                 out.queries.push(q);
             }
             out.rays.push(rays);
@@ -760,8 +898,8 @@ impl ProbeVolume {
     }
 
     /// The second half of an update: `answers` (one per query of `rays`, the reflected
-    /// radiance at each hit) added to their rays' radiance, and every probe's rays blended into
-    /// its maps with the hysteresis.
+    /// radiance at each hit) added to their rays' radiance, and each traced probe's rays
+    /// blended into its maps with the hysteresis.
     pub fn blend(&mut self, mut rays: ProbeRays, answers: &[Vec3]) {
         assert_eq!(
             answers.len(),
@@ -776,20 +914,24 @@ impl ProbeVolume {
         let (im, mm) = (self.irradiance_map, self.moment_map);
         let hysteresis = self.settings.hysteresis;
         let sharp = self.settings.depth_sharpness;
-        // Per probe, in parallel (each probe's texels are its own).
+        let (n, first, traced) = (self.probe_count(), rays.first, rays.rays.len());
+        // Per probe, in parallel (each probe's texels are its own); only the probes traced.
         self.irradiance
             .par_chunks_mut(im.len())
             .zip(self.moments.par_chunks_mut(mm.len()))
-            .zip(rays.rays.par_iter())
-            .zip(self.active.par_iter().zip(self.blended.par_iter_mut()))
+            .zip(self.active.par_iter().zip(self.updates.par_iter_mut()))
+            .enumerate()
             .for_each_init(
                 || (RayColumns::default(), (Vec::new(), Vec::new())),
-                |(columns, scratch), (((irr, mom), rays), (&active, blended))| {
-                    if !active {
+                |(columns, scratch), (p, ((irr, mom), (&active, updates)))| {
+                    let i = (p + n - first) % n;
+                    if !active || i >= traced {
                         return;
                     }
-                    let h = if *blended { hysteresis } else { 0.0 };
-                    *blended = true;
+                    let rays = &rays.rays[i];
+                    let k = *updates as f32;
+                    let h = hysteresis.min(k / (k + 1.0));
+                    *updates += 1;
                     columns.fill(rays);
                     im.blend(irr, columns, h, 1.0, |i| rays[i].1 * PI, scratch);
                     let moments = |i: usize| {
@@ -800,14 +942,18 @@ impl ProbeVolume {
                 },
             );
         self.frames += 1;
-        self.relocate_and_classify(&rays.geometry);
+        self.cursor = (first + traced) % n;
+        self.relocate_and_classify(first, &rays.geometry);
     }
 
-    /// Relocation and classification from the rays' findings (see the module's notes).
-    fn relocate_and_classify(&mut self, geometry: &[ProbeGeometry]) {
+    /// Relocation and classification from the rays' findings, `geometry[i]` probe
+    /// `first + i`'s (see the module's notes).
+    fn relocate_and_classify(&mut self, first: usize, geometry: &[ProbeGeometry]) {
         let min_front = 0.1 * self.spacing.min_element();
         let limit = 0.45 * self.spacing;
-        for (p, g) in geometry.iter().enumerate() {
+        let n = self.probe_count();
+        for (i, g) in geometry.iter().enumerate() {
+            let p = (first + i) % n;
             let inside = g.back_fraction() > INSIDE_FRACTION;
             self.back_fraction[p] = g.back_fraction();
             if self.settings.relocate {

@@ -72,11 +72,14 @@ fn texel_stats(v: &ProbeVolume, expect: f32) -> (f32, f32) {
 
 /// In the enclosure (`L_e = 1`, `ρ = ½`): eq. 5 probes converge to the full irradiance
 /// `E = π L_e / (1 − ρ) = 2π` at every texel, eq. 4 probes to the indirect-only `π ρ L_e /
-/// (1 − ρ) = π`. From the first frame (`E₁ = π L_e` resp. `π ρ L_e`, the history empty) each
-/// frame shrinks the distance to the limit by `λ = h + (1 − h) ρ`: after 30 frames at the
-/// default hysteresis 0.97 the texels' mean lies within 2 % of `E∞ − (E∞ − E₁) λ²⁹`; with
-/// hysteresis 0.9, after 120 frames the mean is within 1 % of the limit and every texel within
-/// 5 % (eq. 4's one-sample NEE at each hit is the noise).
+/// (1 − ρ) = π`. From the first frame (`E₁ = π L_e` resp. `π ρ L_e`, the history empty) the
+/// `k`-th update blends `E₁ + ρ E_k` with weight `h_k = min(h, k / (k + 1))` on the history
+/// (a running mean, then the hysteresis): after 30 frames at the default hysteresis 0.97 the
+/// texels' mean lies within 2 % of that recursion's value, and 5 frames tell it from the
+/// hysteresis alone (`h_k = h` from the second frame on, which gives
+/// `E∞ − (E∞ − E₁) λ^(k−1)`, `λ = h + (1 − h) ρ`); with hysteresis 0.9, after 120 frames the
+/// mean is within 1 % of the limit and every texel within 5 % (eq. 4's one-sample NEE at each
+/// hit is the noise).
 #[test]
 fn enclosure_probes_converge_at_the_rate_the_hysteresis_predicts() {
     let scene = common::enclosure(Vec3::X);
@@ -90,12 +93,30 @@ fn enclosure_probes_converge_at_the_rate_the_hysteresis_predicts() {
             radiance,
             ..Default::default()
         };
+        let h = settings.hysteresis;
+        let ramped = |frames: u32| {
+            (1..frames).fold(first, |e, k| {
+                let hk = h.min(k as f32 / (k as f32 + 1.0));
+                hk * e + (1.0 - hk) * (first + rho * e)
+            })
+        };
+        let lambda = h + (1.0 - h) * rho;
+        let plain = |frames: u32| limit - (limit - first) * lambda.powi(frames as i32 - 1);
         let mut v = ProbeVolume::new(&scene.bounds(), settings).unwrap();
         for f in 0..30 {
             v.update(&scene, 100 + f);
+            if f == 4 {
+                let (mean, _) = texel_stats(&v, 1.0);
+                let (r, p) = (ramped(5), plain(5));
+                println!(
+                    "{radiance:?}: mean after 5 frames {mean:.4}, ramped {r:.4}, plain {p:.4}"
+                );
+                assert!((mean / r - 1.0).abs() < 0.02, "{radiance:?}: {mean} vs {r}");
+                // The control: the hysteresis from the second update on is far off.
+                assert!((mean / p - 1.0).abs() > 0.1, "{radiance:?}: {mean} vs {p}");
+            }
         }
-        let lambda = settings.hysteresis + (1.0 - settings.hysteresis) * rho;
-        let predicted = limit - (limit - first) * lambda.powi(29);
+        let predicted = ramped(30);
         let (mean, _) = texel_stats(&v, predicted);
         println!(
             "{radiance:?}: mean after 30 frames {mean:.4}, predicted {predicted:.4}, limit {limit:.4}"
@@ -498,4 +519,169 @@ fn rays_per_probe_follow_the_frame_where_the_settings_leave_them_open() {
     let mut v = ProbeVolume::new(&scene.bounds(), set).unwrap();
     v.fit_rays_to_frame(1920 * 1080);
     assert_eq!(v.rays, 48);
+}
+
+/// A volume sized to a frame: as many probes as the frame's ray budget (a quarter ray a pixel)
+/// refreshes at 32 rays each within the sweep, at most 4,096, in near-cubic cells; a 1 m box
+/// and a 100 m one get the same counts at the same frame (spaced to their extents), a 100 m
+/// street ten times longer than it is wide gets them along its length; a flat box still gets
+/// 2 along its thin axis.
+#[test]
+fn frame_sized_counts_follow_the_ray_budget_and_the_box() {
+    use nrc_render::ddgi::{MAX_AUTO_PROBES, auto_counts};
+    let count = |c: UVec3| (c.x * c.y * c.z) as usize;
+    // The Country Kitchen's box at 160 × 90: 112 probes a frame, 16 frames.
+    let kitchen = Vec3::new(6.92, 3.38, 8.65);
+    let small = auto_counts(kitchen, 160 * 90, 16);
+    assert!((1500..=1792).contains(&count(small)), "{small}");
+    let spacing = kitchen / small.as_vec3();
+    assert!(
+        spacing.max_element() < 1.25 * spacing.min_element(),
+        "{spacing}"
+    );
+    // At 640 × 360 the cap.
+    let large = auto_counts(kitchen, 640 * 360, 16);
+    assert!((3500..=MAX_AUTO_PROBES).contains(&count(large)), "{large}");
+    // A longer sweep affords more probes at the same frame.
+    assert!(count(auto_counts(kitchen, 160 * 90, 32)) > count(small));
+    // The same frame in a 1 m box and a 100 m one: the same counts.
+    let bx = auto_counts(Vec3::ONE, 128 * 128, 16);
+    let street = auto_counts(Vec3::splat(100.0), 128 * 128, 16);
+    assert_eq!(bx, street);
+    let long = auto_counts(Vec3::new(100.0, 10.0, 10.0), 128 * 128, 16);
+    assert!(long.x >= 8 * long.y, "{long}");
+    // Flat: 2 along the thin axis, the rest spread over the other two; tiny frames and
+    // degenerate boxes: the floor of 2 × 2 × 2.
+    let flat = auto_counts(Vec3::new(10.0, 0.0, 10.0), 160 * 90, 16);
+    assert!(flat.y == 2 && flat.x >= 20 && flat.x == flat.z, "{flat}");
+    assert_eq!(auto_counts(Vec3::ONE, 1, 1), UVec3::splat(2));
+    assert_eq!(auto_counts(Vec3::ZERO, 160 * 90, 16), UVec3::splat(2));
+    assert_eq!(
+        auto_counts(Vec3::splat(f32::NAN), 160 * 90, 16),
+        UVec3::splat(2)
+    );
+}
+
+/// Where the frame's budget does not cover every probe, an update takes the next
+/// `per_update` probes in turn: each update traces exactly those probes' rays, every probe
+/// is updated once within the sweep, a probe not yet updated does not darken a query, and in
+/// the enclosure the frame-sized volume converges to the same limit (within 1 %) as one that
+/// updates every probe each frame.
+#[test]
+fn frame_sized_volumes_update_their_probes_in_turn_within_the_sweep() {
+    let scene = common::enclosure(Vec3::X);
+    let settings = DdgiSettings {
+        hysteresis: 0.9,
+        ..Default::default()
+    };
+    let pixels = 32 * 32;
+    let mut v = ProbeVolume::for_frame(&scene.bounds(), settings, pixels).unwrap();
+    let n = v.probe_count();
+    // 256 rays a frame: 8 probes of 32 rays, at most 128 probes within 16 frames (5 × 5 × 5,
+    // 0.4 apart, at -0.8, -0.4, ...).
+    assert_eq!((v.counts, v.rays, v.per_update()), (UVec3::splat(5), 32, 8));
+    let mut first_update = vec![None; n];
+    for f in 0..16u32 {
+        let stats = v.update(&scene, 300 + u64::from(f));
+        assert_eq!(stats.closest_rays, 8 * 32, "frame {f}");
+        for (p, seen) in first_update.iter_mut().enumerate() {
+            if seen.is_none() && v.irradiance_texels(p).iter().any(|(_, e)| e.x > 0.0) {
+                *seen = Some(f);
+            }
+        }
+        if f == 0 {
+            // Only the first 8 probes (z = -0.8) hold anything; a query between probe 0 and
+            // the empty one above it, facing it, still sees probe 0's irradiance (π), not
+            // the empty one's.
+            let e = v.irradiance(Vec3::new(-0.8, -0.8, -0.6), Vec3::Z, Vec3::Z);
+            assert!(e.x > 0.75 * PI, "{e}");
+        }
+    }
+    assert!(first_update.iter().all(|f| f.is_some()), "{first_update:?}");
+    for f in 0..(16 * 120) {
+        v.update(&scene, 1000 + f);
+    }
+    let (mean, worst) = texel_stats(&v, 2.0 * PI);
+    println!(
+        "frame-sized, 120 sweeps: mean {mean:.4} (limit {:.4}), worst {worst:.3}",
+        2.0 * PI
+    );
+    assert!((mean / (2.0 * PI) - 1.0).abs() < 0.01, "{mean}");
+    // Rays set in the settings: the counts of `new` (8 along the longest axis); counts set:
+    // kept. Either way every probe, every update.
+    for (fixed, counts) in [
+        (
+            DdgiSettings {
+                rays_per_probe: Some(32),
+                ..settings
+            },
+            UVec3::splat(8),
+        ),
+        (
+            DdgiSettings {
+                counts: Some(UVec3::new(8, 4, 4)),
+                ..settings
+            },
+            UVec3::new(8, 4, 4),
+        ),
+    ] {
+        let v = ProbeVolume::for_frame(&scene.bounds(), fixed, pixels).unwrap();
+        assert_eq!((v.counts, v.per_update()), (counts, v.probe_count()));
+    }
+    // A frame whose budget covers every probe at the floor updates them all, at the rays the
+    // budget gives each (rounded down to a multiple of 32): the 125 probes at 128 × 128
+    // (4,096 rays, 32.8 each → 32) and at 320 × 320 (25,600, 204.8 → 192).
+    let mut v = ProbeVolume::for_frame(&scene.bounds(), settings, pixels).unwrap();
+    v.fit_rays_to_frame(128 * 128);
+    assert_eq!((v.rays, v.per_update()), (32, n));
+    v.fit_rays_to_frame(320 * 320);
+    assert_eq!((v.rays, v.per_update()), (192, n));
+}
+
+/// An update of a frame-sized volume is, probe for probe, the update a volume of the same
+/// counts that updates every probe makes: after one update the traced probes' maps, places
+/// and states (relocation and classification on) equal the full volume's bit for bit, the
+/// others are untouched; the next update takes the next probes.
+#[test]
+fn a_frame_sized_update_is_the_full_update_restricted_to_its_probes() {
+    let scene = point_lit_room(true);
+    let settings = DdgiSettings {
+        relocate: true,
+        classify: true,
+        ..Default::default()
+    };
+    let pixels = 48 * 48;
+    let mut part = ProbeVolume::for_frame(&scene.bounds(), settings, pixels).unwrap();
+    let (n, k) = (part.probe_count(), part.per_update());
+    assert!(k < n && 2 * k <= n, "{n} probes, {k} an update");
+    let mut full = ProbeVolume::new(
+        &scene.bounds(),
+        DdgiSettings {
+            counts: Some(part.counts),
+            rays_per_probe: Some(part.rays),
+            ..settings
+        },
+    )
+    .unwrap();
+    let empty = part.clone();
+    part.update(&scene, 11);
+    full.update(&scene, 11);
+    for p in 0..n {
+        let source = if p < k { &full } else { &empty };
+        assert_eq!(
+            part.probe_irradiance(p),
+            source.probe_irradiance(p),
+            "probe {p}"
+        );
+        assert_eq!(part.probe_moments(p), source.probe_moments(p), "probe {p}");
+        assert_eq!(part.probe_origin(p), source.probe_origin(p), "probe {p}");
+        assert_eq!(part.probe_active(p), source.probe_active(p), "probe {p}");
+        assert_eq!(part.probe_updates(p), u32::from(p < k), "probe {p}");
+    }
+    assert!(
+        (0..k).any(|p| part.probe_origin(p) != empty.probe_origin(p) || !part.probe_active(p)),
+        "the room's probes near its wall neither moved nor switched off: nothing was compared"
+    );
+    part.update(&scene, 12);
+    assert!((0..n).all(|p| part.probe_updates(p) == u32::from(p < 2 * k)));
 }

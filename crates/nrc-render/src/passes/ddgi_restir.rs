@@ -3,7 +3,8 @@
 //! plus a radiance source's estimate of the light it reflects. Three passes share this file:
 //!
 //! - `ddgi-restir` (the paper's method): the source is a DDGI probe volume the pass keeps and
-//!   updates every frame (eq. 5 probes), answering `L_DDGI+` of eq. 6 (the diffuse `ρ/π E`
+//!   updates every frame (eq. 5 probes; all of them, or the share of a frame-sized volume the
+//!   frame's ray budget affords, in turn), answering `L_DDGI+` of eq. 6 (the diffuse `ρ/π E`
 //!   plus one sample of the glossy integral);
 //! - `nrc-restir` (beyond the paper): the neural cache, trained online by the harness, as the
 //!   light: it answers the reflected radiance in every direction, where the probes hold only
@@ -978,15 +979,16 @@ impl RenderPass for DdgiRestirPass {
             return;
         }
         let t = Instant::now();
+        let pixels = u64::from(input.width) * u64::from(input.height);
         if self.volume.is_none() {
             let mut ddgi = self.settings.ddgi;
             if self.settings.light == SurfaceLight::CacheProbes {
                 ddgi.radiance = ProbeRadiance::Source;
             }
-            self.volume = ProbeVolume::new(&input.scene.bounds(), ddgi).ok();
+            self.volume = ProbeVolume::for_frame(&input.scene.bounds(), ddgi, pixels).ok();
         }
         if let Some(v) = &mut self.volume {
-            v.fit_rays_to_frame(u64::from(input.width) * u64::from(input.height));
+            v.fit_rays_to_frame(pixels);
         }
         // Probes fed by the cache blend in `resolve`, once the source has answered.
         if self.settings.light == SurfaceLight::Probes

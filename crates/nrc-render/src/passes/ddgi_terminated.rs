@@ -1,4 +1,6 @@
-//! Camera paths that end in a DDGI probe volume the pass keeps and updates every frame:
+//! Camera paths that end in a DDGI probe volume the pass keeps and updates every frame (all
+//! its probes, or, where the volume is sized to the frame, the share of them the frame's ray
+//! budget affords, in turn):
 //! `ddgi-secondary` (the seed paper's "+Secondary DDGI" column: the primary vertex's direct
 //! light traced, the rest from the probes at the secondary vertex) and, with any other
 //! termination, `ddgi-<termination>`. The probe update is part of the frame (it runs in
@@ -73,8 +75,16 @@ pub(super) fn validate_volume(volume: &DdgiSettings) -> Result<(), SettingsError
 /// The probe volume's keys, shared by every pass that keeps one.
 impl Params for DdgiSettings {
     fn visit(&mut self, f: &mut dyn FnMut(&Key, &mut dyn Value)) {
-        let probes = Key::new("probes", "probes per axis (auto: 8 along the longest axis)");
+        let probes = Key::new(
+            "probes",
+            "probes per axis (auto: what the frame's rays refresh within the sweep, cubic cells, at most 4,096)",
+        );
         f(&probes.range(1.0, 64.0), &mut self.counts);
+        let sweep = Key::new(
+            "sweep",
+            "auto probes and rays: the most frames between a probe's updates",
+        );
+        f(&sweep.range(1.0, 1024.0), &mut self.sweep);
         let rays = Key::new(
             "rays",
             "rays per probe and frame (auto: a quarter of the frame's pixels over the probes, 32-256)",
@@ -201,6 +211,7 @@ impl RenderPass for DdgiTerminatedPass {
 
     fn reset(&mut self) {
         self.volume = None;
+        self.rays = None;
     }
 
     fn debug_views(&self) -> Vec<super::frame::PassView> {
@@ -213,13 +224,14 @@ impl RenderPass for DdgiTerminatedPass {
     fn prepare(&mut self, input: &FrameInput) {
         self.view = Some((*input.camera, input.width, input.height));
         let t = std::time::Instant::now();
+        let pixels = u64::from(input.width) * u64::from(input.height);
         if self.volume.is_none() {
             // Settings were validated when the pass was named; an empty scene box leaves the
             // pass without probes (every query answers zero).
-            self.volume = ProbeVolume::new(&input.scene.bounds(), self.settings).ok();
+            self.volume = ProbeVolume::for_frame(&input.scene.bounds(), self.settings, pixels).ok();
         }
         if let Some(v) = &mut self.volume {
-            v.fit_rays_to_frame(u64::from(input.width) * u64::from(input.height));
+            v.fit_rays_to_frame(pixels);
             if self.settings.radiance == ProbeRadiance::Source {
                 // The rays' queries go to the source with the frame's batch (`trace`).
                 self.rays = Some(v.trace_rays(input.scene, Stream::ProbeRays.seed(input.seed)));
@@ -254,8 +266,9 @@ impl RenderPass for DdgiTerminatedPass {
     }
 }
 
-/// The viewer's view of a probe volume: each active probe where it is (relocation included), a
-/// disc in its mean irradiance, through `camera` in a `width × height` image.
+/// The viewer's view of a probe volume: each active probe that has been updated where it is
+/// (relocation included), a disc in its mean irradiance, through `camera` in a `width ×
+/// height` image.
 pub(super) fn probe_view(
     volume: &ProbeVolume,
     camera: &nrc_scene::Camera,
@@ -264,7 +277,7 @@ pub(super) fn probe_view(
 ) -> super::frame::PassView {
     let radius = (width.max(height) as f32 / 160.0).max(1.5);
     let probes = (0..volume.probe_count())
-        .filter(|&p| volume.probe_active(p))
+        .filter(|&p| volume.probe_active(p) && volume.probe_updates(p) > 0)
         .map(|p| {
             let texels = volume.probe_irradiance(p);
             let mean = texels.iter().copied().sum::<Vec3>() / texels.len().max(1) as f32;
