@@ -451,8 +451,6 @@ pub struct ProbeVolume {
     irradiance: Vec<Vec3>,
     /// Per probe, `(m + 2)²` texels of (mean distance, mean squared distance).
     moments: Vec<Vec2>,
-    /// Updates blended in so far.
-    pub frames: u32,
     /// Probes traced and blended per update: all of them, unless the volume was sized to a
     /// frame whose ray budget updates them in turn ([`DdgiSettings::sweep`]).
     per_update: usize,
@@ -566,7 +564,6 @@ impl ProbeVolume {
             moment_map,
             irradiance: vec![Vec3::ZERO; n * irradiance_map.len()],
             moments: vec![Vec2::ZERO; n * moment_map.len()],
-            frames: 0,
             per_update: n,
             cursor: 0,
             frame_sized: sized.is_some(),
@@ -941,7 +938,6 @@ impl ProbeVolume {
                     mm.blend(mom, columns, h, sharp, moments, scratch);
                 },
             );
-        self.frames += 1;
         self.cursor = (first + traced) % n;
         self.relocate_and_classify(first, &rays.geometry);
     }

@@ -82,7 +82,7 @@ impl SettingsError {
 pub enum VolumeError {
     #[error("ddgi: the scene box is empty or not finite")]
     EmptyBox,
-    #[error("ddgi: rays per probe and texels per side must be at least 1")]
+    #[error("ddgi: rays per probe, texels per side and the sweep must be at least 1")]
     Zero,
     #[error("ddgi: at most 16384 rays per probe and 64 texels per side")]
     TooLarge,

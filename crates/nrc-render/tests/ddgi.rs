@@ -560,6 +560,24 @@ fn frame_sized_counts_follow_the_ray_budget_and_the_box() {
         auto_counts(Vec3::splat(f32::NAN), 160 * 90, 16),
         UVec3::splat(2)
     );
+    // A sweep of 0 is refused with a message naming it, by the volume and by the pass.
+    let unit = nrc_scene::Aabb {
+        min: Vec3::ZERO,
+        max: Vec3::ONE,
+    };
+    let zero = DdgiSettings {
+        sweep: 0,
+        ..Default::default()
+    };
+    let e = ProbeVolume::for_frame(&unit, zero, 64)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("sweep"), "{e}");
+    let e = "ddgi-restir:sweep=0"
+        .parse::<nrc_render::PassSpec>()
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("sweep"), "{e}");
 }
 
 /// Where the frame's budget does not cover every probe, an update takes the next
