@@ -77,19 +77,6 @@ fn runs(scene: &Scene, offsets: Offsets) -> Vec<Image> {
         .collect()
 }
 
-/// The runs' variance of a pixel channel, summed over the image.
-fn summed_variance(runs: &[Image]) -> f64 {
-    let n = runs.len() as f64;
-    (0..runs[0].data.len())
-        .flat_map(|p| (0..3).map(move |c| (p, c)))
-        .map(|(p, c)| {
-            let xs: Vec<f64> = runs.iter().map(|r| r.data[p][c] as f64).collect();
-            let mean = xs.iter().sum::<f64>() / n;
-            xs.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1.0)
-        })
-        .sum()
-}
-
 #[test]
 fn sobol_offsets_are_unbiased_per_pixel_and_stratify_a_runs_passes() {
     let scene = window();
@@ -113,9 +100,9 @@ fn sobol_offsets_are_unbiased_per_pixel_and_stratify_a_runs_passes() {
     );
 
     let (v_sobol, v_indep, v_stuck) = (
-        summed_variance(&sobol),
-        summed_variance(&runs(&scene, Offsets::Independent)),
-        summed_variance(&runs(&scene, Offsets::Stuck)),
+        common::summed_variance(&sobol),
+        common::summed_variance(&runs(&scene, Offsets::Independent)),
+        common::summed_variance(&runs(&scene, Offsets::Stuck)),
     );
     eprintln!(
         "variance of a run: sobol {v_sobol:.4}, independent {v_indep:.4}, stuck {v_stuck:.4}"

@@ -47,7 +47,9 @@ use rayon::prelude::*;
 
 use crate::error::SettingsError;
 use super::reuse::{self, Entry, Merge, Resampling, Slot, WorldHistory};
-use super::screen::{GBuffer, MAX, Phase, Primary, par_map, stream, visible_between};
+use super::screen::{
+    GBuffer, MAX, Phase, Primary, par_map, split_camera_rays, stream, visible_between,
+};
 use super::params::{Key, Params, Value};
 use super::spec::{PassConfig, PassKind, parse_variant};
 use super::frame::{FrameInput, PassOutput, PhaseTimes, RenderPass};
@@ -171,6 +173,13 @@ pub struct RestirGiSettings {
     /// (the cache trains between frames; off: keep the answers from the frames that found
     /// them, an ablation and the refresh test's negative control).
     pub refresh: bool,
+    /// Camera rays a pixel sample for the direct light at its primary vertex (1: the path's
+    /// own alone; N: N − 1 more, [`super::screen::split_camera_rays`]). The reservoir's
+    /// indirect light keeps one path a frame.
+    pub split: u32,
+    /// The split's negative control for the tests: the path's own direct light is kept whole
+    /// beside the split's mean instead of entering it (counted twice). No key.
+    pub split_keeps_own: bool,
 }
 
 impl Default for RestirGiSettings {
@@ -186,6 +195,8 @@ impl Default for RestirGiSettings {
             jitter: true,
             jacobian: true,
             refresh: true,
+            split: 1,
+            split_keeps_own: false,
         }
     }
 }
@@ -262,6 +273,11 @@ impl Params for RestirGiSettings {
         reuse::visit_pairwise(f, &mut self.pairwise);
         let nee = Key::new("nee", "light samples of NEE at the shading vertex");
         f(&nee.range(1.0, MAX), &mut self.light_samples);
+        let split = Key::new(
+            "split",
+            "camera rays a pixel sample for the primary vertex's direct light (1: the path's)",
+        );
+        f(&split.range(1.0, MAX), &mut self.split);
         let jacobian = Key::new("jacobian", "shift W by the reconnection Jacobian (0: biased)");
         f(&jacobian, &mut self.jacobian);
         f(&Key::new("jitter", "jitter camera rays in the pixel"), &mut self.jitter);
@@ -379,6 +395,11 @@ struct Traced {
     /// World space, traced tails, rough `x₂`: its initial sample (sample and pdf; `None`: its
     /// path found none) with its owner, for the grid.
     second: Option<(Vertex, Option<(GiSample, f32)>)>,
+    /// The path's own estimate of the direct light at its primary vertex (in `radiance` or in
+    /// the shading's `direct`), which a split replaces by its mean.
+    primary_direct: Vec3,
+    /// The split's extra camera rays: the sum of their estimates of it.
+    split_direct: Vec3,
     stats: PathStats,
 }
 
@@ -457,11 +478,17 @@ impl RestirGiPass {
             }
             let mut walk = PathWalk::from_vertex(scene, &self.tracer, 1);
             loop {
+                // The primary vertex's direct light (NEE there and the emission its BSDF
+                // sample finds), as `primary_direct` estimates it for a split.
+                let at_primary = segments == 1;
                 if walk.at_depth_limit() {
                     return out;
                 }
-                out.radiance +=
-                    walk.throughput() * walk.next_event(scene, &v, &mut s, &mut out.stats);
+                let nee = walk.throughput() * walk.next_event(scene, &v, &mut s, &mut out.stats);
+                out.radiance += nee;
+                if at_primary {
+                    out.primary_direct = nee;
+                }
                 if walk.scatter(&v, &mut s).is_none() {
                     return out;
                 }
@@ -469,10 +496,16 @@ impl RestirGiPass {
                 match walk.arrive(scene, &mut out.stats) {
                     Arrival::Escaped { le, mis } => {
                         out.radiance += walk.throughput() * le * mis;
+                        if at_primary {
+                            out.primary_direct += walk.throughput() * le * mis;
+                        }
                         return out;
                     }
                     Arrival::Hit(h) => {
                         out.radiance += walk.throughput() * h.le * h.mis;
+                        if at_primary {
+                            out.primary_direct += walk.throughput() * h.le * h.mis;
+                        }
                         v = h.vertex;
                         if self.is_rough(&v) {
                             throughput = walk.throughput();
@@ -550,8 +583,59 @@ impl RestirGiPass {
                 }
             }
         }
+        if shading.primary {
+            out.primary_direct = shading.direct;
+        }
         out.shading = Some(shading);
         out
+    }
+
+    /// The direct light at primary vertex `v` as [`RestirGiPass::trace_one`] estimates it
+    /// there (`primary_direct`): NEE and the emission a BSDF sample finds, weighted by MIS;
+    /// zero where the pass does not split it from the path (a specular primary vertex in
+    /// screen space, traced whole by the path tracer).
+    fn direct_at_primary(
+        &self,
+        scene: &Scene,
+        v: &Vertex,
+        s: &mut crate::sampler::PixelSampler,
+        stats: &mut PathStats,
+    ) -> Vec3 {
+        let limit = self.tracer.segment_limit();
+        if self.is_rough(v) {
+            if limit <= 1 {
+                return Vec3::ZERO;
+            }
+            let mut walk = PathWalk::from_vertex(scene, &self.tracer, 1)
+                .with_light_samples(self.settings.light_samples);
+            let mut direct = walk.next_event(scene, v, s, stats);
+            let u_lobe = s.next_1d();
+            let u_dir = s.next_2d();
+            if let Some(bs) = v.bsdf.sample(v.wo, u_dir, u_lobe).filter(|b| b.pdf > 0.0) {
+                walk.follow(v, &bs);
+                direct += match walk.arrive(scene, stats) {
+                    Arrival::Escaped { le, mis } => bs.weight * le * mis,
+                    Arrival::Hit(h) => bs.weight * h.le * h.mis,
+                };
+            }
+            direct
+        } else if self.settings.is_world() {
+            let mut walk = PathWalk::from_vertex(scene, &self.tracer, 1);
+            if walk.at_depth_limit() {
+                return Vec3::ZERO;
+            }
+            let mut direct = walk.throughput() * walk.next_event(scene, v, s, stats);
+            if walk.scatter(v, s).is_none() {
+                return direct;
+            }
+            direct += match walk.arrive(scene, stats) {
+                Arrival::Escaped { le, mis } => walk.throughput() * le * mis,
+                Arrival::Hit(h) => walk.throughput() * h.le * h.mis,
+            };
+            direct
+        } else {
+            Vec3::ZERO
+        }
     }
 
     /// The radiance leaving `y` toward the vertex before it (`segments` used to reach it),
@@ -668,8 +752,17 @@ impl RenderPass for RestirGiPass {
         let scene = input.scene;
         let t = Instant::now();
         let g = GBuffer::trace(input, self.settings.jitter);
+        let extra = self.settings.split - 1;
         let mut traced: Vec<Traced> = par_map(g.len(), |i| {
-            self.trace_one(scene, input.seed, i, g.primary[i].as_ref(), g.emitted[i])
+            let mut t = self.trace_one(scene, input.seed, i, g.primary[i].as_ref(), g.emitted[i]);
+            if extra > 0 {
+                let jitter = self.settings.jitter;
+                t.split_direct =
+                    split_camera_rays(input, i, jitter, extra, &mut t.stats, |v, s, stats| {
+                        self.direct_at_primary(scene, v, s, stats)
+                    });
+            }
+            t
         });
         let mut queries = Vec::new();
         for t in traced.iter_mut() {
@@ -817,6 +910,12 @@ impl RenderPass for RestirGiPass {
                     _ => Vec3::ZERO,
                 };
                 l += sh.throughput * (sh.direct + delta + indirect);
+            }
+            if set.split > 1 {
+                // The path's own direct light at its primary vertex enters the split's mean.
+                let n = set.split as f32;
+                let own = if set.split_keeps_own { 0.0 } else { 1.0 };
+                l += (t.split_direct - own * (n - 1.0) * t.primary_direct) / n;
             }
             (l, r, stats)
         });

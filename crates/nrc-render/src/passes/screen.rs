@@ -46,6 +46,8 @@ pub enum Phase {
     HistoryRefresh = 9,
     /// The near-specular recursion at shading (DDGI resampling's eqs. 7–8).
     Footprint = 10,
+    /// Extra camera rays for the direct light at the primary vertex ([`split_camera_rays`]).
+    Split = 11,
 }
 
 /// The random stream of pixel sample `i` in `phase` of the frame seeded `seed`.
@@ -225,7 +227,7 @@ pub fn similar(q: &Primary, n: Vec3, depth: f32) -> bool {
 }
 
 /// The first hit of camera ray `ray` and the radiance it sees there directly.
-fn primary_hit(scene: &Scene, ray: &Ray) -> (Option<Primary>, Vec3) {
+pub(crate) fn primary_hit(scene: &Scene, ray: &Ray) -> (Option<Primary>, Vec3) {
     let Some(hit) = scene.intersect(ray) else {
         return (None, scene.environment().radiance(ray.d.normalize()));
     };
@@ -239,6 +241,46 @@ fn primary_hit(scene: &Scene, ray: &Ray) -> (Option<Primary>, Vec3) {
         }),
         le,
     )
+}
+
+/// The direct light at the primary vertex split over more camera rays: `extra` more camera
+/// rays in the pixel of pixel sample `i` (uniform in it, or through its centre without
+/// `jitter`), `direct` estimating each primary vertex's direct light; returns their sum. A
+/// pass that takes a split replaces its path's own estimate `D₀` of that light by
+/// `(D₀ + sum) / (extra + 1)`: each term estimates the same mean over the pixel (the direct
+/// light of its primary vertices, emission seen directly excluded), so the pixel stays
+/// unbiased, and a term costs a camera ray and the direct light's rays, not a path.
+pub(crate) fn split_camera_rays(
+    input: &FrameInput,
+    i: usize,
+    jitter: bool,
+    extra: u32,
+    stats: &mut PathStats,
+    mut direct: impl FnMut(&Vertex, &mut PixelSampler, &mut PathStats) -> Vec3,
+) -> Vec3 {
+    let spp = input.spp.max(1) as usize;
+    let pixel = i / spp;
+    let xy = Vec2::new(
+        (pixel % input.width as usize) as f32,
+        (pixel / input.width as usize) as f32,
+    );
+    let mut s = stream(input.seed, i, Phase::Split);
+    let mut sum = Vec3::ZERO;
+    for _ in 0..extra {
+        let offset = if jitter {
+            s.next_2d()
+        } else {
+            Vec2::splat(0.5)
+        };
+        let ray = input
+            .camera
+            .generate_ray(xy + offset, input.width, input.height);
+        stats.closest_rays += 1;
+        if let (Some(p), _) = primary_hit(input.scene, &ray) {
+            sum += direct(&p.v, &mut s, stats);
+        }
+    }
+    sum
 }
 
 /// Whether the segment from `a` (a surface point with geometric normal `ng_a`) to `b` (with

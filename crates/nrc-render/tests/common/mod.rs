@@ -573,3 +573,16 @@ pub fn window() -> Scene {
     b.camera(Vec3::new(0.0, 0.5, 3.0), Vec3::new(0.0, -0.1, 0.0), 50.0);
     b.build()
 }
+
+/// The runs' variance of a pixel channel, summed over the image.
+pub fn summed_variance(runs: &[Image]) -> f64 {
+    let n = runs.len() as f64;
+    (0..runs[0].data.len())
+        .flat_map(|p| (0..3).map(move |c| (p, c)))
+        .map(|(p, c)| {
+            let xs: Vec<f64> = runs.iter().map(|r| r.data[p][c] as f64).collect();
+            let mean = xs.iter().sum::<f64>() / n;
+            xs.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1.0)
+        })
+        .sum()
+}
