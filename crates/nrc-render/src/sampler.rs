@@ -270,6 +270,9 @@ pub enum Stream {
     ConvergeFrame(u32),
     /// Instant radiosity's warm-up iteration `k` before its first frame.
     VplWarmup(u32),
+    /// Extra camera ray `k` of a frame's split (`split=N` of the ReSTIR GI passes): the
+    /// pass's own per-pixel streams under it.
+    SplitRay(u32),
 }
 
 impl Stream {
@@ -286,6 +289,7 @@ impl Stream {
             Self::ConvergeRestart => (8, 0),
             Self::ConvergeFrame(k) => (9, k),
             Self::VplWarmup(k) => (10, k),
+            Self::SplitRay(k) => (11, k),
         };
         mix64(mix64(seed ^ (id as u64).wrapping_mul(0xD1B5_4A32_D192_ED03)) ^ k as u64)
     }
@@ -319,6 +323,7 @@ mod tests {
                         Stream::SweepStep(k),
                         Stream::ConvergeFrame(k),
                         Stream::VplWarmup(k),
+                        Stream::SplitRay(k),
                     ]
                     .map(|s| s.seed(seed)),
                 );

@@ -173,12 +173,14 @@ pub struct RestirGiSettings {
     /// (the cache trains between frames; off: keep the answers from the frames that found
     /// them, an ablation and the refresh test's negative control).
     pub refresh: bool,
-    /// Camera rays a pixel sample for the direct light at its primary vertex (1: the path's
-    /// own alone; N: N − 1 more, [`super::screen::split_camera_rays`]). The reservoir's
-    /// indirect light keeps one path a frame.
+    /// Camera rays a pixel sample for the light gathered up to the shading vertex `x₁`: the
+    /// emission and NEE along the specular chain before it and the direct light at `x₁`
+    /// (1: the path's own alone; N: N − 1 more, [`super::screen::split_camera_rays`]). The
+    /// reservoir's reflected light keeps one path a frame.
     pub split: u32,
-    /// The split's negative control for the tests: the path's own direct light is kept whole
-    /// beside the split's mean instead of entering it (counted twice). No key.
+    /// The split's negative control for the tests: the path's own gathered light is kept
+    /// whole beside the split's mean instead of entering it (weight (2N − 1)/N in all). No
+    /// key.
     pub split_keeps_own: bool,
 }
 
@@ -206,6 +208,9 @@ impl RestirGiSettings {
     pub fn validate(&self) -> Result<(), SettingsError> {
         if self.light_samples == 0 {
             return Err(SettingsError::bounds("light samples", "be at least 1", 0));
+        }
+        if self.split == 0 {
+            return Err(SettingsError::bounds("split", "be at least 1", 0));
         }
         match self.reuse {
             GiReuse::Screen { neighbours, radius } => {
@@ -275,7 +280,7 @@ impl Params for RestirGiSettings {
         f(&nee.range(1.0, MAX), &mut self.light_samples);
         let split = Key::new(
             "split",
-            "camera rays a pixel sample for the primary vertex's direct light (1: the path's)",
+            "camera rays a pixel sample for the light up to the shading vertex (1: the path's)",
         );
         f(&split.range(1.0, MAX), &mut self.split);
         let jacobian = Key::new("jacobian", "shift W by the reconnection Jacobian (0: biased)");
@@ -388,19 +393,27 @@ struct Shading {
 /// One pixel sample after the trace phase.
 #[derive(Clone, Copy, Debug, Default)]
 struct Traced {
-    /// Radiance gathered before `x₁` (emission seen, NEE at specular vertices), or the whole
-    /// path tracer's estimate where there is no `x₁`.
+    /// Radiance gathered before `x₁` (emission and NEE at specular vertices, the emission
+    /// the camera ray sees excluded), or the whole path tracer's estimate where there is no
+    /// `x₁`.
     radiance: Vec3,
     shading: Option<Shading>,
     /// World space, traced tails, rough `x₂`: its initial sample (sample and pdf; `None`: its
     /// path found none) with its owner, for the grid.
     second: Option<(Vertex, Option<(GiSample, f32)>)>,
-    /// The path's own estimate of the direct light at its primary vertex (in `radiance` or in
-    /// the shading's `direct`), which a split replaces by its mean.
-    primary_direct: Vec3,
-    /// The split's extra camera rays: the sum of their estimates of it.
-    split_direct: Vec3,
+    /// The split's extra camera rays ([`RestirGiSettings::split`]): the sum of their
+    /// estimates of the light gathered up to the shading vertex ([`Traced::gathered`]).
+    split: Vec3,
     stats: PathStats,
+}
+
+impl Traced {
+    /// The light the path gathers up to its shading vertex `x₁`, the direct light there
+    /// included (NEE and the emission its candidate's BSDF ray finds, by MIS): all but the
+    /// camera ray's own emission and the reflected light the reservoir estimates.
+    fn gathered(&self) -> Vec3 {
+        self.radiance + self.shading.map_or(Vec3::ZERO, |sh| sh.throughput * sh.direct)
+    }
 }
 
 struct History {
@@ -451,19 +464,18 @@ impl RestirGiPass {
     }
 
     /// The trace phase of one pixel sample: the path to `x₁`, NEE there, the initial
-    /// candidate and (traced tails) its radiance.
+    /// candidate and (traced tails) its radiance; with `gather_only`, no candidate (its BSDF
+    /// ray still finds the emission that completes the direct light's MIS): a split's extra
+    /// camera ray, which estimates only [`Traced::gathered`].
     fn trace_one(
         &self,
         scene: &Scene,
         seed: u64,
         i: usize,
         p: Option<&Primary>,
-        emitted: Vec3,
+        gather_only: bool,
     ) -> Traced {
-        let mut out = Traced {
-            radiance: emitted,
-            ..Default::default()
-        };
+        let mut out = Traced::default();
         let Some(p) = p else { return out };
         let mut s = stream(seed, i, Phase::Path);
         let limit = self.tracer.segment_limit();
@@ -478,17 +490,11 @@ impl RestirGiPass {
             }
             let mut walk = PathWalk::from_vertex(scene, &self.tracer, 1);
             loop {
-                // The primary vertex's direct light (NEE there and the emission its BSDF
-                // sample finds), as `primary_direct` estimates it for a split.
-                let at_primary = segments == 1;
                 if walk.at_depth_limit() {
                     return out;
                 }
-                let nee = walk.throughput() * walk.next_event(scene, &v, &mut s, &mut out.stats);
-                out.radiance += nee;
-                if at_primary {
-                    out.primary_direct = nee;
-                }
+                out.radiance +=
+                    walk.throughput() * walk.next_event(scene, &v, &mut s, &mut out.stats);
                 if walk.scatter(&v, &mut s).is_none() {
                     return out;
                 }
@@ -496,16 +502,10 @@ impl RestirGiPass {
                 match walk.arrive(scene, &mut out.stats) {
                     Arrival::Escaped { le, mis } => {
                         out.radiance += walk.throughput() * le * mis;
-                        if at_primary {
-                            out.primary_direct += walk.throughput() * le * mis;
-                        }
                         return out;
                     }
                     Arrival::Hit(h) => {
                         out.radiance += walk.throughput() * h.le * h.mis;
-                        if at_primary {
-                            out.primary_direct += walk.throughput() * h.le * h.mis;
-                        }
                         v = h.vertex;
                         if self.is_rough(&v) {
                             throughput = walk.throughput();
@@ -554,7 +554,7 @@ impl RestirGiPass {
                         Some(h.vertex)
                     }
                 };
-                if let Some(y) = y.filter(|_| segments + 1 < limit) {
+                if let Some(y) = y.filter(|_| segments + 1 < limit && !gather_only) {
                     let mut sample = GiSample {
                         x: y.si.p,
                         n: y.si.ng,
@@ -583,59 +583,8 @@ impl RestirGiPass {
                 }
             }
         }
-        if shading.primary {
-            out.primary_direct = shading.direct;
-        }
         out.shading = Some(shading);
         out
-    }
-
-    /// The direct light at primary vertex `v` as [`RestirGiPass::trace_one`] estimates it
-    /// there (`primary_direct`): NEE and the emission a BSDF sample finds, weighted by MIS;
-    /// zero where the pass does not split it from the path (a specular primary vertex in
-    /// screen space, traced whole by the path tracer).
-    fn direct_at_primary(
-        &self,
-        scene: &Scene,
-        v: &Vertex,
-        s: &mut crate::sampler::PixelSampler,
-        stats: &mut PathStats,
-    ) -> Vec3 {
-        let limit = self.tracer.segment_limit();
-        if self.is_rough(v) {
-            if limit <= 1 {
-                return Vec3::ZERO;
-            }
-            let mut walk = PathWalk::from_vertex(scene, &self.tracer, 1)
-                .with_light_samples(self.settings.light_samples);
-            let mut direct = walk.next_event(scene, v, s, stats);
-            let u_lobe = s.next_1d();
-            let u_dir = s.next_2d();
-            if let Some(bs) = v.bsdf.sample(v.wo, u_dir, u_lobe).filter(|b| b.pdf > 0.0) {
-                walk.follow(v, &bs);
-                direct += match walk.arrive(scene, stats) {
-                    Arrival::Escaped { le, mis } => bs.weight * le * mis,
-                    Arrival::Hit(h) => bs.weight * h.le * h.mis,
-                };
-            }
-            direct
-        } else if self.settings.is_world() {
-            let mut walk = PathWalk::from_vertex(scene, &self.tracer, 1);
-            if walk.at_depth_limit() {
-                return Vec3::ZERO;
-            }
-            let mut direct = walk.throughput() * walk.next_event(scene, v, s, stats);
-            if walk.scatter(v, s).is_none() {
-                return direct;
-            }
-            direct += match walk.arrive(scene, stats) {
-                Arrival::Escaped { le, mis } => walk.throughput() * le * mis,
-                Arrival::Hit(h) => walk.throughput() * h.le * h.mis,
-            };
-            direct
-        } else {
-            Vec3::ZERO
-        }
     }
 
     /// The radiance leaving `y` toward the vertex before it (`segments` used to reach it),
@@ -752,15 +701,16 @@ impl RenderPass for RestirGiPass {
         let scene = input.scene;
         let t = Instant::now();
         let g = GBuffer::trace(input, self.settings.jitter);
-        let extra = self.settings.split - 1;
+        let extra = self.settings.split.saturating_sub(1);
         let mut traced: Vec<Traced> = par_map(g.len(), |i| {
-            let mut t = self.trace_one(scene, input.seed, i, g.primary[i].as_ref(), g.emitted[i]);
+            let mut t = self.trace_one(scene, input.seed, i, g.primary[i].as_ref(), false);
             if extra > 0 {
                 let jitter = self.settings.jitter;
-                t.split_direct =
-                    split_camera_rays(input, i, jitter, extra, &mut t.stats, |v, s, stats| {
-                        self.direct_at_primary(scene, v, s, stats)
-                    });
+                t.split = split_camera_rays(input, i, jitter, extra, &mut t.stats, |p, seed, stats| {
+                    let extra = self.trace_one(scene, seed, i, Some(p), true);
+                    stats.add(&extra.stats);
+                    extra.gathered()
+                });
             }
             t
         });
@@ -893,7 +843,11 @@ impl RenderPass for RestirGiPass {
         let shaded: Vec<(Vec3, GiReservoir, PathStats)> = par_map(n, |i| {
             let (mut r, mut stats) = spatial[i];
             let t = &traced[i];
-            let mut l = t.radiance;
+            // The light gathered up to x₁ (the path's own, or with a split the mean of its
+            // camera rays'), then the reflected light of the reservoir at x₁.
+            let n = set.split.max(1) as f32;
+            let own = if set.split_keeps_own { n } else { 1.0 };
+            let mut l = g.emitted[i] + (own * t.gathered() + t.split) / n;
             if let Some(sh) = &t.shading {
                 let mut indirect = Vec3::ZERO;
                 if let Some(y) = r.sample {
@@ -909,13 +863,7 @@ impl RenderPass for RestirGiPass {
                     (Some(weight), Some((y, _))) => weight * y.l,
                     _ => Vec3::ZERO,
                 };
-                l += sh.throughput * (sh.direct + delta + indirect);
-            }
-            if set.split > 1 {
-                // The path's own direct light at its primary vertex enters the split's mean.
-                let n = set.split as f32;
-                let own = if set.split_keeps_own { 0.0 } else { 1.0 };
-                l += (t.split_direct - own * (n - 1.0) * t.primary_direct) / n;
+                l += sh.throughput * (delta + indirect);
             }
             (l, r, stats)
         });

@@ -13,7 +13,7 @@ use rayon::prelude::*;
 
 use super::frame::{FrameInput, PassOutput, PassStats, PhaseTimes};
 use crate::path_tracer::PathStats;
-use crate::sampler::PixelSampler;
+use crate::sampler::{PixelSampler, Stream};
 use crate::transport::Vertex;
 
 /// Cosine of the largest angle between the normals of two vertices that may share samples.
@@ -46,7 +46,7 @@ pub enum Phase {
     HistoryRefresh = 9,
     /// The near-specular recursion at shading (DDGI resampling's eqs. 7–8).
     Footprint = 10,
-    /// Extra camera rays for the direct light at the primary vertex ([`split_camera_rays`]).
+    /// The offsets of a split's extra camera rays in the pixel ([`split_camera_rays`]).
     Split = 11,
 }
 
@@ -243,20 +243,22 @@ pub(crate) fn primary_hit(scene: &Scene, ray: &Ray) -> (Option<Primary>, Vec3) {
     )
 }
 
-/// The direct light at the primary vertex split over more camera rays: `extra` more camera
-/// rays in the pixel of pixel sample `i` (uniform in it, or through its centre without
-/// `jitter`), `direct` estimating each primary vertex's direct light; returns their sum. A
-/// pass that takes a split replaces its path's own estimate `D₀` of that light by
-/// `(D₀ + sum) / (extra + 1)`: each term estimates the same mean over the pixel (the direct
-/// light of its primary vertices, emission seen directly excluded), so the pixel stays
-/// unbiased, and a term costs a camera ray and the direct light's rays, not a path.
+/// The light a pass gathers up to its shading vertex, split over more camera rays: `extra`
+/// more camera rays in the pixel of pixel sample `i` (uniform in it, or through its centre
+/// without `jitter`), `gather` estimating that light from each one's primary vertex with the
+/// seed it is given (each ray its own, for the pass's named streams); returns their sum. A pass
+/// that takes a split replaces its path's own estimate `D₀` of that light by
+/// `(D₀ + sum) / (extra + 1)`: each term estimates the same mean over the pixel, so the pixel
+/// stays unbiased, and a term costs a camera ray and the rays to the shading vertex and of its
+/// direct light, not a path (but where a pass traces a pixel's path whole, as screen-space
+/// ReSTIR GI does at a specular primary, the term is that whole path).
 pub(crate) fn split_camera_rays(
     input: &FrameInput,
     i: usize,
     jitter: bool,
     extra: u32,
     stats: &mut PathStats,
-    mut direct: impl FnMut(&Vertex, &mut PixelSampler, &mut PathStats) -> Vec3,
+    mut gather: impl FnMut(&Primary, u64, &mut PathStats) -> Vec3,
 ) -> Vec3 {
     let spp = input.spp.max(1) as usize;
     let pixel = i / spp;
@@ -266,7 +268,7 @@ pub(crate) fn split_camera_rays(
     );
     let mut s = stream(input.seed, i, Phase::Split);
     let mut sum = Vec3::ZERO;
-    for _ in 0..extra {
+    for k in 0..extra {
         let offset = if jitter {
             s.next_2d()
         } else {
@@ -277,7 +279,9 @@ pub(crate) fn split_camera_rays(
             .generate_ray(xy + offset, input.width, input.height);
         stats.closest_rays += 1;
         if let (Some(p), _) = primary_hit(input.scene, &ray) {
-            sum += direct(&p.v, &mut s, stats);
+            // A seed of its own for each extra ray: the pass's streams of pixel sample `i`
+            // under it are independent of the frame's.
+            sum += gather(&p, Stream::SplitRay(k).seed(input.seed), stats);
         }
     }
     sum
