@@ -782,3 +782,39 @@ fn a_split_of_the_light_up_to_the_shading_vertex_keeps_restir_gi_unbiased_per_pi
         }
     }
 }
+
+/// The split's extra camera rays jittered in the pixel, as `nrc compare` renders
+/// (`wsrestir-gi:split=3`, jitter on): the runs match the path tracer's jittered reference
+/// (the mean over each pixel's footprint) per pixel in [`firefly_room`] at depth 3, 192 runs of
+/// 4 frames, Bonferroni (family-wise 10⁻³), each run's variance floored by the reference's per
+/// sample over 64 (an edge crossing a pixel is a rare event in a run). Control, of the test's
+/// power to see where in the pixel the rays land: the same runs against the reference through
+/// pixel centres fail (so extra rays stuck at the centre, or anywhere else, would be seen).
+#[test]
+fn a_split_with_jittered_camera_rays_matches_the_pixel_footprint_reference() {
+    let scene = firefly_room();
+    let tracer = PathTracer {
+        max_depth: 3,
+        ..Default::default()
+    };
+    let (w, h) = (24, 16);
+    let ref_spp = 8192;
+    let footprint = common::render_scene(&scene, &tracer, w, h, ref_spp, 77);
+    let footprint_var = footprint.variance.expect("the reference's variance");
+    let spec: PassSpec = "wsrestir-gi:split=3".parse().unwrap();
+    let runs: Vec<Image> = (0..192)
+        .map(|r| last_frame(&scene, &spec, &tracer, w, h, 4, 12_000 + r))
+        .collect();
+    let (worst, beyond, bound) =
+        common::per_pixel_z_floored(&runs, &footprint.mean, &footprint_var, ref_spp, 64.0);
+    println!("{spec}: worst per-pixel |z| {worst:.2} against the footprint, bound {bound:.2}");
+    assert_eq!(beyond, 0, "{spec}: worst |z| {worst:.2} (bound {bound:.2})");
+    let (centres, centres_var) = reference_at_centres(&scene, &tracer, w, h, ref_spp);
+    let (worst, beyond, _) =
+        common::per_pixel_z_floored(&runs, &centres, &centres_var, ref_spp, 64.0);
+    println!("{spec} against the pixel centres: worst |z| {worst:.2}, {beyond} beyond");
+    assert!(
+        beyond > 0,
+        "jittered runs matched the centres: worst |z| {worst:.2}"
+    );
+}

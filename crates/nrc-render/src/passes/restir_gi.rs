@@ -707,9 +707,9 @@ impl RenderPass for RestirGiPass {
             if extra > 0 {
                 let jitter = self.settings.jitter;
                 t.split = split_camera_rays(input, i, jitter, extra, &mut t.stats, |p, seed, stats| {
-                    let extra = self.trace_one(scene, seed, i, Some(p), true);
-                    stats.add(&extra.stats);
-                    extra.gathered()
+                    let ray = self.trace_one(scene, seed, i, Some(p), true);
+                    stats.add(&ray.stats);
+                    ray.gathered()
                 });
             }
             t
