@@ -723,6 +723,16 @@ fn glossy_samples_keep_restir_gis_direct_light_unbiased_per_pixel() {
     assert!(beyond > 0, "20 % too bright passed: worst |z| {worst:.2}");
 }
 
+/// The split tests' scene, tracer (depth 3: the world-space pass walks through the firefly
+/// room's glossy table to its shading vertex) and image (width, height, reference samples).
+fn split_setup() -> (Scene, PathTracer, (u32, u32, u32)) {
+    let tracer = PathTracer {
+        max_depth: 3,
+        ..Default::default()
+    };
+    (firefly_room(), tracer, (24, 16, 8192))
+}
+
 /// A split of the light gathered up to the shading vertex (`split=3`: two more camera rays a
 /// pixel sample, each traced to `x₁` through the specular vertices before it, with NEE along
 /// the way and at `x₁` and a BSDF ray there weighed by MIS) keeps screen- and world-space
@@ -736,13 +746,7 @@ fn glossy_samples_keep_restir_gis_direct_light_unbiased_per_pixel() {
 #[test]
 fn a_split_of_the_light_up_to_the_shading_vertex_keeps_restir_gi_unbiased_per_pixel() {
     use nrc_render::passes::RestirGiSettings;
-    let scene = firefly_room();
-    let tracer = PathTracer {
-        max_depth: 3,
-        ..Default::default()
-    };
-    let (w, h) = (24, 16);
-    let ref_spp = 8192;
+    let (scene, tracer, (w, h, ref_spp)) = split_setup();
     let (reference, ref_var) = reference_at_centres(&scene, &tracer, w, h, ref_spp);
     let runs_of = |spec: &PassSpec| -> Vec<Image> {
         (0..192)
@@ -792,13 +796,7 @@ fn a_split_of_the_light_up_to_the_shading_vertex_keeps_restir_gi_unbiased_per_pi
 /// pixel centres fail (so extra rays stuck at the centre, or anywhere else, would be seen).
 #[test]
 fn a_split_with_jittered_camera_rays_matches_the_pixel_footprint_reference() {
-    let scene = firefly_room();
-    let tracer = PathTracer {
-        max_depth: 3,
-        ..Default::default()
-    };
-    let (w, h) = (24, 16);
-    let ref_spp = 8192;
+    let (scene, tracer, (w, h, ref_spp)) = split_setup();
     let footprint = common::render_scene(&scene, &tracer, w, h, ref_spp, 77);
     let footprint_var = footprint.variance.expect("the reference's variance");
     let spec: PassSpec = "wsrestir-gi:split=3".parse().unwrap();
