@@ -39,8 +39,9 @@ use crate::compare::StoredRuns;
 /// the DDGI passes' defaults changed (probe rays sized to the frame, history cap 5), so a
 /// plan of the first format does not mix with this build's results. 3: the DDGI passes'
 /// default probe counts follow the frame (updated in turn) and young probes average their
-/// first updates.
-pub const FORMAT: &str = "nrc-study/3";
+/// first updates. 4: `wsrestir-gi` and `wsrestir-gi-biased` split their gathered light over
+/// two camera rays by default (`split=2`), so a plan naming them meant another estimator.
+pub const FORMAT: &str = "nrc-study/4";
 /// The plan's file name in a study folder.
 pub const PLAN_FILE: &str = "plan.json";
 const METADATA_KEY: &str = "nrc_study";

@@ -378,6 +378,11 @@ impl<S> WorldHistory<S> {
     pub fn entries(&self) -> &[Entry<S>] {
         &self.entries
     }
+
+    /// The entries' buffer, for the next frame's grid to reuse.
+    pub fn into_entries(self) -> Vec<Entry<S>> {
+        self.entries
+    }
 }
 
 /// Spatial reuse in world space (`world-space-restir-gi.txt`, Alg. 2): each receiver (`at(i)`:

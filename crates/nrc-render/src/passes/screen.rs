@@ -307,6 +307,15 @@ pub fn par_map<T: Send>(n: usize, f: impl Fn(usize) -> T + Sync + Send) -> Vec<T
     (0..n).into_par_iter().map(f).collect()
 }
 
+/// [`par_map`] into `buf`, replacing its contents and keeping its allocation: a pass that
+/// keeps a frame-sized buffer across frames writes the same pages each frame, where a fresh
+/// allocation of that size (hundreds of MB at 640 × 360) is mapped anew and every page of it
+/// faulted in and zeroed by the system first.
+pub fn par_map_into<T: Send>(buf: &mut Vec<T>, n: usize, f: impl Fn(usize) -> T + Sync + Send) {
+    buf.clear();
+    buf.par_extend((0..n).into_par_iter().map(f));
+}
+
 /// The frame from each pixel sample's radiance, state and counters: pixels average their
 /// samples (non-finite ones counted and zeroed), rays add up. Returns the output and the
 /// per-sample states (the next frame's history).
@@ -344,4 +353,29 @@ pub fn assemble<R>(
         stats,
     };
     (out, states)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The buffer's allocation is kept from one frame to the next (the same pages), and its
+    /// contents are only the new frame's.
+    #[test]
+    fn par_map_into_refills_the_same_allocation() {
+        let mut buf: Vec<u64> = Vec::new();
+        par_map_into(&mut buf, 100_000, |i| i as u64);
+        let at = buf.as_ptr();
+        par_map_into(&mut buf, 60_000, |i| 2 * i as u64);
+        assert_eq!(buf.as_ptr(), at, "a new allocation for a smaller frame");
+        assert_eq!(buf.len(), 60_000);
+        assert!(buf.iter().enumerate().all(|(i, &v)| v == 2 * i as u64));
+        par_map_into(&mut buf, 100_000, |i| 3 * i as u64);
+        assert_eq!(
+            buf.as_ptr(),
+            at,
+            "a new allocation for a frame of the first size"
+        );
+        assert!(buf.iter().enumerate().all(|(i, &v)| v == 3 * i as u64));
+    }
 }
