@@ -227,6 +227,7 @@ pub fn render(job: RenderJob) -> Result<Rendered> {
              --camera-offsets sobol samples are not: give one of them"
         );
     }
+    check_frame_memory(job.pass, job.width, job.height, job.spp, available_memory())?;
     let mut pass: Box<dyn RenderPass> = match job.pass.get::<PathTracedSettings>() {
         Some(&PathTracedSettings { strategy }) => {
             let mut p = PathTracedPass::new(PathTracer {
@@ -268,6 +269,49 @@ pub fn render(job: RenderJob) -> Result<Rendered> {
         output: out.context("no camera to render from")?,
         pass: pass.name(),
         seconds_per_frame: start.elapsed().as_secs_f64() / frames as f64,
+    })
+}
+
+/// Refuses a frame whose state cannot fit in `available` bytes (`None`: unknown, not checked).
+/// A screen-space pass holds the state of all of a frame's pixel samples at once
+/// ([`PassSpec::state_bytes_per_sample`]), so its `spp` multiplies its memory where the path
+/// tracer streams tiles: without this, `nrc render --pass wsrestir-gi` at 640 × 360 with the
+/// default 64 samples a pixel grew to 24 GB and was killed by the system.
+pub fn check_frame_memory(
+    pass: &PassSpec,
+    width: u32,
+    height: u32,
+    spp: u32,
+    available: Option<u64>,
+) -> Result<()> {
+    let samples = u64::from(width)
+        .saturating_mul(u64::from(height))
+        .saturating_mul(u64::from(spp));
+    let need = samples.saturating_mul(pass.state_bytes_per_sample());
+    match available {
+        Some(free) if need > free => bail!(
+            "the pass {} holds all {:.1} M pixel samples of a frame at once ({width}x{height} at \
+             {spp} spp), about {:.1} GB at {} bytes each, more than the {:.1} GB available: \
+             give fewer --spp (a resampling pass accumulates over --frames)",
+            pass,
+            samples as f64 / 1e6,
+            need as f64 / 1e9,
+            pass.state_bytes_per_sample(),
+            free as f64 / 1e9
+        ),
+        _ => Ok(()),
+    }
+}
+
+/// The memory this process can still take: the system's available memory, or its control
+/// group's free memory where that is less; `None` where the system does not say.
+pub fn available_memory() -> Option<u64> {
+    let mut sys = sysinfo::System::new();
+    sys.refresh_memory();
+    let system = Some(sys.available_memory()).filter(|&m| m > 0)?;
+    Some(match sys.cgroup_limits() {
+        Some(limits) => system.min(limits.free_memory),
+        None => system,
     })
 }
 
@@ -410,5 +454,32 @@ impl TrainSummary {
                 .filter(|s| s.records <= nrc_train::schedule::MIN_BUDGET_RECORDS)
                 .count(),
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A pass's frame is refused where its per-sample state exceeds what is available, the
+    /// path tracer's never (it streams tiles), and nothing is refused where the memory is
+    /// unknown.
+    #[test]
+    fn a_frame_is_checked_against_the_memory_available() {
+        let ws: PassSpec = "wsrestir-gi".parse().unwrap();
+        let pt: PassSpec = "pt".parse().unwrap();
+        let gb = Some(1u64 << 30);
+        // 640 × 360 at 1 spp: 230,400 samples, about 0.4 GB for wsrestir-gi.
+        assert!(check_frame_memory(&ws, 640, 360, 1, gb).is_ok());
+        let e = check_frame_memory(&ws, 640, 360, 64, gb)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("--spp") && e.contains("14.7 M"), "{e}");
+        assert!(check_frame_memory(&ws, 640, 360, 1, Some(100 << 20)).is_err());
+        assert!(check_frame_memory(&pt, 640, 360, 1 << 20, gb).is_ok());
+        assert!(check_frame_memory(&ws, 1 << 16, 1 << 16, u32::MAX, None).is_ok());
+        // Sizes whose product overflows u64 saturate and are refused, not wrapped.
+        assert!(check_frame_memory(&ws, u32::MAX, u32::MAX, u32::MAX, gb).is_err());
+        assert!(available_memory().is_some_and(|m| m > 0));
     }
 }

@@ -186,6 +186,11 @@ impl Params for IrSettings {
 }
 
 impl PassConfig for IrSettings {
+    /// (measured 392 (`ir`).)
+    fn state_bytes_per_sample(&self) -> u64 {
+        450
+    }
+
     fn kind(&self) -> &'static PassKind {
         &KIND
     }

@@ -36,6 +36,11 @@ impl Params for PathTracedSettings {
 }
 
 impl PassConfig for PathTracedSettings {
+    /// (tiles of pixels, each path traced whole.)
+    fn state_bytes_per_sample(&self) -> u64 {
+        0
+    }
+
     fn kind(&self) -> &'static PassKind {
         &KIND
     }

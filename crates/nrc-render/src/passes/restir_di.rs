@@ -160,6 +160,11 @@ impl Params for RestirDiSettings {
 }
 
 impl PassConfig for RestirDiSettings {
+    /// (measured 676.)
+    fn state_bytes_per_sample(&self) -> u64 {
+        700
+    }
+
     fn kind(&self) -> &'static PassKind {
         &KIND
     }

@@ -43,6 +43,12 @@ pub trait PassConfig: Any + Send + Sync + fmt::Debug {
     fn uses_source(&self) -> bool {
         false
     }
+    /// Bytes the pass holds per pixel sample of a frame: a screen-space pass keeps the state
+    /// of all of a frame's samples at once (G-buffer, paths, reservoirs), so `spp` multiplies
+    /// it; 0 for a pass that streams its pixels in tiles. Measured as the growth of the peak
+    /// resident size per added sample on the kitchen at 640 × 360 (BENCHMARKS.md, "Memory a
+    /// pass holds per pixel sample"), rounded up.
+    fn state_bytes_per_sample(&self) -> u64;
     /// Its `KEY=VALUE` parameters and their values.
     fn params(&self) -> Vec<Param> {
         Vec::new()
@@ -81,6 +87,10 @@ impl PassSpec {
 
     pub fn uses_source(&self) -> bool {
         self.0.uses_source()
+    }
+
+    pub fn state_bytes_per_sample(&self) -> u64 {
+        self.0.state_bytes_per_sample()
     }
 
     pub fn params(&self) -> Vec<Param> {
