@@ -254,6 +254,10 @@ pub(crate) fn validate(args: &CompareArgs) -> Result<Budget> {
     let mut seen = std::collections::HashSet::new();
     for m in &args.methods() {
         ensure!(seen.insert(m.to_string()), "method {m} is listed twice");
+        // Before the reference is rendered (a study's jobs check again where they run).
+        let memory = nrc_harness::run::available_memory();
+        nrc_harness::run::check_frame_memory(&m.pass, args.width, args.height, m.spp, memory)
+            .map_err(|e| anyhow::anyhow!("{m}: {e}"))?;
     }
     Budget::from_limits(args.equal_time, args.equal_spp).map_err(anyhow::Error::msg)
 }

@@ -119,8 +119,6 @@ pub struct TrainArgs {
 /// which device the cache computes on.
 pub fn trainer(args: &TrainArgs, scene: &Scene, print: bool) -> Result<OnlineTrainer> {
     check(args)?;
-    let settings = cache_settings(args, scene, print)?;
-    let tracer = args.tracer.tracer();
     let pass = args.pass.clone().unwrap_or_else(|| {
         CacheTerminatedSettings {
             termination: args.termination,
@@ -128,6 +126,15 @@ pub fn trainer(args: &TrainArgs, scene: &Scene, print: bool) -> Result<OnlineTra
         }
         .into()
     });
+    nrc_harness::run::check_frame_memory(
+        &pass,
+        args.width,
+        args.height,
+        args.spp,
+        nrc_harness::run::available_memory(),
+    )?;
+    let settings = cache_settings(args, scene, print)?;
+    let tracer = args.tracer.tracer();
     let mut trainer =
         nrc_harness::methods::scene_trainer(scene, args.producer.clone(), pass, &settings, tracer)
             .map_err(anyhow::Error::msg)?;

@@ -453,4 +453,40 @@ fn a_pass_frame_too_large_for_the_memory_is_refused_with_one_line() {
         text(&o.stderr)
     );
     assert!(!out.exists(), "an image was written");
+    // The same frame asked of `nrc compare` (before its reference is rendered) and of `nrc
+    // train`'s inference pass.
+    let dir_out = dir.path().join("cmp");
+    let o = nrc(&[
+        "compare",
+        "--scene",
+        s.to_str().unwrap(),
+        "--methods",
+        "pt-1spp,wsrestir-gi@1000000spp",
+        "--width",
+        "640",
+        "--height",
+        "360",
+        "--equal-spp",
+        "1",
+        "--out",
+        dir_out.to_str().unwrap(),
+    ]);
+    assert_clean_error(&o, "wsrestir-gi@1000000spp");
+    assert!(!dir_out.exists(), "compare wrote its folder");
+    let o = nrc(&[
+        "train",
+        "--scene",
+        s.to_str().unwrap(),
+        "--pass",
+        "wsrestir-gi",
+        "--spp",
+        "1000000",
+        "--width",
+        "640",
+        "--height",
+        "360",
+        "--frames",
+        "1",
+    ]);
+    assert_clean_error(&o, "holds all");
 }

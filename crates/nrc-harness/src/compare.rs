@@ -279,6 +279,8 @@ fn mean_metrics(ms: &[ErrorMetrics]) -> ErrorMetrics {
 /// another size would leave a stateful pass's history cold).
 pub fn ready_method(c: &Comparison, scene: &Scene, spec: &MethodSpec) -> Result<Box<dyn Method>> {
     let (w, h) = (c.width, c.height);
+    crate::run::check_frame_memory(&spec.pass, w, h, spec.spp, crate::run::available_memory())
+        .map_err(|e| anyhow::anyhow!("{spec}: {e}"))?;
     let mut method = spec.build(&c.tracer, &c.cache, c.emitter_samples);
     method
         .prepare(scene, &scene.camera, w, h)

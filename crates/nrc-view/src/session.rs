@@ -346,11 +346,18 @@ impl Session {
                 }
             }
             Command::Pass(spec) => {
-                let name = spec.to_string();
-                self.trainer.set_pass(spec);
-                self.pass_views.clear();
-                self.restart_accumulation();
-                Ok(Some(format!("pass {name}")))
+                let (w, h, spp) = (self.width, self.height, self.trainer.settings.spp);
+                let memory = nrc_harness::run::available_memory();
+                match nrc_harness::run::check_frame_memory(&spec, w, h, spp, memory) {
+                    Err(e) => Err(e.to_string()),
+                    Ok(()) => {
+                        let name = spec.to_string();
+                        self.trainer.set_pass(spec);
+                        self.pass_views.clear();
+                        self.restart_accumulation();
+                        Ok(Some(format!("pass {name}")))
+                    }
+                }
             }
             Command::Producer(spec) => {
                 let name = spec.to_string();
