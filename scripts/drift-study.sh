@@ -13,10 +13,10 @@
 set -euo pipefail
 if [ $# -eq 0 ]; then
   set -- base \
-    optimizer.nested.learning_rate=2e-3 \
-    optimizer.nested.epsilon=1e-8 \
-    optimizer.nested.beta2=0.999 \
-    optimizer.nested.l2_reg=1e-6 \
+    optimizer.nested.nested.learning_rate=2e-3 \
+    optimizer.nested.nested.epsilon=1e-8 \
+    optimizer.nested.nested.beta2=0.999 \
+    optimizer.nested.nested.l2_reg=1e-6 \
     optimizer.decay=0.999 \
     optimizer.decay=0.9995 \
     encoding.nested.0.log2_hashmap_size=15 \

@@ -78,11 +78,17 @@ fn train_then_render_from_the_snapshot() {
     let rows: Vec<&str> = csv.lines().collect();
     assert_eq!(rows.len(), 4, "{csv}");
     assert!(rows[0].starts_with("frame,produce_ms,train_ms,infer_ms,records,used,dropped"));
+    let lr_column = rows[0].split(',').position(|c| c == "learning_rate");
     for row in &rows[1..] {
         let cols: Vec<&str> = row.split(',').collect();
         let (records, used): (usize, usize) = (cols[4].parse().unwrap(), cols[5].parse().unwrap());
         assert!(records > 0 && used == records, "{row}");
         assert!(cols[9].parse::<f32>().unwrap().is_finite());
+        // The preset's rate: its decay starts at step 400.
+        let lr: f32 = cols[lr_column.expect("a learning_rate column")]
+            .parse()
+            .unwrap();
+        assert_eq!(lr, 1e-2, "{row}");
     }
 
     // Two renders from the snapshot are identical; a different seed differs.

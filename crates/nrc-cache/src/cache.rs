@@ -8,7 +8,7 @@ use burn::backend::Dispatch;
 use burn::tensor::{Device, Tensor, TensorData};
 
 use crate::batch::{QUERY_ROW, TRAIN_ROW, pack_queries, pack_training};
-use crate::config::{AdamParams, CacheConfig, MlpPrecision, SceneBox, Sizing};
+use crate::config::{AdamParams, CacheConfig, LrDecay, MlpPrecision, SceneBox, Sizing};
 use crate::cpu::train::LossSettings;
 use crate::device::{CacheDevice, ComputePath};
 use crate::error::CacheError;
@@ -94,8 +94,13 @@ pub struct RadianceCache {
     device: CacheDevice,
     burn_device: Device,
     path: ComputePath,
+    /// Adam's parameters, the learning rate undecayed.
     adam: AdamParams,
     ema: Option<f32>,
+    /// The learning rate's decay, and the step it counts from (0, or the last
+    /// [`RadianceCache::restart_learning_rate`]; a loaded cache counts from 0).
+    lr_decay: Option<LrDecay>,
+    lr_start: u32,
     step: u32,
     /// On the fused path with EMA, the base step of the table's EMA gap in the records (see
     /// [`crate::cpu::optim`]); `None` while the records hold the raw EMA at the current step
@@ -177,6 +182,7 @@ impl RadianceCache {
             ));
         }
         let (adam, ema) = config.optimizer.resolve();
+        let lr_decay = config.optimizer.lr_decay();
         // The fused CPU step keeps the table as per-entry records; the GPU's as four arrays.
         let packed = (path == ComputePath::Fused && device == CacheDevice::Cpu)
             .then(|| layout.encoding.grid().map(|(g, _)| g.features()))
@@ -192,6 +198,8 @@ impl RadianceCache {
             path,
             adam,
             ema,
+            lr_decay,
+            lr_start: 0,
             step,
             ema_base: None,
             state: Some(state),
@@ -275,9 +283,34 @@ impl RadianceCache {
         self.layout.training_memory_bytes()
     }
 
-    /// Adam's learning rate.
+    /// Adam's learning rate, before its decay (the configured one).
     pub fn learning_rate(&self) -> f32 {
         self.adam.learning_rate
+    }
+
+    /// The learning rate the next step takes: [`Self::learning_rate`] decayed by the
+    /// configuration's `ExponentialDecay`, if any.
+    pub fn current_learning_rate(&self) -> f32 {
+        self.scheduled_adam().learning_rate
+    }
+
+    /// Adam's parameters for the next step, the learning rate decayed.
+    fn scheduled_adam(&self) -> AdamParams {
+        let factor = self
+            .lr_decay
+            .map_or(1.0, |d| d.factor(self.step - self.lr_start));
+        AdamParams {
+            learning_rate: self.adam.learning_rate * factor,
+            ..self.adam
+        }
+    }
+
+    /// Restarts the learning rate's decay: the next step takes the full rate again, and the
+    /// decay counts from it. The online loop calls this when the scene changes under the cache
+    /// ([`crate::Cache::begin_recovery`]), so that the cache learns the change at the full rate
+    /// and settles again; no effect without a decay.
+    pub fn restart_learning_rate(&mut self) {
+        self.lr_start = self.step;
     }
 
     /// Sets Adam's learning rate from the next step on (the config, and so the snapshot's
@@ -349,8 +382,20 @@ impl RadianceCache {
             self.layout.mlp_params(),
             self.memory_bytes() as f64 / (1024.0 * 1024.0)
         ));
+        let decay = self.lr_decay.map_or(String::new(), |d| {
+            format!(
+                " × {} every {} steps from step {} to {} (floor × {:.3}, restarted by a change; \
+                 now {:.2e})",
+                d.base,
+                d.interval,
+                d.start,
+                d.end,
+                d.floor(),
+                self.current_learning_rate()
+            )
+        });
         s.push_str(&format!(
-            "optimizer: Adam lr {} β1 {} β2 {} ε {:e} L2 {}, EMA {}\n",
+            "optimizer: Adam lr {}{decay} β1 {} β2 {} ε {:e} L2 {}, EMA {}\n",
             self.adam.learning_rate,
             self.adam.beta1,
             self.adam.beta2,
@@ -418,11 +463,16 @@ impl RadianceCache {
             self.convert_ema(EmaConversion::ToGap);
             self.ema_base = Some(self.step);
         }
+        // The decayed rate of this call's first step (a call is one step in the online loop).
+        let adam = self.scheduled_adam();
         let state = self.state.take().expect("state present between calls");
         let state_packed = state.packed;
         let losses: Tensor<1> = match self.path {
             ComputePath::Fused => {
-                let spec = self.step_spec(steps, clock.clone());
+                let spec = StepSpec {
+                    adam,
+                    ..self.step_spec(steps, clock.clone())
+                };
                 let out = <Dispatch as NrcFusedOps>::fused_train_steps(
                     state.into_dispatch(),
                     rows.into_dispatch(),
@@ -441,7 +491,7 @@ impl RadianceCache {
                         self.path,
                         &mut state,
                         &rows,
-                        self.adam,
+                        adam,
                         self.ema,
                         (
                             self.config.loss.epsilon,

@@ -265,6 +265,20 @@ pub enum OptimizerConfig {
         /// The optimizer whose weights are averaged (must be Adam).
         nested: Box<OptimizerConfig>,
     },
+    /// Piecewise-constant exponential decay of the nested optimizer's learning rate, as
+    /// tiny-cuda-nn's `ExponentialDecay`: at step `k` (counted from the cache's first step, or
+    /// from the last [`crate::RadianceCache::restart_learning_rate`], where tiny-cuda-nn counts
+    /// from its first) the rate is `learning_rate · decay_base^n`, `n` the number of steps
+    /// `decay_start, decay_start + decay_interval, …` at most `min(k, decay_end)`. The rate
+    /// stops falling at `decay_end`: that is its floor.
+    ExponentialDecay {
+        decay_start: u32,
+        decay_interval: u32,
+        decay_base: f32,
+        decay_end: u32,
+        /// The optimizer whose learning rate decays (Adam).
+        nested: Box<OptimizerConfig>,
+    },
     /// Adam.
     Adam {
         /// Learning rate.
@@ -296,6 +310,31 @@ pub(crate) fn adam_eps() -> f32 {
     1e-15
 }
 
+/// A learning-rate decay ([`OptimizerConfig::ExponentialDecay`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LrDecay {
+    pub start: u32,
+    pub interval: u32,
+    pub base: f32,
+    pub end: u32,
+}
+
+impl LrDecay {
+    /// The factor of the learning rate at step `k` of the schedule (counted from 0).
+    pub fn factor(&self, k: u32) -> f32 {
+        if k < self.start {
+            return 1.0;
+        }
+        let n = (k.min(self.end) - self.start) / self.interval + 1;
+        self.base.powi(n.min(i32::MAX as u32) as i32)
+    }
+
+    /// The lowest factor (from step `end` on).
+    pub fn floor(&self) -> f32 {
+        self.factor(self.end)
+    }
+}
+
 /// Adam hyper-parameters, resolved from the config.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct AdamParams {
@@ -312,18 +351,43 @@ pub struct AdamParams {
 }
 
 impl OptimizerConfig {
-    /// Sets Adam's learning rate (the nested optimizer's, under an EMA).
+    /// Sets Adam's learning rate (the nested optimizer's, under an EMA or a decay; a decay
+    /// scales it from there).
     pub fn set_learning_rate(&mut self, lr: f32) {
         match self {
-            Self::EMA { nested, .. } => nested.set_learning_rate(lr),
+            Self::EMA { nested, .. } | Self::ExponentialDecay { nested, .. } => {
+                nested.set_learning_rate(lr)
+            }
             Self::Adam { learning_rate, .. } => *learning_rate = lr,
         }
     }
 
-    /// The Adam parameters and the EMA decay (None without EMA).
+    /// The learning rate's decay, if any.
+    pub fn lr_decay(&self) -> Option<LrDecay> {
+        match self {
+            Self::EMA { nested, .. } => nested.lr_decay(),
+            &Self::ExponentialDecay {
+                decay_start,
+                decay_interval,
+                decay_base,
+                decay_end,
+                ..
+            } => Some(LrDecay {
+                start: decay_start,
+                interval: decay_interval,
+                base: decay_base,
+                end: decay_end,
+            }),
+            Self::Adam { .. } => None,
+        }
+    }
+
+    /// The Adam parameters and the EMA decay (None without EMA); the learning rate is the
+    /// undecayed one (see [`Self::lr_decay`]).
     pub fn resolve(&self) -> (AdamParams, Option<f32>) {
         match self {
             Self::EMA { decay, nested } => (nested.resolve().0, Some(*decay)),
+            Self::ExponentialDecay { nested, .. } => nested.resolve(),
             Self::Adam {
                 learning_rate,
                 beta1,
@@ -627,6 +691,28 @@ fn validate_optimizer(o: &OptimizerConfig, field: &str, top: bool) -> Result<(),
             }
             if !(decay.is_finite() && (0.0..1.0).contains(decay)) {
                 return err("decay", format!("must be in [0, 1), got {decay}"));
+            }
+            validate_optimizer(nested, &format!("{field}.nested"), false)
+        }
+        OptimizerConfig::ExponentialDecay { nested, .. } => {
+            let d = o.lr_decay().expect("a decay");
+            if d.interval == 0 {
+                return err("decay_interval", "must be at least 1".into());
+            }
+            if !(d.base.is_finite() && d.base > 0.0 && d.base <= 1.0) {
+                return err("decay_base", format!("must be in (0, 1], got {}", d.base));
+            }
+            if d.end < d.start {
+                return err(
+                    "decay_end",
+                    format!("must be at least decay_start ({}), got {}", d.start, d.end),
+                );
+            }
+            if !matches!(**nested, OptimizerConfig::Adam { .. }) {
+                return err(
+                    "nested.otype",
+                    "the decay's nested optimizer must be Adam".into(),
+                );
             }
             validate_optimizer(nested, &format!("{field}.nested"), false)
         }

@@ -220,6 +220,34 @@ struct EmaFields {
     nested: OptimizerConfig,
 }
 
+/// tiny-cuda-nn's defaults.
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct DecayFields {
+    #[serde(default = "decay_start")]
+    decay_start: u32,
+    #[serde(default = "decay_interval")]
+    decay_interval: u32,
+    #[serde(default = "decay_base")]
+    decay_base: f32,
+    #[serde(default = "decay_end")]
+    decay_end: u32,
+    nested: OptimizerConfig,
+}
+
+fn decay_start() -> u32 {
+    10_000
+}
+fn decay_interval() -> u32 {
+    10_000
+}
+fn decay_base() -> f32 {
+    0.1
+}
+fn decay_end() -> u32 {
+    10_000_000
+}
+
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
 struct AdamFields {
@@ -248,6 +276,16 @@ impl<'de> Deserialize<'de> for OptimizerConfig {
                     nested: Box::new(f.nested),
                 }
             }
+            "ExponentialDecay" => {
+                let f: DecayFields = fields(v)?;
+                Self::ExponentialDecay {
+                    decay_start: f.decay_start,
+                    decay_interval: f.decay_interval,
+                    decay_base: f.decay_base,
+                    decay_end: f.decay_end,
+                    nested: Box::new(f.nested),
+                }
+            }
             "Adam" => {
                 let f: AdamFields = fields(v)?;
                 Self::Adam {
@@ -260,7 +298,7 @@ impl<'de> Deserialize<'de> for OptimizerConfig {
             }
             other => {
                 return Err(D::Error::custom(format!(
-                    "@otype@ unknown optimizer {other:?} (expected EMA or Adam)"
+                    "@otype@ unknown optimizer {other:?} (expected EMA, ExponentialDecay or Adam)"
                 )));
             }
         })
@@ -274,6 +312,20 @@ impl Serialize for OptimizerConfig {
             Self::EMA { decay, nested } => {
                 m.serialize_entry("otype", "EMA")?;
                 m.serialize_entry("decay", decay)?;
+                m.serialize_entry("nested", nested)?;
+            }
+            Self::ExponentialDecay {
+                decay_start,
+                decay_interval,
+                decay_base,
+                decay_end,
+                nested,
+            } => {
+                m.serialize_entry("otype", "ExponentialDecay")?;
+                m.serialize_entry("decay_start", decay_start)?;
+                m.serialize_entry("decay_interval", decay_interval)?;
+                m.serialize_entry("decay_base", decay_base)?;
+                m.serialize_entry("decay_end", decay_end)?;
                 m.serialize_entry("nested", nested)?;
             }
             Self::Adam {

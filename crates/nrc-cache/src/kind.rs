@@ -132,12 +132,16 @@ impl Cache {
     pub const HASH_RECOVERY_KEEP: f32 = 4.0;
 
     /// A change in the scene was detected: the neural cache infers from its training weights
-    /// until [`Cache::end_recovery`] ([`RadianceCache::set_follow`]); the hash cache's cells
+    /// until [`Cache::end_recovery`] ([`RadianceCache::set_follow`]) and restarts its learning
+    /// rate's decay ([`RadianceCache::restart_learning_rate`]); the hash cache's cells
     /// keep at most [`Cache::HASH_RECOVERY_KEEP`] samples' weight, so that the next records
     /// move them quickly.
     pub fn begin_recovery(&mut self) {
         match self {
-            Self::Neural(c) => c.set_follow(true),
+            Self::Neural(c) => {
+                c.set_follow(true);
+                c.restart_learning_rate();
+            }
             Self::Hash(c) => c.forget(Self::HASH_RECOVERY_KEEP),
         }
     }

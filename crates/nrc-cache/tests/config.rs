@@ -54,7 +54,7 @@ fn presets_parse_and_have_the_documented_shape() {
 
 #[test]
 fn out_of_range_values_name_the_field() {
-    let cases: [(&str, serde_json::Value, &str); 9] = [
+    let cases: [(&str, serde_json::Value, &str); 12] = [
         (
             "/encoding/nested/0/n_levels",
             0.into(),
@@ -84,9 +84,24 @@ fn out_of_range_values_name_the_field() {
         ("/loss/epsilon", (-1.0).into(), "loss.epsilon"),
         ("/optimizer/decay", 1.5.into(), "optimizer.decay"),
         (
-            "/optimizer/nested/learning_rate",
+            "/optimizer/nested/nested/learning_rate",
             0.0.into(),
-            "optimizer.nested.learning_rate",
+            "optimizer.nested.nested.learning_rate",
+        ),
+        (
+            "/optimizer/nested/decay_base",
+            1.5.into(),
+            "optimizer.nested.decay_base",
+        ),
+        (
+            "/optimizer/nested/decay_interval",
+            0.into(),
+            "optimizer.nested.decay_interval",
+        ),
+        (
+            "/optimizer/nested/decay_end",
+            10.into(),
+            "optimizer.nested.decay_end",
         ),
     ];
     for (pointer, value, field) in cases {

@@ -1,15 +1,18 @@
-//! The weight EMA: its bias-corrected average equals the closed form
-//! `ê_t = Σ_{i≤t} (1 − α) α^(t−i) w_i / (1 − α^t)` of the weights after each step.
+//! The optimizer's wrappers. The weight EMA: its bias-corrected average equals the closed form
+//! `ê_t = Σ_{i≤t} (1 − α) α^(t−i) w_i / (1 − α^t)` of the weights after each step. The learning
+//! rate's decay (`ExponentialDecay`, as tiny-cuda-nn's): its factor, its effect on training, and
+//! its restart when the scene changes.
 
 use burn::tensor::f16;
-use nrc_cache::config::{AdamParams, NestedEncoding};
+use nrc_cache::config::{AdamParams, LrDecay, NestedEncoding, OptimizerConfig};
 use nrc_cache::cpu::optim::{
     StepConstants, decay_pow, dense_step, ema_gap_from_raw, ema_raw_from_gap, materialize_dense,
     materialize_grid, pack_records, rebase_ema_gap, sparse_step, unpack_records,
 };
 use nrc_cache::state::tensor_vec;
 use nrc_cache::{
-    CacheConfig, CacheDevice, CacheQuery, ComputePath, RadianceCache, SceneBox, TrainingBatch,
+    Cache, CacheConfig, CacheDevice, CacheQuery, ComputePath, RadianceCache, SceneBox,
+    TrainingBatch,
 };
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64Mcg;
@@ -580,4 +583,132 @@ fn fused_training_is_the_same_whatever_the_thread_count() {
     for threads in [2, 3] {
         assert!(run(threads) == one, "{threads} threads differ from one");
     }
+}
+
+/// tiny-cuda-nn's rule: the factor is multiplied by the base at steps `start`, `start +
+/// interval`, … up to `end` (its `step()` counted from 0 before each step).
+#[test]
+fn the_factor_is_the_staircase_of_tiny_cuda_nn() {
+    let d = LrDecay {
+        start: 400,
+        interval: 800,
+        base: 0.5,
+        end: 2000,
+    };
+    // The same rule, stepped as tiny-cuda-nn steps it.
+    let mut factor = 1.0f32;
+    for k in 0..5000u32 {
+        if k >= d.start && (k - d.start) % d.interval == 0 && k <= d.end {
+            factor *= d.base;
+        }
+        assert_eq!(d.factor(k), factor, "step {k}");
+    }
+    assert_eq!(d.factor(399), 1.0);
+    assert_eq!(d.factor(400), 0.5);
+    assert_eq!(d.factor(1199), 0.5);
+    assert_eq!(d.factor(1200), 0.25);
+    assert_eq!(d.floor(), 0.125);
+    assert_eq!(d.factor(u32::MAX), 0.125);
+}
+
+/// The hash-grid preset with a 2^12 table and the decay `d` (start, interval, base, end).
+fn decay_config(d: (u32, u32, f32, u32)) -> CacheConfig {
+    let mut json: serde_json::Value =
+        serde_json::from_str(&CacheConfig::hash_grid_preset().to_json()).unwrap();
+    let decay = json.pointer_mut("/optimizer/nested").unwrap();
+    assert_eq!(decay["otype"], "ExponentialDecay", "the preset decays");
+    decay["decay_start"] = d.0.into();
+    decay["decay_interval"] = d.1.into();
+    decay["decay_base"] = d.2.into();
+    decay["decay_end"] = d.3.into();
+    let mut c = CacheConfig::from_json_str(&json.to_string()).unwrap();
+    if let Some(NestedEncoding::HashGrid {
+        log2_hashmap_size, ..
+    }) = c.encoding.nested.first_mut()
+    {
+        *log2_hashmap_size = 12;
+    }
+    c
+}
+
+/// `config` without its decay: EMA over Adam.
+fn undecayed(config: &CacheConfig) -> CacheConfig {
+    let mut c = config.clone();
+    let OptimizerConfig::EMA { nested, .. } = &mut c.optimizer else {
+        panic!("EMA at the top");
+    };
+    let OptimizerConfig::ExponentialDecay { nested: adam, .. } = nested.as_ref().clone() else {
+        panic!("the decay under the EMA");
+    };
+    *nested = adam;
+    assert!(c.optimizer.lr_decay().is_none());
+    c
+}
+
+/// Training with the decay takes exactly the steps of training without it whose learning rate
+/// is set by hand to the decayed one before each step, on the fused path and the tensor path;
+/// restarted (as the online loop restarts it at a change), the rate is the full one again and
+/// decays anew. The negative control: the undecayed cache left at the full rate ends elsewhere.
+#[test]
+fn a_decayed_cache_trains_as_one_whose_rate_is_set_by_hand() {
+    let decayed_config = decay_config((3, 2, 0.5, 7));
+    let d = decayed_config.optimizer.lr_decay().unwrap();
+    for path in [ComputePath::Fused, ComputePath::Unfused] {
+        let mut decayed = cache_on(&decayed_config, path);
+        let mut by_hand = cache_on(&undecayed(&decayed_config), path);
+        let mut full = cache_on(&undecayed(&decayed_config), path);
+        let lr = decayed.learning_rate();
+        let (mut k, mut rates) = (0u32, Vec::new());
+        for step in 0..16u64 {
+            if step == 10 {
+                decayed.restart_learning_rate();
+                k = 0;
+            }
+            let expect = lr * d.factor(k);
+            assert_eq!(
+                decayed.current_learning_rate(),
+                expect,
+                "{path} step {step}"
+            );
+            rates.push(expect);
+            by_hand.set_learning_rate(expect).unwrap();
+            let b = batch(64, step);
+            decayed.train(&b, 1).unwrap();
+            by_hand.train(&b, 1).unwrap();
+            full.train(&b, 1).unwrap();
+            k += 1;
+        }
+        // The rate fell to the floor, and came back after the restart.
+        assert_eq!(rates[9], lr * d.floor());
+        assert_eq!(rates[10], lr);
+        assert!(rates[15] < lr);
+        assert_eq!(decayed.weights(), by_hand.weights(), "{path}");
+        assert_ne!(decayed.weights(), full.weights(), "{path}");
+    }
+    let decayed = cache_on(&decayed_config, ComputePath::Fused);
+    // The description says what the rate is and will be.
+    let text = decayed.describe();
+    assert!(
+        text.contains("× 0.5 every 2 steps from step 3 to 7"),
+        "{text}"
+    );
+}
+
+/// A change called by the online loop ([`Cache::begin_recovery`]) restarts the neural cache's
+/// decay.
+#[test]
+fn a_change_restarts_the_decay() {
+    let c = decay_config((0, 1, 0.5, 4));
+    let mut cache = Cache::Neural(Box::new(cache_on(&c, ComputePath::Fused)));
+    for step in 0..6 {
+        cache.train(&batch(32, step), 1).unwrap();
+    }
+    let n = cache.neural().unwrap();
+    assert_eq!(
+        n.current_learning_rate(),
+        n.learning_rate() * 0.5f32.powi(5)
+    );
+    cache.begin_recovery();
+    let n = cache.neural().unwrap();
+    assert_eq!(n.current_learning_rate(), n.learning_rate() * 0.5);
 }

@@ -72,11 +72,11 @@ pub fn write_stats(path: &Path, stats: &[FrameStats]) -> Result<()> {
         serde_json::to_vec_pretty(stats)?
     } else {
         let mut s = String::from(
-            "frame,produce_ms,train_ms,infer_ms,records,used,dropped_nonfinite,dropped_absurd,steps,loss,target_mean,change_z,phase,spend_ms,paths,rays,cache_queries,invalid_samples,producer_dropped,producer_skipped\n",
+            "frame,produce_ms,train_ms,infer_ms,records,used,dropped_nonfinite,dropped_absurd,steps,loss,target_mean,change_z,phase,spend_ms,learning_rate,paths,rays,cache_queries,invalid_samples,producer_dropped,producer_skipped\n",
         );
         for f in stats {
             s.push_str(&format!(
-                "{},{:.3},{:.3},{:.3},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
+                "{},{:.3},{:.3},{:.3},{},{},{},{},{},{},{},{},{},{},{:e},{},{},{},{},{},{}\n",
                 f.frame,
                 f.produce_ms,
                 f.train_ms,
@@ -91,6 +91,7 @@ pub fn write_stats(path: &Path, stats: &[FrameStats]) -> Result<()> {
                 f.change_z,
                 f.phase.name(),
                 f.spend_ms,
+                f.learning_rate,
                 f.producer.paths,
                 f.producer.rays + f.inference.rays,
                 f.inference.queries,

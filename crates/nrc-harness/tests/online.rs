@@ -18,7 +18,17 @@ fn scene(name: &str) -> Scene {
 }
 
 fn trainer(scene: &Scene, producer: &str, records: usize) -> OnlineTrainer {
-    let mut s = CacheMethodSettings::new(CacheConfig::hash_grid_preset(), CacheDevice::Cpu);
+    trainer_with(scene, producer, records, CacheConfig::hash_grid_preset())
+}
+
+/// [`trainer`] with the cache configured by `config`.
+fn trainer_with(
+    scene: &Scene,
+    producer: &str,
+    records: usize,
+    config: CacheConfig,
+) -> OnlineTrainer {
+    let mut s = CacheMethodSettings::new(config, CacheDevice::Cpu);
     s.records_per_frame = records;
     s.batch_size = records / 2;
     s.resolution = 128;
@@ -238,7 +248,9 @@ fn long_run(
     (renders, spp): (u32, u32),
 ) -> LongRun {
     let (w, h) = (reference.width as u32, reference.height as u32);
-    let mut t = trainer(scene, producer, records);
+    // `NRC_LONG_VARIANT`: the preset edited as the drift study's variants ([`edited_preset`]).
+    let variant = env_or("NRC_LONG_VARIANT", "base");
+    let mut t = trainer_with(scene, producer, records, edited_preset(&variant));
     let input = FrameInput {
         scene,
         camera: &scene.camera,
@@ -265,7 +277,22 @@ fn long_run(
     };
     let start = std::time::Instant::now();
     let mut checking = std::time::Duration::ZERO;
+    // Experiment (issue 31): `NRC_LONG_LR_DECAY=T,FLOOR`: the learning rate times
+    // max(FLOOR, T / (T + f)) at frame f.
+    let lr = t.cache.neural().map(|c| c.learning_rate());
+    let decay: Option<(f32, f32)> = std::env::var("NRC_LONG_LR_DECAY").ok().map(|v| {
+        let (a, b) = v.split_once(',').expect("T,FLOOR");
+        (a.parse().unwrap(), b.parse().unwrap())
+    });
     for f in 1..=frames {
+        if let (Some((tau, floor)), Some(lr)) = (decay, lr) {
+            let scale = (tau / (tau + f as f32)).max(floor);
+            t.cache
+                .neural_mut()
+                .unwrap()
+                .set_learning_rate(lr * scale)
+                .unwrap();
+        }
         let render = f % 25 == 0;
         let (s, out) = t.frame(scene, &scene.camera, w, h, render).unwrap();
         assert!(s.loss.is_finite(), "{producer} frame {f}: loss {}", s.loss);
@@ -426,7 +453,14 @@ fn long_runs(
         "| scene | producer | frames | records | dropped (non-finite / absurd) | {measure} at frame {early} | at frame {frames} | lowest from frame {early} on | relMSE at frame {frames} | ms per frame | changes called | {measure} at every tenth of the run |\n|---|---|---|---|---|---|---|---|---|---|---|---|"
     );
     let mut failures = Vec::new();
-    for (name, scene) in hard_scenes() {
+    // On demand, `NRC_LONG_SCENES` and `NRC_LONG_PRODUCERS` (`;`-separated) pick runs.
+    let picked = |var: &str, name: &str| {
+        std::env::var(var).map_or(true, |list| list.split(';').any(|n| n == name))
+    };
+    for (name, scene) in hard_scenes()
+        .into_iter()
+        .filter(|(n, _)| picked("NRC_LONG_SCENES", n))
+    {
         let reference = reference_of(&scene, size, reference_spp);
         let input = FrameInput {
             width: size.0,
@@ -440,7 +474,10 @@ fn long_runs(
             "| {name} | controls, {measure} (relMSE at the end): path-traced answers {:.4} ({:.4}), zero answers {:.4} ({:.4}) | | | | | | | | | | |",
             exact.0, exact.1, black.0, black.1
         );
-        for producer in LONG_RUN_PRODUCERS {
+        for producer in LONG_RUN_PRODUCERS
+            .into_iter()
+            .filter(|p| picked("NRC_LONG_PRODUCERS", p))
+        {
             let r = long_run(
                 &scene,
                 producer,
@@ -496,7 +533,11 @@ fn short_online_runs_on_the_hard_scenes_stay_finite_and_do_not_diverge() {
 
 /// The long runs (issues 21 and 31), on demand: 2000 frames of 4096 records; the cache's
 /// relative bias² (four 64-spp renders) at the end at most 1.1 × its lowest from frame 200 on
-/// (`cargo test --release --test online -- --ignored long`).
+/// (`cargo test --release --test online -- --ignored long`). For experiments, from the
+/// environment: `NRC_LONG_VARIANT` (the preset edited, as the drift study's variants),
+/// `NRC_LONG_SCENES` and `NRC_LONG_PRODUCERS` (`;`-separated: the runs to take) and
+/// `NRC_LONG_LR_DECAY=T,FLOOR` (the learning rate set by the test at each frame, see
+/// [`long_run`]).
 #[test]
 #[ignore]
 fn long_online_runs_on_the_hard_scenes_stay_finite_and_do_not_diverge() {
@@ -581,14 +622,7 @@ fn errors_with(scene: &Scene, producer: &str, mut s: CacheMethodSettings) -> [f6
 /// The preset with a learning rate of 10⁻⁹: a cache that barely learns (negative control).
 fn frozen_preset() -> CacheConfig {
     let mut frozen = CacheConfig::hash_grid_preset();
-    let mut opt = &mut frozen.optimizer;
-    while let nrc_cache::config::OptimizerConfig::EMA { nested, .. } = opt {
-        opt = nested.as_mut();
-    }
-    let nrc_cache::config::OptimizerConfig::Adam { learning_rate, .. } = opt else {
-        panic!("the preset's optimizer is Adam under the EMA");
-    };
-    *learning_rate = 1e-9;
+    frozen.optimizer.set_learning_rate(1e-9);
     frozen
 }
 
@@ -675,7 +709,7 @@ fn env_or(var: &str, default: &str) -> String {
 }
 
 /// The hash-grid preset with `edits` applied: `path.to.field=value` pairs, `,`-separated, on
-/// its JSON form (`optimizer.nested.learning_rate=2e-3`, `optimizer.decay=0.999`,
+/// its JSON form (`optimizer.nested.nested.learning_rate=2e-3`, `optimizer.decay=0.999`,
 /// `encoding.nested.0.log2_hashmap_size=21`); `base` is the preset itself.
 fn edited_preset(edits: &str) -> CacheConfig {
     let mut json = serde_json::to_value(CacheConfig::hash_grid_preset()).unwrap();

@@ -183,6 +183,9 @@ pub struct FrameStats {
     /// Under a training budget, the milliseconds the frame planned to spend producing and
     /// training (0 without a budget).
     pub spend_ms: f64,
+    /// The learning rate of the frame's first step, decayed as the cache's configuration says
+    /// (0 for the hash cache).
+    pub learning_rate: f32,
     pub producer: ProducerStats,
     pub inference: PassStats,
 }
@@ -415,6 +418,10 @@ impl OnlineTrainer {
         // (its cache queries wait for them); their losses are read after it.
         // Under a time budget each call is waited for: the budget prices training by its time,
         // which a wait hidden in the render would move out of sight.
+        stats.learning_rate = self
+            .cache
+            .neural()
+            .map_or(0.0, |c| c.current_learning_rate());
         let overlap = s.overlap && self.budget.is_none();
         let mut pending = Vec::new();
         for chunk in order.chunks(s.batch_size) {
