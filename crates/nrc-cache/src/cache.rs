@@ -305,8 +305,8 @@ impl RadianceCache {
         }
     }
 
-    /// Restarts the learning rate's decay: the next step takes the full rate again, and the
-    /// decay counts from it. The online loop calls this when the scene changes under the cache
+    /// Restarts the learning rate's decay: it counts its steps from the next one again (which
+    /// takes the full rate unless `decay_start` is 0). The online loop calls this when the scene changes under the cache
     /// ([`crate::Cache::begin_recovery`]), so that the cache learns the change at the full rate
     /// and settles again; no effect without a decay.
     pub fn restart_learning_rate(&mut self) {

@@ -270,7 +270,9 @@ pub enum OptimizerConfig {
     /// from the last [`crate::RadianceCache::restart_learning_rate`], where tiny-cuda-nn counts
     /// from its first) the rate is `learning_rate · decay_base^n`, `n` the number of steps
     /// `decay_start, decay_start + decay_interval, …` at most `min(k, decay_end)`. The rate
-    /// stops falling at `decay_end`: that is its floor.
+    /// stops falling at `decay_end`: that is its floor. A training call of several steps takes
+    /// its first step's rate for all of them (the online loop makes one step a call); a
+    /// snapshot does not store the step of the last restart (a loaded cache counts from 0).
     ExponentialDecay {
         decay_start: u32,
         decay_interval: u32,
@@ -325,7 +327,8 @@ impl LrDecay {
         if k < self.start {
             return 1.0;
         }
-        let n = (k.min(self.end) - self.start) / self.interval + 1;
+        let n =
+            (k.min(self.end).saturating_sub(self.start) / self.interval.max(1)).saturating_add(1);
         self.base.powi(n.min(i32::MAX as u32) as i32)
     }
 

@@ -609,6 +609,15 @@ fn the_factor_is_the_staircase_of_tiny_cuda_nn() {
     assert_eq!(d.factor(1200), 0.25);
     assert_eq!(d.floor(), 0.125);
     assert_eq!(d.factor(u32::MAX), 0.125);
+    // A decay that never ends, one step apart: no overflow at the last step.
+    let endless = LrDecay {
+        start: 0,
+        interval: 1,
+        base: 0.5,
+        end: u32::MAX,
+    };
+    assert_eq!(endless.floor(), 0.0);
+    assert_eq!(endless.factor(3), 0.0625);
 }
 
 /// The hash-grid preset with a 2^12 table and the decay `d` (start, interval, base, end).

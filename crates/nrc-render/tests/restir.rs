@@ -830,8 +830,8 @@ fn a_split_with_jittered_camera_rays_matches_the_pixel_footprint_reference() {
 
 /// World-space ReSTIR GI's `specular` key decides which vertices shade: in [`firefly_room`]
 /// (glossy floor of roughness 0.2, table 0.16, the rest diffuse) the thresholds 0.1 and 0.15
-/// count the same vertices as rough and render the same bits, 0.1 and the default (0.24, which
-/// traces through floor and table) do not; the default's name omits the key, others print it,
+/// count the same vertices as rough and render the same bits, 0.1 and the default (0.2, which
+/// traces through the table) do not; the default's name omits the key, others print it,
 /// and a threshold beyond 1 is refused.
 #[test]
 fn the_specular_threshold_decides_where_world_space_reuse_shades() {

@@ -13,7 +13,7 @@
 //! `y`, further bounces) or, for `-nrc`, one cache query at `y`.
 //!
 //! - **Shading vertex `x₁`**: `restir-gi` uses the primary vertex (non-delta; delta primaries
-//!   fall back to the path tracer); `wsrestir-gi` the first vertex of roughness ≥ 0.24 (§4.1),
+//!   fall back to the path tracer); `wsrestir-gi` the first vertex of roughness ≥ 0.2 (§4.1),
 //!   the path traced through the specular ones before it (their NEE and emission counted as
 //!   the path tracer counts them). A traced tail `L` is one walk from `y` on, Russian roulette
 //!   on its throughput from `y` (not restarted at the vertex after `y`, whose sample the grid
@@ -61,13 +61,13 @@ use crate::transport::{Arrival, PathWalk, Vertex};
 
 /// Vertices below this roughness (perceptual, √α) count as specular in world space and are
 /// traced through (§4.1: "smaller than 0.2", which does not say whether of α or of √α); the
-/// `specular` key sets it. 0.24 rather than 0.2: a conductor of roughness 0.2 (α 0.04) is a
-/// near-mirror whose reconnections are mostly zero or fireflies; with it specular, `glossy`'s
-/// median MSE at equal time fell from 0.0145–0.0155 to 0.0121–0.0123 (two sets of 8 runs), the
-/// kitchen stayed level (0.0548 against 0.0556, relMSE 0.381 → 0.337), and `ajar` (0.25),
-/// the Cornell box and `caustics` have no roughness between 0.2 and 0.24 (same bits; RESULTS.md,
+/// `specular` key sets it. `specular=0.24` makes `glossy`'s gold of roughness 0.2 (α 0.04, a
+/// near-mirror whose reconnections are mostly zero or fireflies) specular: its median MSE at
+/// equal time fell from 0.0145–0.0155 to 0.0121–0.0123 (two sets of 8 runs) and the kitchen
+/// at 160 × 90 stayed level, but at 640 × 360 the frames cost about 10 % more and one
+/// command's mean MSE came out 1.05× above path tracing, so 0.2 stays the default (RESULTS.md,
 /// "A specular threshold above the near-mirrors").
-pub const SPECULAR_ROUGHNESS: f32 = 0.24;
+pub const SPECULAR_ROUGHNESS: f32 = 0.2;
 /// The shift from a donor to a receiver is defined only where the reconnection Jacobian lies
 /// in `[1/JACOBIAN_MAX, JACOBIAN_MAX]` (Ouyang et al. reject reuse beyond such a bound): a
 /// donor never lends a sample outside it, and counts in `Z` only for samples inside it, so the
