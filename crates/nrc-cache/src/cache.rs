@@ -306,9 +306,9 @@ impl RadianceCache {
     }
 
     /// Restarts the learning rate's decay: it counts its steps from the next one again (which
-    /// takes the full rate unless `decay_start` is 0). The online loop calls this when the scene changes under the cache
-    /// ([`crate::Cache::begin_recovery`]), so that the cache learns the change at the full rate
-    /// and settles again; no effect without a decay.
+    /// takes the full rate unless `decay_start` is 0). The online loop calls this when a change
+    /// in the scene is confirmed ([`crate::Cache::confirm_change`]), so that the cache learns
+    /// the change at the full rate and settles again; no effect without a decay.
     pub fn restart_learning_rate(&mut self) {
         self.lr_start = self.step;
     }
@@ -384,7 +384,7 @@ impl RadianceCache {
         ));
         let decay = self.lr_decay.map_or(String::new(), |d| {
             format!(
-                " × {} every {} steps from step {} to {} (floor × {:.3}, restarted by a change; \
+                " × {} every {} steps from step {} to {} (floor × {:.3}, restarted by a confirmed change; \
                  now {:.2e})",
                 d.base,
                 d.interval,

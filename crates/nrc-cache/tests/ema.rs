@@ -656,7 +656,7 @@ fn undecayed(config: &CacheConfig) -> CacheConfig {
 
 /// Training with the decay takes exactly the steps of training without it whose learning rate
 /// is set by hand to the decayed one before each step, on the fused path and the tensor path;
-/// restarted (as the online loop restarts it at a change), the rate is the full one again and
+/// restarted (as the online loop restarts it at a confirmed change), the rate is the full one again and
 /// decays anew. The negative control: the undecayed cache left at the full rate ends elsewhere.
 #[test]
 fn a_decayed_cache_trains_as_one_whose_rate_is_set_by_hand() {
@@ -703,8 +703,8 @@ fn a_decayed_cache_trains_as_one_whose_rate_is_set_by_hand() {
     );
 }
 
-/// A change called by the online loop ([`Cache::begin_recovery`]) restarts the neural cache's
-/// decay.
+/// A change confirmed by the online loop ([`Cache::confirm_change`]) restarts the neural
+/// cache's decay; a change called and not yet confirmed ([`Cache::begin_recovery`]) does not.
 #[test]
 fn a_change_restarts_the_decay() {
     let c = decay_config((0, 1, 0.5, 4));
@@ -718,6 +718,13 @@ fn a_change_restarts_the_decay() {
         n.learning_rate() * 0.5f32.powi(5)
     );
     cache.begin_recovery();
+    let n = cache.neural().unwrap();
+    assert_eq!(
+        n.current_learning_rate(),
+        n.learning_rate() * 0.5f32.powi(5),
+        "a change not yet confirmed restarted the decay"
+    );
+    cache.confirm_change();
     let n = cache.neural().unwrap();
     assert_eq!(n.current_learning_rate(), n.learning_rate() * 0.5);
 }

@@ -447,7 +447,12 @@ impl TrainSummary {
             changes: all.iter().filter(|s| s.phase == Phase::Changed).count(),
             recovering_frames: all
                 .iter()
-                .filter(|s| matches!(s.phase, Phase::Recovering | Phase::Recovered))
+                .filter(|s| {
+                    matches!(
+                        s.phase,
+                        Phase::Confirmed | Phase::Recovering | Phase::Recovered
+                    )
+                })
                 .count(),
             budgeted_frames: budgeted.clone().count(),
             over_budget: over.clone().count(),

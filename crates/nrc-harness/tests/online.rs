@@ -28,10 +28,22 @@ fn trainer_with(
     records: usize,
     config: CacheConfig,
 ) -> OnlineTrainer {
+    trainer_sized(scene, producer, records, config, 128)
+}
+
+/// [`trainer_with`] with the hash grid's finest resolution (cells along the scene's longest
+/// axis) given.
+fn trainer_sized(
+    scene: &Scene,
+    producer: &str,
+    records: usize,
+    config: CacheConfig,
+    resolution: u32,
+) -> OnlineTrainer {
     let mut s = CacheMethodSettings::new(config, CacheDevice::Cpu);
     s.records_per_frame = records;
     s.batch_size = records / 2;
-    s.resolution = 128;
+    s.resolution = resolution;
     s.seed = 11;
     scene_trainer(
         scene,
@@ -110,8 +122,9 @@ struct LongRun {
 
 /// A reference of `scene` at `w × h` (`spp` samples), with its emitter mask.
 /// The change detector on a scene: on `cornell-box-jump` (the lamp jumps 0.17 m at 1 s, frame
-/// 30 at 30 fps) the frame of the jump or the next is called a change, and none before; the
-/// cache then infers from its training weights and stops once it has caught up, within the
+/// 30 at 30 fps) the frame of the jump or the next is called a change, and none before, and
+/// the frame after it confirms it (the learning rate's decay restarts there); the cache infers
+/// from its training weights from the change and stops once it has caught up, within the
 /// recovery's frame limit. The negative control, the same run on the scene held at its first
 /// pose, has no change at all.
 #[test]
@@ -121,10 +134,14 @@ fn a_jumping_light_is_called_a_change_and_recovered_from_and_a_still_scene_is_no
     let animated = nrc_scene::AnimatedScene::load(&path).unwrap();
     let first = animated.at(0.0).unwrap();
     // Posing each frame (also the still run's, at 0 s) keeps the two runs alike but for the jump.
+    // A decay that has begun by the jump (the preset's starts at step 400), so that its
+    // restart shows: halved every 40 steps from step 1 (two steps a frame).
+    let config = edited_preset("optimizer.nested.decay_start=1,optimizer.nested.decay_interval=40");
     let run = |jump: bool| {
-        let mut t = trainer(&first, "pt-sl", 4096);
+        let mut t = trainer_with(&first, "pt-sl", 4096, config.clone());
         let mut phases = Vec::new();
         let mut followed = Vec::new();
+        let mut rates = Vec::new();
         for f in 0..70u32 {
             let posed = animated
                 .at(if jump { f as f32 / 30.0 } else { 0.0 })
@@ -132,11 +149,13 @@ fn a_jumping_light_is_called_a_change_and_recovered_from_and_a_still_scene_is_no
             let (stats, _) = t.frame(&posed, &posed.camera, 32, 32, true).unwrap();
             phases.push(stats.phase);
             followed.push(t.cache.neural().unwrap().follows());
+            rates.push(stats.learning_rate);
         }
-        (phases, followed)
+        let full = t.cache.neural().unwrap().learning_rate();
+        (phases, followed, rates, full)
     };
     use nrc_train::schedule::Phase;
-    let (phases, followed) = run(true);
+    let (phases, followed, rates, full) = run(true);
     let changes: Vec<usize> = (0..phases.len())
         .filter(|&f| phases[f] == Phase::Changed)
         .collect();
@@ -149,13 +168,25 @@ fn a_jumping_light_is_called_a_change_and_recovered_from_and_a_still_scene_is_no
         followed[c],
         "the cache does not follow its weights after the change"
     );
+    assert_eq!(
+        phases[c + 1],
+        Phase::Confirmed,
+        "the lamp's jump is not confirmed the frame after it: {phases:?}"
+    );
+    // The rate's decay restarts at the confirmation, not at the call.
+    assert!(
+        rates[c] < 0.5 * full && rates[c + 1] == full,
+        "learning rates {} at the change, {} at its confirmation (full {full})",
+        rates[c],
+        rates[c + 1]
+    );
     let end = (c..phases.len()).find(|&f| phases[f] == Phase::Recovered);
     let end = end.unwrap_or_else(|| panic!("no recovery ended: {phases:?}"));
     assert!(
         end - c <= nrc_train::schedule::RECOVERY_MAX_FRAMES as usize && !followed[end],
         "recovery from frame {c} to {end}"
     );
-    let (still, followed) = run(false);
+    let (still, followed, ..) = run(false);
     assert!(
         !still.contains(&Phase::Changed) && !followed.contains(&true),
         "a change called in a still scene: {still:?}"
@@ -250,7 +281,17 @@ fn long_run(
     let (w, h) = (reference.width as u32, reference.height as u32);
     // `NRC_LONG_VARIANT`: the preset edited as the drift study's variants ([`edited_preset`]).
     let variant = env_or("NRC_LONG_VARIANT", "base");
-    let mut t = trainer_with(scene, producer, records, edited_preset(&variant));
+    // `NRC_LONG_RESOLUTION`: the hash grid's finest resolution (128 by default).
+    let resolution = env_or("NRC_LONG_RESOLUTION", "128")
+        .parse()
+        .expect("NRC_LONG_RESOLUTION: cells, an integer");
+    let mut t = trainer_sized(
+        scene,
+        producer,
+        records,
+        edited_preset(&variant),
+        resolution,
+    );
     let input = FrameInput {
         scene,
         camera: &scene.camera,
@@ -306,6 +347,16 @@ fn long_run(
         run.dropped_absurd += s.dropped_absurd;
         run.loss = s.loss;
         run.changes += usize::from(s.phase == nrc_train::schedule::Phase::Changed);
+        if matches!(
+            s.phase,
+            nrc_train::schedule::Phase::Changed | nrc_train::schedule::Phase::Confirmed
+        ) {
+            eprintln!(
+                "    {producer} frame {f}: {} (score {:.1})",
+                s.phase.name(),
+                s.change_z
+            );
+        }
         if let Some(out) = out {
             assert_eq!(out.stats.invalid_samples, 0, "{producer} frame {f}");
             assert!(
@@ -525,7 +576,10 @@ fn long_runs(
 /// The long runs shortened for CI: 60 frames of 1024 records; the relMSE of one 4-spp render
 /// at the end at most twice the lowest from frame 15 on (at 16 × 16 pixels and 4 spp the
 /// render's own noise moves the error by ±15 % between checkpoints; a diverging cache, as the
-/// one a firefly target kicked before the loss was bounded, went from 0.31 to 10.3).
+/// one a firefly target kicked before the loss was bounded, went from 0.31 to 10.3). The long
+/// runs' measure and bound (relative bias² of four renders, 1.1 ×) do not fit this length:
+/// with four 16-spp renders the caches are still learning at frame 60 (`ajar` with `pt`
+/// 0.20 at frame 15, 0.33 at frame 60; measured 2026-12-07).
 #[test]
 fn short_online_runs_on_the_hard_scenes_stay_finite_and_do_not_diverge() {
     long_runs((60, 15, 1024), (16, 16), (1024, 1, 4), (2.0, true));
@@ -535,9 +589,10 @@ fn short_online_runs_on_the_hard_scenes_stay_finite_and_do_not_diverge() {
 /// relative bias² (four 64-spp renders) at the end at most 1.1 × its lowest from frame 200 on
 /// (`cargo test --release --test online -- --ignored long`). For experiments, from the
 /// environment: `NRC_LONG_VARIANT` (the preset edited, as the drift study's variants),
-/// `NRC_LONG_SCENES` and `NRC_LONG_PRODUCERS` (`;`-separated: the runs to take) and
+/// `NRC_LONG_SCENES` and `NRC_LONG_PRODUCERS` (`;`-separated: the runs to take),
+/// `NRC_LONG_RESOLUTION` (the hash grid's finest resolution, 128 by default) and
 /// `NRC_LONG_LR_DECAY=T,FLOOR` (the learning rate set by the test at each frame, see
-/// [`long_run`]).
+/// [`long_run`]). Changes called and confirmed are printed with their frames and scores.
 #[test]
 #[ignore]
 fn long_online_runs_on_the_hard_scenes_stay_finite_and_do_not_diverge() {

@@ -98,7 +98,7 @@ impl OnlineSettings {
     pub fn describe_control(&self) -> String {
         let recovery = if self.recover {
             format!(
-                "watching for changes in the scene (after one: inference from the training weights, {} step(s) a batch, until the cache has caught up)",
+                "watching for changes in the scene (after one: inference from the training weights, {} step(s) a batch, until the cache has caught up; the learning rate's decay restarts once the change lasts a second frame)",
                 self.recovery_steps
             )
         } else {
@@ -408,6 +408,7 @@ impl OnlineTrainer {
             stats.phase = self.detector.observe(stats.change_z);
             match stats.phase {
                 Phase::Changed => self.cache.begin_recovery(),
+                Phase::Confirmed => self.cache.confirm_change(),
                 Phase::Recovered => self.cache.end_recovery(),
                 _ => {}
             }

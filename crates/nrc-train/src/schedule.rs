@@ -16,7 +16,9 @@
 //! follows lasts until the score is back at its level. What the online loop does about a
 //! change is [`crate::online`]'s business (the cache infers from its training weights while
 //! it recovers, [`nrc_cache::RadianceCache::set_follow`]; the hash cache forgets most of its
-//! cells' samples, [`nrc_cache::HashCache::forget`]: [`nrc_cache::Cache::begin_recovery`]).
+//! cells' samples, [`nrc_cache::HashCache::forget`]: [`nrc_cache::Cache::begin_recovery`]; and
+//! once the change is confirmed a frame later, the learning rate's decay restarts:
+//! [`nrc_cache::Cache::confirm_change`]).
 
 use glam::Vec3;
 use nrc_cache::TrainingBatch;
@@ -170,6 +172,11 @@ pub enum Phase {
     Settled,
     /// The score jumped this frame: the scene changed under the cache.
     Changed,
+    /// The frame after a change, the score still up: the change is real, not one frame's
+    /// outlier (a burst of caustic paths): the cache's learning rate restarts
+    /// ([`nrc_cache::Cache::confirm_change`]). A recovering frame otherwise. (A non-finite
+    /// score is not counted as a frame: after one, the confirmation waits for the next.)
+    Confirmed,
     /// Since a change, until the score is back at its level before it.
     Recovering,
     /// The score came back this frame: the recovery ends.
@@ -183,6 +190,7 @@ impl Phase {
             Phase::Watching => "watching",
             Phase::Settled => "settled",
             Phase::Changed => "changed",
+            Phase::Confirmed => "confirmed",
             Phase::Recovering => "recovering",
             Phase::Recovered => "recovered",
         }
@@ -194,7 +202,8 @@ impl Phase {
 /// normal score) of the scores; a score above the level by [`CHANGE_SPREADS`] spreads and at
 /// least [`CHANGE_MIN_RISE`] is a change. The recovery that follows ends when the score is back
 /// within two spreads of the level it had before the change (at least [`RECOVERY_MIN_FRAMES`],
-/// at most [`RECOVERY_MAX_FRAMES`] frames); then the detector learns the level anew.
+/// at most [`RECOVERY_MAX_FRAMES`] frames); then the detector learns the level anew. A change
+/// whose next score has not come back is confirmed ([`Phase::Confirmed`]).
 #[derive(Clone, Debug, Default)]
 pub struct ChangeDetector {
     level: f32,
@@ -217,6 +226,9 @@ impl ChangeDetector {
         if let Some((frames, level, spread)) = &mut self.recovery {
             *frames += 1;
             let back = z <= *level + 2.0 * *spread;
+            if *frames == 1 && !back {
+                return Phase::Confirmed;
+            }
             if (*frames >= RECOVERY_MIN_FRAMES && back) || *frames >= RECOVERY_MAX_FRAMES {
                 let spread = *spread;
                 self.recovery = None;

@@ -6,7 +6,7 @@
 use nrc_cache::{CacheQuery, TrainingBatch};
 use nrc_train::schedule::{
     ChangeDetector, ChangeMonitor, MAX_BUDGET_RECORDS, MIN_BUDGET_RECORDS, Phase,
-    RECOVERY_MAX_FRAMES, SETTLED_SHARE, TrainBudget, WARM_UP_FRAMES,
+    RECOVERY_MAX_FRAMES, RECOVERY_MIN_FRAMES, SETTLED_SHARE, TrainBudget, WARM_UP_FRAMES,
 };
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64Mcg;
@@ -118,7 +118,8 @@ fn the_detector_calls_a_jump_a_change_and_the_noise_nothing() {
     // A jump: a change at once, a recovery while the score stays high, then watching again.
     assert_eq!(d.observe(60.0), Phase::Changed);
     assert!(d.recovering() && !d.settled());
-    for _ in 0..5 {
+    assert_eq!(d.observe(40.0 + normal(&mut r)), Phase::Confirmed);
+    for _ in 0..4 {
         assert_eq!(d.observe(40.0 + normal(&mut r)), Phase::Recovering);
     }
     assert_eq!(d.observe(3.0), Phase::Recovered);
@@ -129,12 +130,26 @@ fn the_detector_calls_a_jump_a_change_and_the_noise_nothing() {
         d.observe(3.0 + normal(&mut r));
     }
     assert_eq!(d.observe(80.0), Phase::Changed);
-    let mut frames = 0;
+    assert_eq!(d.observe(80.0), Phase::Confirmed);
+    let mut frames = 1;
     while d.observe(80.0) == Phase::Recovering {
         frames += 1;
         assert!(frames < RECOVERY_MAX_FRAMES, "the recovery does not end");
     }
     assert_eq!(frames + 1, RECOVERY_MAX_FRAMES);
+    // A one-frame outlier (a burst of caustic paths): a change, never confirmed; the recovery
+    // lasts its shortest (after the level, left at 80 by the recovery above, has settled).
+    for _ in 0..100 {
+        d.observe(3.0 + normal(&mut r));
+    }
+    assert_eq!(d.observe(60.0), Phase::Changed);
+    let after: Vec<Phase> = (0..RECOVERY_MIN_FRAMES)
+        .map(|_| d.observe(3.0 + normal(&mut r)))
+        .collect();
+    assert!(
+        !after.contains(&Phase::Confirmed) && after.last() == Some(&Phase::Recovered),
+        "an outlier's recovery: {after:?}"
+    );
     // Non-finite scores change nothing.
     assert_eq!(d.observe(f32::NAN), Phase::Watching);
 }
