@@ -293,8 +293,8 @@ pub fn run(args: &TrainArgs) -> Result<()> {
     }
     if sum.changes > 0 {
         println!(
-            "{} change(s) in the scene detected; {} frames recovering",
-            sum.changes, sum.recovering_frames
+            "{} change(s) in the scene detected, {} confirmed (the learning rate's decay restarted); {} frames recovering",
+            sum.changes, sum.confirmed, sum.recovering_frames
         );
     }
     Ok(())

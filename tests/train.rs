@@ -458,3 +458,43 @@ fn every_producer_trains_on_the_environment_lit_kajiya_scene() {
         );
     }
 }
+
+/// `nrc train` on `cornell-box-jump` (the lamp jumps at frame 30) reports the change it
+/// detected and confirmed; on the still Cornell box, the negative control, it reports none.
+#[test]
+fn a_jump_in_the_scene_is_reported_as_a_confirmed_change() {
+    let run = |scene: &Path| {
+        let o = nrc(&[
+            "train",
+            "--scene",
+            scene.to_str().unwrap(),
+            "--frames",
+            "60",
+            "--width",
+            "32",
+            "--height",
+            "32",
+        ]);
+        assert!(o.status.success(), "{}", text(&o.stderr));
+        text(&o.stdout)
+    };
+    let jump = run(&Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/cornell-box-jump.gltf"));
+    let line = jump
+        .lines()
+        .find(|l| l.contains("change(s) in the scene detected"))
+        .unwrap_or_else(|| panic!("no change reported: {jump}"));
+    let count = |word: &str| -> usize {
+        let before = line.split(word).next().unwrap();
+        let n = before.split_whitespace().last().unwrap();
+        n.parse().unwrap_or_else(|_| panic!("{line}"))
+    };
+    assert!(
+        count("change(s)") >= 1 && count("confirmed") >= 1,
+        "the lamp's jump is not a confirmed change: {line}"
+    );
+    let still = run(&cornell());
+    assert!(
+        !still.contains("change(s) in the scene detected"),
+        "a change reported on a still scene: {still}"
+    );
+}

@@ -409,8 +409,10 @@ pub struct TrainSummary {
     pub skipped: u64,
     /// Mean records produced per frame.
     pub records: f64,
-    /// Changes in the scene the loop detected, and frames it spent recovering.
+    /// Changes in the scene the loop detected, those it confirmed a frame later (the learning
+    /// rate's decay restarted), and frames it spent recovering.
     pub changes: usize,
+    pub confirmed: usize,
     pub recovering_frames: usize,
     /// Under a training budget: frames after the warm-up
     /// ([`nrc_train::schedule::BUDGET_WARM_UP_FRAMES`]), and those whose producing and training
@@ -445,6 +447,7 @@ impl TrainSummary {
             skipped: all.iter().map(|s| s.producer.skipped).sum(),
             records: mean(|s| s.records as f64),
             changes: all.iter().filter(|s| s.phase == Phase::Changed).count(),
+            confirmed: all.iter().filter(|s| s.phase == Phase::Confirmed).count(),
             recovering_frames: all
                 .iter()
                 .filter(|s| {
