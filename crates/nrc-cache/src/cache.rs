@@ -98,7 +98,7 @@ pub struct RadianceCache {
     adam: AdamParams,
     ema: Option<f32>,
     /// The learning rate's decay, and the step it counts from (0, or the last
-    /// [`RadianceCache::restart_learning_rate`]; a loaded cache counts from 0).
+    /// [`RadianceCache::restart_learning_rate`]; kept by snapshots and path changes).
     lr_decay: Option<LrDecay>,
     lr_start: u32,
     step: u32,
@@ -804,7 +804,7 @@ impl RadianceCache {
             &self.config,
             &self.scene_box,
             self.scene_content.as_deref(),
-            self.step,
+            (self.step, self.lr_start),
             &host,
         )
     }
@@ -825,6 +825,7 @@ impl RadianceCache {
             s.step,
         )?;
         cache.scene_content = s.scene_content;
+        cache.lr_start = s.lr_start;
         Ok(cache)
     }
 
@@ -858,6 +859,7 @@ impl RadianceCache {
         match moved {
             Ok(mut cache) => {
                 cache.scene_content = scene_content;
+                cache.lr_start = self.lr_start;
                 *self = cache;
                 Ok(())
             }

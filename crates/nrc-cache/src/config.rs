@@ -272,7 +272,7 @@ pub enum OptimizerConfig {
     /// `decay_start, decay_start + decay_interval, …` at most `min(k, decay_end)`. The rate
     /// stops falling at `decay_end`: that is its floor. A training call of several steps takes
     /// its first step's rate for all of them (the online loop makes one step a call); a
-    /// snapshot does not store the step of the last restart (a loaded cache counts from 0).
+    /// snapshot stores the step of the last restart.
     ExponentialDecay {
         decay_start: u32,
         decay_interval: u32,

@@ -16,7 +16,8 @@
 //!   "param_count": 12345, "checksum": "fnv1a64:0123456789abcdef" }
 //! ```
 //!
-//! `scene_content` is optional (absent in older files, and when the caller gave none): a hex
+//! `lr_start` is optional (absent in older files, and where the learning rate's decay never
+//! restarted: 0): the step the decay counts from. `scene_content` is optional (absent in older files, and when the caller gave none): a hex
 //! content hash of the scene the cache was trained on, computed by the caller (this crate knows
 //! nothing of scenes); [`check_scene`] compares it and the scene box with another scene's.
 //! `checksum` is FNV-1a (64-bit) over the little-endian 64-bit words of the eight tensors'
@@ -65,8 +66,16 @@ struct Metadata {
     /// Hex content hash of the scene, given by the caller; absent in older files.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     scene_content: Option<String>,
+    /// The step the learning rate's decay counts from (its last restart); absent (0) in older
+    /// files and where it never restarted.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    lr_start: u32,
     param_count: usize,
     checksum: String,
+}
+
+fn is_zero(v: &u32) -> bool {
+    *v == 0
 }
 
 /// A snapshot read back.
@@ -81,6 +90,9 @@ pub struct Snapshot {
     pub scene_content: Option<String>,
     /// Steps taken.
     pub step: u32,
+    /// The step the learning rate's decay counts from
+    /// ([`crate::RadianceCache::restart_learning_rate`]; 0 in files without it).
+    pub lr_start: u32,
     /// The training state.
     pub state: HostState,
 }
@@ -139,7 +151,7 @@ pub fn write(
     config: &CacheConfig,
     scene_box: &SceneBox,
     scene_content: Option<&str>,
-    step: u32,
+    (step, lr_start): (u32, u32),
     state: &HostState,
 ) -> Result<(), CacheError> {
     let bytes: Vec<&[u8]> = arrays(state)
@@ -153,6 +165,7 @@ pub fn write(
         config: serde_json::to_value(config).expect("config serialises"),
         scene_box: *scene_box,
         scene_content: scene_content.map(str::to_owned),
+        lr_start,
         param_count: state.grid.len() + state.mlp.len(),
         checksum: checksum(&bytes),
     };
@@ -393,6 +406,7 @@ pub fn read(path: &Path) -> Result<Snapshot, CacheError> {
         scene_box: meta.scene_box,
         scene_content: meta.scene_content,
         step: meta.step,
+        lr_start: meta.lr_start.min(meta.step),
         state,
     })
 }

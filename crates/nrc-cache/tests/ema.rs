@@ -728,3 +728,42 @@ fn a_change_restarts_the_decay() {
     let n = cache.neural().unwrap();
     assert_eq!(n.current_learning_rate(), n.learning_rate() * 0.5);
 }
+
+/// The step a restarted decay counts from survives a snapshot and a change of compute path:
+/// the loaded (and the moved) cache takes the rate the saved one would take. The negative
+/// control: the same cache without the restart is at another rate, so a lost restart shows.
+#[test]
+fn a_restarted_decay_survives_a_snapshot_and_a_path_change() {
+    let c = decay_config((0, 1, 0.5, 6));
+    let trained = |restart: bool| {
+        let mut cache = Cache::Neural(Box::new(cache_on(&c, ComputePath::Fused)));
+        for step in 0..5 {
+            cache.train(&batch(32, step), 1).unwrap();
+        }
+        if restart {
+            cache.confirm_change();
+        }
+        cache.train(&batch(32, 5), 1).unwrap();
+        cache
+    };
+    let mut restarted = trained(true);
+    let rate = restarted.neural().unwrap().current_learning_rate();
+    let plain = trained(false).neural().unwrap().current_learning_rate();
+    assert_ne!(rate, plain, "the restart changed nothing to test");
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("c.nrc");
+    restarted.neural_mut().unwrap().save(&file).unwrap();
+    let loaded = RadianceCache::load(&file, CacheDevice::Cpu).unwrap();
+    assert_eq!(
+        loaded.current_learning_rate(),
+        rate,
+        "the loaded cache lost the restart"
+    );
+    let moved = restarted.neural_mut().unwrap();
+    moved.set_path(ComputePath::CustomOps).unwrap();
+    assert_eq!(
+        moved.current_learning_rate(),
+        rate,
+        "the path change lost the restart"
+    );
+}
