@@ -404,8 +404,17 @@ impl RadianceCache {
             self.ema.map_or("off".into(), |a| format!("α {a}"))
         ));
         let loss = &self.config.loss;
+        let returned = loss.return_clipped.as_ref().map_or(String::new(), |r| {
+            format!(
+                "; the clipped light returned per bin of a {g}³ grid × 6 normals over {} frames, gain ≤ {}, surfaces of roughness ≥ {} or without a specular part",
+                r.frames,
+                r.max_gain,
+                r.min_roughness,
+                g = r.grid
+            )
+        });
         s.push_str(&format!(
-            "loss: {:?} ε {} (Huber beyond a relative residual of {}), targets above {:e} dropped\n",
+            "loss: {:?} ε {} (Huber beyond a relative residual of {}{returned}), targets above {:e} dropped\n",
             loss.otype, loss.epsilon, loss.max_relative_error, loss.max_target
         ));
         s.push_str(&format!(

@@ -243,6 +243,32 @@ pub struct LossConfig {
     /// door scenes, worse on the kitchen: RESULTS.md, "The drift was the measure's").
     #[serde(default = "max_relative_error")]
     pub max_relative_error: f32,
+    /// The light the bound clips, returned to the place it was clipped from (the online loop
+    /// does it: `nrc_train::clipped`). Absent: the bound's light is lost, and the cache
+    /// settles below its targets' mean where rare bright targets carry the light.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub return_clipped: Option<ReturnClipped>,
+}
+
+/// How the online loop returns the light the loss bound clips (`nrc_train::clipped`): each
+/// record's target is clamped where the bound would clip its residual (at the cache's
+/// prediction), the clipped luminance is summed per bin (a cell of a `grid`³ grid over the
+/// scene box and the normal's dominant axis and sign), and every target of a bin is scaled by
+/// its gain, `1 + clipped / kept` over the bin's remembered records, at most `max_gain`;
+/// records on glossy surfaces are only clamped.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ReturnClipped {
+    /// Cells per axis of the grid whose bins balance the light.
+    pub grid: u32,
+    /// Frames a bin remembers (its sums decay by `1 − 1/frames` a frame).
+    pub frames: f32,
+    /// The largest gain of a bin.
+    pub max_gain: f32,
+    /// Records on a surface with a specular part smoother than this (the BSDF's roughness,
+    /// `√α`; 1 for a diffuse surface) are clamped but take no part in the bins: their radiance
+    /// depends on the direction, which a bin does not hold.
+    pub min_roughness: f32,
 }
 
 fn loss_eps() -> f32 {
@@ -645,6 +671,32 @@ impl CacheConfig {
                 "loss.max_relative_error".into(),
                 format!("must be finite and > 0, got {}", l.max_relative_error),
             );
+        }
+        if let Some(r) = &l.return_clipped {
+            if !(r.min_roughness.is_finite() && r.min_roughness >= 0.0) {
+                return err(
+                    "loss.return_clipped.min_roughness".into(),
+                    format!("must be finite and >= 0, got {}", r.min_roughness),
+                );
+            }
+            if !(1..=64).contains(&r.grid) {
+                return err(
+                    "loss.return_clipped.grid".into(),
+                    format!("must be 1 to 64 cells, got {}", r.grid),
+                );
+            }
+            if !(r.frames.is_finite() && r.frames >= 1.0) {
+                return err(
+                    "loss.return_clipped.frames".into(),
+                    format!("must be finite and >= 1, got {}", r.frames),
+                );
+            }
+            if !(r.max_gain.is_finite() && r.max_gain >= 1.0) {
+                return err(
+                    "loss.return_clipped.max_gain".into(),
+                    format!("must be finite and >= 1, got {}", r.max_gain),
+                );
+            }
         }
         validate_optimizer(&self.optimizer, "optimizer", true)
     }

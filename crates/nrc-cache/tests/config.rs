@@ -54,7 +54,7 @@ fn presets_parse_and_have_the_documented_shape() {
 
 #[test]
 fn out_of_range_values_name_the_field() {
-    let cases: [(&str, serde_json::Value, &str); 12] = [
+    let cases: [(&str, serde_json::Value, &str); 16] = [
         (
             "/encoding/nested/0/n_levels",
             0.into(),
@@ -82,6 +82,26 @@ fn out_of_range_values_name_the_field() {
             "network.n_hidden_layers",
         ),
         ("/loss/epsilon", (-1.0).into(), "loss.epsilon"),
+        (
+            "/loss/return_clipped/grid",
+            0.into(),
+            "loss.return_clipped.grid",
+        ),
+        (
+            "/loss/return_clipped/frames",
+            0.5.into(),
+            "loss.return_clipped.frames",
+        ),
+        (
+            "/loss/return_clipped/max_gain",
+            0.9.into(),
+            "loss.return_clipped.max_gain",
+        ),
+        (
+            "/loss/return_clipped/min_roughness",
+            (-1.0).into(),
+            "loss.return_clipped.min_roughness",
+        ),
         ("/optimizer/decay", 1.5.into(), "optimizer.decay"),
         (
             "/optimizer/nested/nested/learning_rate",
@@ -106,6 +126,9 @@ fn out_of_range_values_name_the_field() {
     ];
     for (pointer, value, field) in cases {
         let mut v = preset_json();
+        // The presets leave the clipped light's return out (opt-in): add a valid one.
+        v["loss"]["return_clipped"] =
+            serde_json::json!({"grid": 16, "frames": 64, "max_gain": 4, "min_roughness": 0.7});
         *v.pointer_mut(pointer)
             .unwrap_or_else(|| panic!("{pointer}")) = value;
         let (f, m) = field_of(CacheConfig::from_json_str(&v.to_string()));

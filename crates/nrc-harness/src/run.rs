@@ -72,11 +72,11 @@ pub fn write_stats(path: &Path, stats: &[FrameStats]) -> Result<()> {
         serde_json::to_vec_pretty(stats)?
     } else {
         let mut s = String::from(
-            "frame,produce_ms,train_ms,infer_ms,records,used,dropped_nonfinite,dropped_absurd,steps,loss,target_mean,change_z,phase,spend_ms,learning_rate,paths,rays,cache_queries,invalid_samples,producer_dropped,producer_skipped\n",
+            "frame,produce_ms,train_ms,infer_ms,records,used,dropped_nonfinite,dropped_absurd,steps,loss,target_mean,change_z,phase,spend_ms,learning_rate,clamped,clip_gain,paths,rays,cache_queries,invalid_samples,producer_dropped,producer_skipped\n",
         );
         for f in stats {
             s.push_str(&format!(
-                "{},{:.3},{:.3},{:.3},{},{},{},{},{},{},{},{},{},{},{:e},{},{},{},{},{},{}\n",
+                "{},{:.3},{:.3},{:.3},{},{},{},{},{},{},{},{},{},{},{:e},{},{},{},{},{},{},{},{}\n",
                 f.frame,
                 f.produce_ms,
                 f.train_ms,
@@ -92,6 +92,8 @@ pub fn write_stats(path: &Path, stats: &[FrameStats]) -> Result<()> {
                 f.phase.name(),
                 f.spend_ms,
                 f.learning_rate,
+                f.clamped,
+                f.clip_gain,
                 f.producer.paths,
                 f.producer.rays + f.inference.rays,
                 f.inference.queries,

@@ -12,6 +12,7 @@
 //! - [`source`]: the cache as an [`nrc_render::RadianceSource`] (the adapter the passes
 //!   reach it through).
 //! - [`online`]: the per-frame loop produce → train → infer, with per-phase statistics.
+//! - [`clipped`]: the light the loss bound clips, returned to the bins it was clipped in.
 //! - [`schedule`]: the loop's control: noticing that the scene changed under the cache (and
 //!   recovering), and fitting a frame's training records to a time budget.
 //!
@@ -19,6 +20,7 @@
 //! [`nrc_cache::CacheQuery`]. The inference passes, the path-vertex step, light paths and the
 //! area-spread heuristic live in [`nrc_render`].
 
+pub mod clipped;
 pub mod error;
 pub mod mix;
 pub mod online;

@@ -1,6 +1,7 @@
 //! The online loop: per frame, predict training queries, produce records, train the cache,
 //! and render with it.
 
+use std::borrow::Cow;
 use std::time::Instant;
 
 use nrc_cache::{Cache, CacheError, PendingTrain};
@@ -9,6 +10,7 @@ use nrc_render::sampler::Stream;
 use nrc_render::{PathTracer, PixelSampler, pass_seed};
 use nrc_scene::{Camera, Scene};
 
+use crate::clipped::ClippedLight;
 use crate::error::TrainError;
 use crate::mix::{ProducerMix, ProducerOptions, ProducerSpec};
 use crate::producer::{Produced, ProducerContext, ProducerStats};
@@ -186,6 +188,12 @@ pub struct FrameStats {
     /// The learning rate of the frame's first step, decayed as the cache's configuration says
     /// (0 for the hash cache).
     pub learning_rate: f32,
+    /// Records whose target was clamped at the loss bound, the light returned to their bins
+    /// ([`crate::clipped`]; 0 when the cache's loss does not return it).
+    pub clamped: usize,
+    /// The records' mean gain from the light returned to their bins (1 when none was; 0 when
+    /// the cache's loss does not return it).
+    pub clip_gain: f32,
     pub producer: ProducerStats,
     pub inference: PassStats,
 }
@@ -208,6 +216,8 @@ pub struct OnlineTrainer {
     /// The last frame's training records' positions (normalised to the scene box, as the
     /// cache sees them): where the frame trained (the viewer's heat map).
     record_positions: Vec<[f32; 3]>,
+    /// The light the loss bound clipped, per bin (when the cache's loss returns it).
+    clipped: Option<ClippedLight>,
 }
 
 impl OnlineTrainer {
@@ -235,6 +245,7 @@ impl OnlineTrainer {
                 .train_budget_ms
                 .map(|ms| TrainBudget::new(ms, settings.records_per_frame)),
             record_positions: Vec::new(),
+            clipped: None,
             settings,
         })
     }
@@ -367,7 +378,7 @@ impl OnlineTrainer {
             width,
             height,
         };
-        let produced = produce_frame(
+        let mut produced = produce_frame(
             &mut self.mix,
             s,
             &source,
@@ -393,17 +404,34 @@ impl OnlineTrainer {
 
         let t = Instant::now();
         let order = shuffled(produced.batch.queries.len(), seed);
+        // The cache's predictions at every record, where the loss returns the light its bound
+        // clips (the clamp is at the prediction).
+        let returned = self.cache.neural().and_then(|c| {
+            c.config()
+                .loss
+                .return_clipped
+                .clone()
+                .map(|r| (r, c.config().loss.clone()))
+        });
+        let all = returned
+            .is_some()
+            .then(|| self.cache.infer(&produced.batch.queries));
         // The change score: the cache's predictions (what the passes read) at the frame's
         // training queries, before it learns from them (not watched without recovery). Beyond
         // PROBE_RECORDS records a shuffled subset, so that a mix's producers all take part.
         if s.recover {
-            let probe = produced.batch.queries.len().min(PROBE_RECORDS);
-            let probed = if probe < produced.batch.queries.len() {
-                std::borrow::Cow::Owned(produced.batch.select(&order[..probe]))
+            let n = produced.batch.queries.len();
+            let probe = n.min(PROBE_RECORDS);
+            let probed = if probe < n {
+                Cow::Owned(produced.batch.select(&order[..probe]))
             } else {
-                std::borrow::Cow::Borrowed(&produced.batch)
+                Cow::Borrowed(&produced.batch)
             };
-            let predictions = self.cache.infer(&probed.queries);
+            let predictions = match &all {
+                Some(p) if probe < n => Cow::Owned(order[..probe].iter().map(|&i| p[i]).collect()),
+                Some(p) => Cow::Borrowed(p.as_slice()),
+                None => Cow::Owned(self.cache.infer(&probed.queries)),
+            };
             stats.change_z = self.monitor.score(&probed, &predictions).z;
             stats.phase = self.detector.observe(stats.change_z);
             match stats.phase {
@@ -412,6 +440,20 @@ impl OnlineTrainer {
                 Phase::Recovered => self.cache.end_recovery(),
                 _ => {}
             }
+        }
+        // The light the bound would clip, returned to its bins (after the change score, which
+        // reads the targets as the producers made them).
+        if let (Some((spec, loss)), Some(predictions)) = (returned, &all) {
+            let light = match self.clipped.take() {
+                Some(c) if c.spec() == &spec => c,
+                _ => ClippedLight::new(&spec),
+            };
+            let done = self
+                .clipped
+                .insert(light)
+                .apply(&mut produced.batch, predictions, &loss);
+            stats.clamped = done.clamped;
+            stats.clip_gain = done.gain;
         }
         // Recovering, the cache takes more steps on each batch (decided before this frame's
         // score, which may start or end a recovery: the steps follow one frame later). On a

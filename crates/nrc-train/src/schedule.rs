@@ -102,7 +102,7 @@ impl ChangeMonitor {
         for ((q, t), y) in batch.queries.iter().zip(&batch.targets).zip(predictions) {
             let d = f64::from(luminance(Vec3::from(*t)) - luminance(Vec3::from(*y)));
             if d.is_finite() {
-                now[bin(&q.position, &q.normal)].add(d);
+                now[bin_of(&q.position, &q.normal, GRID)].add(d);
             }
         }
         let (mut total, mut bins) = (0.0f64, 0u32);
@@ -130,11 +130,11 @@ impl ChangeMonitor {
     }
 }
 
-/// The bin of a query: its cell of the 8³ grid over the scene box, and its normal's dominant
-/// axis and sign.
-fn bin(position: &[f32; 3], normal: &[f32; 3]) -> usize {
+/// The bin of a query: its cell of the `grid`³ grid over the scene box (positions normalised
+/// to it), and its normal's dominant axis and sign; `grid³ · 6` bins.
+pub(crate) fn bin_of(position: &[f32; 3], normal: &[f32; 3], grid: usize) -> usize {
     let cell = position.iter().fold(0usize, |c, p| {
-        c * GRID + ((p.clamp(0.0, 1.0) * GRID as f32) as usize).min(GRID - 1)
+        c * grid + ((p.clamp(0.0, 1.0) * grid as f32) as usize).min(grid - 1)
     });
     let n = Vec3::from(*normal);
     let a = n.abs();
