@@ -406,7 +406,7 @@ impl RadianceCache {
         let loss = &self.config.loss;
         let returned = loss.return_clipped.as_ref().map_or(String::new(), |r| {
             format!(
-                "; the clipped light returned per bin of a {g}³ grid × 6 normals over {} frames, gain ≤ {}, surfaces of roughness ≥ {} or without a specular part",
+                "; the online loop returns the clipped light per bin of a {g}³ grid × 6 normals over {} frames, gain ≤ {}, surfaces of roughness ≥ {} or without a specular part",
                 r.frames,
                 r.max_gain,
                 r.min_roughness,

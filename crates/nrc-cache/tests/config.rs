@@ -126,7 +126,7 @@ fn out_of_range_values_name_the_field() {
     ];
     for (pointer, value, field) in cases {
         let mut v = preset_json();
-        // The presets leave the clipped light's return out (opt-in): add a valid one.
+        // A valid return of the clipped light (the presets' may change).
         v["loss"]["return_clipped"] =
             serde_json::json!({"grid": 16, "frames": 64, "max_gain": 4, "min_roughness": 0.7});
         *v.pointer_mut(pointer)

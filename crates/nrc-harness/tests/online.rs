@@ -74,7 +74,7 @@ fn the_loop_returns_the_light_the_bound_clips_when_the_loss_asks() {
     let mut on = trainer_with(&scene, "lt", 2048, preset);
     let mut off = trainer_with(&scene, "lt", 2048, without);
     let describe = on.cache.neural().unwrap().describe();
-    assert!(describe.contains("clipped light returned"), "{describe}");
+    assert!(describe.contains("returns the clipped light"), "{describe}");
     let (mut clamped, mut gain) = (0, 0.0f32);
     for _ in 0..12 {
         let (s, _) = on.frame(&scene, &scene.camera, 16, 16, false).unwrap();
@@ -810,8 +810,8 @@ fn edited_preset(edits: &str) -> CacheConfig {
                 Err(_) => &mut at[key],
             };
         }
-        // A field the preset leaves out may be added under `loss`, whose sections reject
-        // unknown fields themselves (`loss.return_clipped.grid=16,...`).
+        // Under `loss` a field the preset leaves out may be added: the loss's sections reject
+        // unknown fields themselves.
         assert!(
             !at.is_null() || path.starts_with("loss."),
             "{path} is not a field of the preset"

@@ -192,7 +192,8 @@ pub struct FrameStats {
     /// ([`crate::clipped`]; 0 when the cache's loss does not return it).
     pub clamped: usize,
     /// The records' mean gain from the light returned to their bins (1 when none was; 0 when
-    /// the cache's loss does not return it).
+    /// the cache's loss does not return it). The bins start empty with a new cache and after a
+    /// confirmed change.
     pub clip_gain: f32,
     pub producer: ProducerStats,
     pub inference: PassStats,
@@ -303,6 +304,7 @@ impl OnlineTrainer {
         self.pass.reset();
         self.warmth.reset();
         self.previous.clear();
+        self.clipped = None;
     }
 
     /// The inference pass's own debug views after its last frame.
@@ -436,7 +438,11 @@ impl OnlineTrainer {
             stats.phase = self.detector.observe(stats.change_z);
             match stats.phase {
                 Phase::Changed => self.cache.begin_recovery(),
-                Phase::Confirmed => self.cache.confirm_change(),
+                Phase::Confirmed => {
+                    self.cache.confirm_change();
+                    // The bins' light is the scene's before the change.
+                    self.clipped = None;
+                }
                 Phase::Recovered => self.cache.end_recovery(),
                 _ => {}
             }
