@@ -220,6 +220,8 @@ pub struct Supersampled {
     pub rays: u64,
     /// Pixels that got extra rays.
     pub pixels: usize,
+    /// Which pixels got them, row-major (empty where no pixel could: `extra` 0).
+    pub flags: Vec<bool>,
 }
 
 /// Anti-aliases the emission seen by the camera (module documentation): `seen_means` holds
@@ -275,15 +277,18 @@ pub fn supersample(
             (n * own + sum) / (n + extra_f) - own
         })
         .collect();
-    let pixels = if extra == 0 {
-        0
-    } else {
-        flags.iter().filter(|&&f| f).count()
-    };
+    // The pixels that got the extra rays: flagged, with a finite mean of their own.
+    let flags: Vec<bool> = flags
+        .iter()
+        .zip(seen_means)
+        .map(|(&f, own)| f && own.is_finite())
+        .collect();
+    let pixels = flags.iter().filter(|&&f| f).count();
     Supersampled {
         delta,
         rays: pixels as u64 * extra as u64 + grid_rays,
         pixels,
+        flags,
     }
 }
 

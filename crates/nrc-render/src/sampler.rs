@@ -172,6 +172,16 @@ pub struct PixelSequence {
 }
 
 impl PixelSequence {
+    /// The same frame's place in the sequence of a split's extra camera ray `k`
+    /// ([`Stream::SplitSequence`]): scrambled independently of this one, so that a pixel
+    /// sample's extra rays stratify over a run's frames among themselves.
+    pub fn for_split_ray(self, k: u32) -> Self {
+        Self {
+            seed: Stream::SplitSequence(k).seed(self.seed),
+            ..self
+        }
+    }
+
     /// The camera offset in its pixel of sample `s` of pixel `pixel` (any unique index).
     pub fn offset(&self, pixel: u64, s: u32) -> Vec2 {
         let scramble = mix64(mix64(self.seed ^ SOBOL) ^ pixel.wrapping_mul(0xD1B5_4A32_D192_ED03));
@@ -273,6 +283,9 @@ pub enum Stream {
     /// Extra camera ray `k` of a frame's split (`split=N` of the ReSTIR GI passes): the
     /// pass's own per-pixel streams under it.
     SplitRay(u32),
+    /// The camera offsets' sequence of a split's extra camera ray `k`
+    /// ([`PixelSequence::for_split_ray`]), from the run's sequence seed.
+    SplitSequence(u32),
 }
 
 impl Stream {
@@ -290,6 +303,7 @@ impl Stream {
             Self::ConvergeFrame(k) => (9, k),
             Self::VplWarmup(k) => (10, k),
             Self::SplitRay(k) => (11, k),
+            Self::SplitSequence(k) => (12, k),
         };
         mix64(mix64(seed ^ (id as u64).wrapping_mul(0xD1B5_4A32_D192_ED03)) ^ k as u64)
     }
@@ -324,6 +338,7 @@ mod tests {
                         Stream::ConvergeFrame(k),
                         Stream::VplWarmup(k),
                         Stream::SplitRay(k),
+                        Stream::SplitSequence(k),
                     ]
                     .map(|s| s.seed(seed)),
                 );

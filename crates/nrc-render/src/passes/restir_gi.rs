@@ -48,7 +48,8 @@ use rayon::prelude::*;
 use crate::error::SettingsError;
 use super::reuse::{self, Entry, Merge, Resampling, Slot, WorldHistory};
 use super::screen::{
-    GBuffer, MAX, Phase, Primary, par_map, par_map_into, split_camera_rays, stream,
+    GBuffer, MAX, Phase, Primary, par_map, par_map_into, split_camera_rays, split_emission,
+    stream,
     visible_between,
 };
 use super::params::{Key, Params, Value};
@@ -177,9 +178,10 @@ pub struct RestirGiSettings {
     /// them, an ablation and the refresh test's negative control).
     pub refresh: bool,
     /// Camera rays a pixel sample for the light gathered up to the shading vertex `x₁`: the
-    /// emission and NEE along the specular chain before it and the direct light at `x₁`
-    /// (1: the path's own alone; N: N − 1 more, [`super::screen::split_camera_rays`]). The
-    /// reservoir's reflected light keeps one path a frame.
+    /// emission seen directly, the emission and NEE along the specular chain before `x₁` and
+    /// the direct light at `x₁` (1: the path's own alone; N: N − 1 more,
+    /// [`super::screen::split_camera_rays`]). The reservoir's reflected light keeps one path a
+    /// frame.
     pub split: u32,
     /// The split's negative control for the tests: the path's own gathered light is kept
     /// whole beside the split's mean instead of entering it (weight (2N − 1)/N in all). No
@@ -437,6 +439,8 @@ struct Traced {
     /// The split's extra camera rays ([`RestirGiSettings::split`]): the sum of their
     /// estimates of the light gathered up to the shading vertex ([`Traced::gathered`]).
     split: Vec3,
+    /// The sum of what the split's extra camera rays saw directly ([`split_emission`]).
+    split_seen: Vec3,
     stats: PathStats,
 }
 
@@ -743,11 +747,12 @@ impl RenderPass for RestirGiPass {
             let mut t = self.trace_one(scene, input.seed, i, g.primary[i].as_ref(), false);
             if extra > 0 {
                 let jitter = self.settings.jitter;
-                t.split = split_camera_rays(input, i, jitter, extra, &mut t.stats, |p, seed, stats| {
-                    let ray = self.trace_one(scene, seed, i, Some(p), true);
-                    stats.add(&ray.stats);
-                    ray.gathered()
-                });
+                (t.split, t.split_seen) =
+                    split_camera_rays(input, i, jitter, extra, &mut t.stats, |p, seed, stats| {
+                        let ray = self.trace_one(scene, seed, i, Some(p), true);
+                        stats.add(&ray.stats);
+                        ray.gathered()
+                    });
             }
             t
         });
@@ -880,11 +885,14 @@ impl RenderPass for RestirGiPass {
         let shaded: Vec<(Vec3, GiReservoir, PathStats)> = par_map(n, |i| {
             let (mut r, mut stats) = spatial[i];
             let t = &traced[i];
-            // The light gathered up to x₁ (the path's own, or with a split the mean of its
-            // camera rays'), then the reflected light of the reservoir at x₁.
+            // The emission the camera sees and the light gathered up to x₁ (the path's own, or
+            // with a split the mean of its camera rays'), then the reflected light of the
+            // reservoir at x₁.
             let n = set.split.max(1) as f32;
             let own = if set.split_keeps_own { n } else { 1.0 };
-            let mut l = g.emitted[i] + (own * t.gathered() + t.split) / n;
+            let extra = set.split.saturating_sub(1);
+            let seen = split_emission(&g, i, extra, t.split_seen);
+            let mut l = seen + (own * t.gathered() + t.split) / n;
             if let Some(sh) = &t.shading {
                 let mut indirect = Vec3::ZERO;
                 if let Some(y) = r.sample {
