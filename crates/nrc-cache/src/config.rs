@@ -654,49 +654,24 @@ impl CacheConfig {
             );
         }
         let l = &self.loss;
-        if !(l.epsilon.is_finite() && l.epsilon > 0.0) {
-            return err(
-                "loss.epsilon".into(),
-                format!("must be finite and > 0, got {}", l.epsilon),
-            );
-        }
-        if !(l.max_target.is_finite() && l.max_target > 0.0) {
-            return err(
-                "loss.max_target".into(),
-                format!("must be finite and > 0, got {}", l.max_target),
-            );
-        }
-        if !(l.max_relative_error.is_finite() && l.max_relative_error > 0.0) {
-            return err(
-                "loss.max_relative_error".into(),
-                format!("must be finite and > 0, got {}", l.max_relative_error),
-            );
-        }
+        finite_above("loss.epsilon", l.epsilon, 0.0, true)?;
+        finite_above("loss.max_target", l.max_target, 0.0, true)?;
+        finite_above("loss.max_relative_error", l.max_relative_error, 0.0, true)?;
         if let Some(r) = &l.return_clipped {
-            if !(r.min_roughness.is_finite() && r.min_roughness >= 0.0) {
-                return err(
-                    "loss.return_clipped.min_roughness".into(),
-                    format!("must be finite and >= 0, got {}", r.min_roughness),
-                );
-            }
+            finite_above(
+                "loss.return_clipped.min_roughness",
+                r.min_roughness,
+                0.0,
+                false,
+            )?;
             if !(1..=64).contains(&r.grid) {
                 return err(
                     "loss.return_clipped.grid".into(),
                     format!("must be 1 to 64 cells, got {}", r.grid),
                 );
             }
-            if !(r.frames.is_finite() && r.frames >= 1.0) {
-                return err(
-                    "loss.return_clipped.frames".into(),
-                    format!("must be finite and >= 1, got {}", r.frames),
-                );
-            }
-            if !(r.max_gain.is_finite() && r.max_gain >= 1.0) {
-                return err(
-                    "loss.return_clipped.max_gain".into(),
-                    format!("must be finite and >= 1, got {}", r.max_gain),
-                );
-            }
+            finite_above("loss.return_clipped.frames", r.frames, 1.0, false)?;
+            finite_above("loss.return_clipped.max_gain", r.max_gain, 1.0, false)?;
         }
         validate_optimizer(&self.optimizer, "optimizer", true)
     }
@@ -802,4 +777,20 @@ fn validate_optimizer(o: &OptimizerConfig, field: &str, top: bool) -> Result<(),
             Ok(())
         }
     }
+}
+
+/// An error naming `field` unless `value` is finite and above `min` (`strict`) or at least
+/// `min`: "must be finite and > 0, got …".
+fn finite_above(field: &str, value: f32, min: f32, strict: bool) -> Result<(), CacheError> {
+    let ok = value.is_finite() && if strict { value > min } else { value >= min };
+    if ok {
+        return Ok(());
+    }
+    Err(CacheError::Config {
+        field: field.into(),
+        message: format!(
+            "must be finite and {} {min}, got {value}",
+            if strict { ">" } else { ">=" }
+        ),
+    })
 }
