@@ -44,6 +44,7 @@ pub mod params;
 pub mod reuse;
 pub mod screen;
 pub mod spec;
+pub mod split;
 
 use std::str::FromStr;
 

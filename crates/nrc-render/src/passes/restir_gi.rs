@@ -48,10 +48,9 @@ use rayon::prelude::*;
 use crate::error::SettingsError;
 use super::reuse::{self, Entry, Merge, Resampling, Slot, WorldHistory};
 use super::screen::{
-    GBuffer, MAX, Phase, Primary, par_map, par_map_into, split_camera_rays, split_emission,
-    stream,
-    visible_between,
+    GBuffer, MAX, Phase, Primary, par_map, par_map_into, stream, visible_between,
 };
+use super::split::{SplitChooser, SplitTerms, split_camera_rays, split_emission};
 use super::params::{Key, Params, Value};
 use super::spec::{PassConfig, PassKind, parse_variant};
 use super::frame::{FrameInput, PassOutput, PhaseTimes, RenderPass};
@@ -180,9 +179,12 @@ pub struct RestirGiSettings {
     /// Camera rays a pixel sample for the light gathered up to the shading vertex `x₁`: the
     /// emission seen directly, the emission and NEE along the specular chain before `x₁` and
     /// the direct light at `x₁` (1: the path's own alone; N: N − 1 more,
-    /// [`super::screen::split_camera_rays`]). The reservoir's reflected light keeps one path a
-    /// frame.
+    /// [`super::split::split_camera_rays`]; 0: chosen for each frame between 2 and
+    /// `split_max` by the variances and costs of the frames before, [`SplitChooser`]). The
+    /// reservoir's reflected light keeps one path a frame.
     pub split: u32,
+    /// The most camera rays a chosen split (`split` 0) takes.
+    pub split_max: u32,
     /// The split's negative control for the tests: the path's own gathered light is kept
     /// whole beside the split's mean instead of entering it (weight (2N − 1)/N in all). No
     /// key.
@@ -206,6 +208,7 @@ impl Default for RestirGiSettings {
             jacobian: true,
             refresh: true,
             split: 1,
+            split_max: 8,
             split_keeps_own: false,
             specular: SPECULAR_ROUGHNESS,
         }
@@ -217,10 +220,12 @@ impl RestirGiSettings {
     /// up to its shading vertex over two camera rays (`split=2`): measured at equal time
     /// against one ray, 1.2–1.45× lower MSE on the kitchen at 160 × 90 and 640 × 360, and
     /// lower or level on the door scenes (RESULTS.md, "Splitting the light gathered before the
-    /// reservoir" and "`split=2` the default for world-space ReSTIR GI"). `-biased` shares the
-    /// split's part of the estimator (the light before the reservoir) and follows; it was not
-    /// measured with it. Screen space and `-nrc` (whose frames are cheaper, so an extra ray
-    /// weighs more) were not measured with it and keep one.
+    /// reservoir" and "`split=2` the default for world-space ReSTIR GI"); a count chosen each
+    /// frame (`split=0`, [`SplitChooser`]) was not measured better on the kitchen ("A split
+    /// chosen by variance and cost"). `-biased` shares the split's part of the estimator (the
+    /// light before the reservoir) and follows; it was not measured with it. Screen space and
+    /// `-nrc` (whose frames are cheaper, so an extra ray weighs more) were not measured with it
+    /// and keep one.
     pub fn variant(reuse: GiReuse, biased: bool, cache: bool) -> Self {
         let world = matches!(reuse, GiReuse::World { .. });
         Self {
@@ -237,8 +242,8 @@ impl RestirGiSettings {
         if self.light_samples == 0 {
             return Err(SettingsError::bounds("light samples", "be at least 1", 0));
         }
-        if self.split == 0 {
-            return Err(SettingsError::bounds("split", "be at least 1", 0));
+        if self.split_max < 2 {
+            return Err(SettingsError::bounds("splitmax", "be at least 2", self.split_max));
         }
         match self.reuse {
             GiReuse::Screen { neighbours, radius } => {
@@ -313,9 +318,11 @@ impl Params for RestirGiSettings {
         f(&nee.range(1.0, MAX), &mut self.light_samples);
         let split = Key::new(
             "split",
-            "camera rays a pixel sample for the light up to the shading vertex (1: the path's)",
+            "camera rays a pixel sample for the light up to the shading vertex (1: the path's; 0: chosen each frame)",
         );
-        f(&split.range(1.0, MAX), &mut self.split);
+        f(&split.range(0.0, MAX), &mut self.split);
+        let split_max = Key::new("splitmax", "the most camera rays a chosen split (split=0) takes");
+        f(&split_max.range(2.0, MAX), &mut self.split_max);
         let jacobian = Key::new("jacobian", "shift W by the reconnection Jacobian (0: biased)");
         f(&jacobian, &mut self.jacobian);
         f(&Key::new("jitter", "jitter camera rays in the pixel"), &mut self.jitter);
@@ -441,6 +448,8 @@ struct Traced {
     split: Vec3,
     /// The sum of what the split's extra camera rays saw directly ([`split_emission`]).
     split_seen: Vec3,
+    /// Rays the split's extra camera rays traced (in `stats` too).
+    split_rays: u64,
     stats: PathStats,
 }
 
@@ -464,7 +473,11 @@ pub struct RestirGiPass {
     pub settings: RestirGiSettings,
     tracer: PathTracer,
     history: Option<History>,
-    frame: Option<(GBuffer, Vec<Traced>, Vec<(Refresh, Vertex)>, f64)>,
+    /// The traced frame: its G-buffer, pixel samples, history to refresh, trace time (ms) and
+    /// split.
+    frame: Option<(GBuffer, Vec<Traced>, Vec<(Refresh, Vertex)>, f64, u32)>,
+    /// `split=0`: the split's chooser, kept across frames.
+    chooser: Option<SplitChooser>,
     /// The last frame's trace buffer, its allocation reused ([`par_map_into`]).
     spare: Vec<Traced>,
 }
@@ -483,6 +496,7 @@ impl RestirGiPass {
             tracer: *tracer,
             history: None,
             frame: None,
+            chooser: None,
             spare: Vec::new(),
         }
     }
@@ -731,6 +745,7 @@ impl RenderPass for RestirGiPass {
 
     fn reset(&mut self) {
         self.history = None;
+        self.chooser = None;
     }
 
     fn debug_views(&self) -> Vec<super::frame::PassView> {
@@ -741,18 +756,22 @@ impl RenderPass for RestirGiPass {
         let scene = input.scene;
         let t = Instant::now();
         let g = GBuffer::trace(input, self.settings.jitter);
-        let extra = self.settings.split.saturating_sub(1);
+        let split = self.split();
+        let extra = split.saturating_sub(1);
         let mut traced = std::mem::take(&mut self.spare);
         par_map_into(&mut traced, g.len(), |i| {
             let mut t = self.trace_one(scene, input.seed, i, g.primary[i].as_ref(), false);
             if extra > 0 {
                 let jitter = self.settings.jitter;
+                let mut stats = PathStats::default();
                 (t.split, t.split_seen) =
-                    split_camera_rays(input, i, jitter, extra, &mut t.stats, |p, seed, stats| {
+                    split_camera_rays(input, i, jitter, extra, &mut stats, |p, seed, stats| {
                         let ray = self.trace_one(scene, seed, i, Some(p), true);
                         stats.add(&ray.stats);
                         ray.gathered()
                     });
+                t.split_rays = stats.rays();
+                t.stats.add(&stats);
             }
             t
         });
@@ -775,7 +794,7 @@ impl RenderPass for RestirGiPass {
             _ => Vec::new(),
         };
         queries.extend(refresh.iter().map(|(_, v)| v.query()));
-        self.frame = Some((g, traced, refresh, t.elapsed().as_secs_f64() * 1e3));
+        self.frame = Some((g, traced, refresh, t.elapsed().as_secs_f64() * 1e3, split));
         queries
     }
 
@@ -787,7 +806,7 @@ impl RenderPass for RestirGiPass {
                 "resolve without trace needs a pass that asks no source"
             );
         }
-        let (g, traced, refresh, trace_ms) = self.frame.take().expect("just traced");
+        let (g, traced, refresh, trace_ms, split) = self.frame.take().expect("just traced");
         let scene = input.scene;
         let seed = input.seed;
         let n = g.len();
@@ -882,17 +901,18 @@ impl RenderPass for RestirGiPass {
         // pixel's own candidate was found by a ray from it, and a history sample taken there
         // was shadow-tested (`recheck`).
         let t0 = Instant::now();
-        let shaded: Vec<(Vec3, GiReservoir, PathStats)> = par_map(n, |i| {
+        let shaded: Vec<(Vec3, GiReservoir, PathStats, Vec3)> = par_map(n, |i| {
             let (mut r, mut stats) = spatial[i];
             let t = &traced[i];
             // The emission the camera sees and the light gathered up to x₁ (the path's own, or
             // with a split the mean of its camera rays'), then the reflected light of the
             // reservoir at x₁.
-            let n = set.split.max(1) as f32;
+            let n = split.max(1) as f32;
             let own = if set.split_keeps_own { n } else { 1.0 };
-            let extra = set.split.saturating_sub(1);
+            let extra = split.saturating_sub(1);
             let seen = split_emission(&g, i, extra, t.split_seen);
             let mut l = seen + (own * t.gathered() + t.split) / n;
+            let mut reflected = Vec3::ZERO;
             if let Some(sh) = &t.shading {
                 let mut indirect = Vec3::ZERO;
                 if let Some(y) = r.sample {
@@ -908,11 +928,14 @@ impl RenderPass for RestirGiPass {
                     (Some(weight), Some((y, _))) => weight * y.l,
                     _ => Vec3::ZERO,
                 };
-                l += sh.throughput * (delta + indirect);
+                reflected = sh.throughput * (delta + indirect);
+                l += reflected;
             }
-            (l, r, stats)
+            (l, r, stats, reflected)
         });
         times.shading_ms = t0.elapsed().as_secs_f64() * 1e3;
+        let (shaded, reflected): (Vec<_>, Vec<_>) =
+            shaded.into_iter().map(|(l, r, s, refl)| ((l, r, s), refl)).unzip();
 
         // The grid for the next frame: temporal reservoirs keyed at x₁, second samples at x₂
         // (its build is counted in the spatial phase).
@@ -929,6 +952,10 @@ impl RenderPass for RestirGiPass {
             GiReuse::Screen { .. } => None,
         };
         times.spatial_ms += t0.elapsed().as_secs_f64() * 1e3;
+        if let Some(chooser) = &mut self.chooser {
+            let rays = g.rays + shaded.iter().map(|s| s.2.rays()).sum::<u64>();
+            chooser_observe(chooser, &traced, &reflected, split, rays);
+        }
         self.spare = traced;
 
         let (out, res) = super::screen::assemble(&g, input, shaded, times);
@@ -940,7 +967,41 @@ impl RenderPass for RestirGiPass {
     }
 }
 
+/// Gives `chooser` a frame of `split` camera rays a pixel sample: each pixel sample's terms
+/// ([`SplitTerms`]; the emission the rays see is left to the outline's rays,
+/// `--emitter-samples`), and the frame's cost and the split's share of it, counted in rays
+/// traced (so that a seed renders the same frames on any machine; on the kitchen at 160 × 90
+/// the split's share by rays, 0.23 of the rest, is its share by time, 0.25).
+fn chooser_observe(
+    chooser: &mut SplitChooser,
+    traced: &[Traced],
+    reflected: &[Vec3],
+    split: u32,
+    frame_rays: u64,
+) {
+    let m = split.saturating_sub(1).max(1) as f32;
+    let terms: Vec<SplitTerms> = (traced.par_iter().zip(reflected))
+        .map(|(t, &reflected)| SplitTerms {
+            own: t.gathered(),
+            extras: t.split / m,
+            reflected,
+        })
+        .collect();
+    let split_rays: u64 = traced.iter().map(|t| t.split_rays).sum();
+    chooser.observe(&terms, split, frame_rays as f64, split_rays as f64);
+}
+
 impl RestirGiPass {
+    /// The camera rays of the next frame's split: the fixed count, or (`split=0`) the
+    /// chooser's.
+    fn split(&mut self) -> u32 {
+        if self.settings.split > 0 {
+            return self.settings.split;
+        }
+        let max = self.settings.split_max;
+        self.chooser.get_or_insert_with(|| SplitChooser::new(max)).rays()
+    }
+
     /// The history's samples that reuse can reach, each with the vertex at its sample facing
     /// its owner: the screen reservoirs (with temporal reuse on) and the grid's entries.
     fn refresh_list(&self, scene: &Scene, h: &History) -> Vec<(Refresh, Vertex)> {

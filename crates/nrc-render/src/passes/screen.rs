@@ -13,7 +13,7 @@ use rayon::prelude::*;
 
 use super::frame::{FrameInput, PassOutput, PassStats, PhaseTimes};
 use crate::path_tracer::PathStats;
-use crate::sampler::{PixelSampler, Stream};
+use crate::sampler::PixelSampler;
 use crate::transport::Vertex;
 
 /// Cosine of the largest angle between the normals of two vertices that may share samples.
@@ -46,7 +46,7 @@ pub enum Phase {
     HistoryRefresh = 9,
     /// The near-specular recursion at shading (DDGI resampling's eqs. 7–8).
     Footprint = 10,
-    /// The offsets of a split's extra camera rays in the pixel ([`split_camera_rays`]).
+    /// The offsets of a split's extra camera rays in the pixel ([`super::split::split_camera_rays`]).
     Split = 11,
 }
 
@@ -74,7 +74,7 @@ pub struct GBuffer {
     /// The primary vertex of each pixel sample (`None`: the ray escaped).
     pub primary: Vec<Option<Primary>>,
     /// Radiance the camera ray sees directly (emission of its hit, or the environment), which
-    /// counts fully (a pass's split averages it with its extra rays', [`split_emission`]).
+    /// counts fully (a pass's split averages it with its extra rays', [`super::split::split_emission`]).
     pub emitted: Vec<Vec3>,
     /// Per pixel, whether its emission was supersampled on an emitter's outline (empty: none
     /// was); [`GBuffer::emission_rays`].
@@ -263,80 +263,6 @@ pub(crate) fn primary_hit(scene: &Scene, ray: &Ray) -> (Option<Primary>, Vec3) {
         }),
         le,
     )
-}
-
-/// The light a pass gathers up to its shading vertex, split over more camera rays: `extra`
-/// more camera rays in the pixel of pixel sample `i` (uniform in it, or through its centre
-/// without `jitter`), `gather` estimating that light from each one's primary vertex with the
-/// seed it is given (each ray its own, for the pass's named streams); returns their sum, and
-/// the sum of what they saw directly (emission or the environment). A pass
-/// that takes a split replaces its path's own estimate `D₀` of that light by
-/// `(D₀ + sum) / (extra + 1)`: each term estimates the same mean over the pixel, so the pixel
-/// stays unbiased, and a term costs a camera ray and the rays to the shading vertex and of its
-/// direct light, not a path (but where a pass traces a pixel's path whole, as screen-space
-/// ReSTIR GI does at a specular primary, the term is that whole path). The seen light joins
-/// the G-buffer's by [`split_emission`], for no ray more.
-///
-/// With the frame's [`FrameInput::sequence`] (a run's frames stratifying each pixel), extra
-/// ray `k` takes the same point of a sequence of its own (another scramble): each of the
-/// `extra + 1` rays of a pixel sample is stratified over the run's frames with its
-/// like-numbered rays, so averaging them keeps the stratification of each. (Independent
-/// offsets here would average stratified rays with unstratified ones; consecutive points of
-/// one sequence would put every frame's G-buffer ray in the same half of the pixel.)
-pub(crate) fn split_camera_rays(
-    input: &FrameInput,
-    i: usize,
-    jitter: bool,
-    extra: u32,
-    stats: &mut PathStats,
-    mut gather: impl FnMut(&Primary, u64, &mut PathStats) -> Vec3,
-) -> (Vec3, Vec3) {
-    let spp = input.spp.max(1) as usize;
-    let pixel = i / spp;
-    let xy = Vec2::new(
-        (pixel % input.width as usize) as f32,
-        (pixel / input.width as usize) as f32,
-    );
-    let mut s = stream(input.seed, i, Phase::Split);
-    let (mut sum, mut seen) = (Vec3::ZERO, Vec3::ZERO);
-    for k in 0..extra {
-        let offset = if jitter {
-            let independent = s.next_2d();
-            let sequence = input.sequence.map(|q| q.for_split_ray(k));
-            crate::sampler::camera_offset(sequence, pixel as u64, (i % spp) as u32, independent)
-        } else {
-            Vec2::splat(0.5)
-        };
-        let ray = input
-            .camera
-            .generate_ray(xy + offset, input.width, input.height);
-        stats.closest_rays += 1;
-        let (p, le) = primary_hit(input.scene, &ray);
-        // A non-finite value counts as black, as the outline's extra rays do.
-        if le.is_finite() {
-            seen += le;
-        }
-        if let Some(p) = p {
-            // A seed of its own for each extra ray: the pass's streams of pixel sample `i`
-            // under it are independent of the frame's.
-            sum += gather(&p, Stream::SplitRay(k).seed(input.seed), stats);
-        }
-    }
-    (sum, seen)
-}
-
-/// The emission seen directly at pixel sample `i`, over the G-buffer's ray and a split's
-/// `extra` rays, which saw `seen` in all ([`split_camera_rays`]): every ray weighs the same,
-/// the G-buffer's value counting for [`GBuffer::emission_rays`] of them (on an emitter's
-/// outline, the supersampled mean). The outline is decided from the neighbours' samples alone
-/// (`crate::emitters`), so the weights are independent of the pixel's rays and each term's
-/// expectation is the pixel's mean emission: unbiased.
-pub(crate) fn split_emission(g: &GBuffer, i: usize, extra: u32, seen: Vec3) -> Vec3 {
-    if extra == 0 {
-        return g.emitted[i];
-    }
-    let m = g.emission_rays(i);
-    (g.emitted[i] * m + seen) / (m + extra as f32)
 }
 
 /// Whether the segment from `a` (a surface point with geometric normal `ng_a`) to `b` (with
