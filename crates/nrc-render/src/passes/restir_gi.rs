@@ -48,7 +48,7 @@ use rayon::prelude::*;
 use crate::error::SettingsError;
 use super::reuse::{self, Entry, Merge, Resampling, Slot, WorldHistory};
 use super::screen::{
-    GBuffer, MAX, Phase, Primary, par_map, par_map_into, stream, visible_between,
+    GBuffer, MAX, MAX_COUNT, Phase, Primary, par_map, par_map_into, stream, visible_between,
 };
 use super::split::{SplitChooser, SplitTerms, split_camera_rays, split_emission};
 use super::params::{Key, Params, Value};
@@ -242,8 +242,18 @@ impl RestirGiSettings {
         if self.light_samples == 0 {
             return Err(SettingsError::bounds("light samples", "be at least 1", 0));
         }
-        if self.split_max < 2 {
-            return Err(SettingsError::bounds("splitmax", "be at least 2", self.split_max));
+        if !(2..=MAX_COUNT).contains(&self.split_max) {
+            let what = format!("be between 2 and {MAX_COUNT}");
+            return Err(SettingsError::bounds("splitmax", what, self.split_max));
+        }
+        if self.split == 0 && !(self.is_world() && !self.cache) {
+            // Tested and measured with world-space traced tails only (a cache's answers would
+            // be a cost the rays do not count).
+            return Err(SettingsError::bounds(
+                "split",
+                "be at least 1 here (0, a split chosen each frame, is for wsrestir-gi)",
+                0,
+            ));
         }
         match self.reuse {
             GiReuse::Screen { neighbours, radius } => {
@@ -318,7 +328,8 @@ impl Params for RestirGiSettings {
         f(&nee.range(1.0, MAX), &mut self.light_samples);
         let split = Key::new(
             "split",
-            "camera rays a pixel sample for the light up to the shading vertex (1: the path's; 0: chosen each frame)",
+            "camera rays a pixel sample for the light up to the shading vertex \
+             (1: the path's; 0: chosen each frame)",
         );
         f(&split.range(0.0, MAX), &mut self.split);
         let split_max = Key::new("splitmax", "the most camera rays a chosen split (split=0) takes");

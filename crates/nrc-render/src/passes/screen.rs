@@ -46,7 +46,8 @@ pub enum Phase {
     HistoryRefresh = 9,
     /// The near-specular recursion at shading (DDGI resampling's eqs. 7–8).
     Footprint = 10,
-    /// The offsets of a split's extra camera rays in the pixel ([`super::split::split_camera_rays`]).
+    /// The offsets of a split's extra camera rays in the pixel
+    /// ([`super::split::split_camera_rays`]).
     Split = 11,
 }
 
@@ -74,7 +75,8 @@ pub struct GBuffer {
     /// The primary vertex of each pixel sample (`None`: the ray escaped).
     pub primary: Vec<Option<Primary>>,
     /// Radiance the camera ray sees directly (emission of its hit, or the environment), which
-    /// counts fully (a pass's split averages it with its extra rays', [`super::split::split_emission`]).
+    /// counts fully (a pass's split averages it with its extra rays',
+    /// [`super::split::split_emission`]).
     pub emitted: Vec<Vec3>,
     /// Per pixel, whether its emission was supersampled on an emitter's outline (empty: none
     /// was); [`GBuffer::emission_rays`].

@@ -105,8 +105,8 @@ const SPLIT_MEMORY: u32 = 16;
 /// from estimated variances and costs in Rath et al. 2022 (EARS, "Efficiency-Aware Russian
 /// Roulette and Splitting"), here for one factor per frame.
 ///
-/// With `n` rays, the estimate at a pixel sample is `X = E + (D₀ + … + D_{n−1}) / n + R`: `Dₖ`
-/// the light gathered up to the shading vertex by camera ray `k` (`D₀` the path's own) and
+/// With `n` rays, the estimate at a pixel sample is `X = E + (D₀ + … + D_{n−1}) / n + R`:
+/// `Dₖ` the light gathered up to the shading vertex by camera ray `k` (`D₀` the path's own) and
 /// `R` the reservoir's reflected light, found by the path's own ray. So
 /// `Var X = A / n + B` (the emission `E` seen aside: on an emitter's edge the outline's rays
 /// are what lowers its variance), `A = Var D + 2 Cov(D₀, R)`,
@@ -115,21 +115,25 @@ const SPLIT_MEMORY: u32 = 16;
 ///
 /// Estimates, from a frame with `m = n − 1 ≥ 1` extra rays: with `q = D₀ − D̄` (`D̄` the
 /// extras' mean, independent of `D₀` and `R`), `E[q²] = Var D · (1 + 1/m)` and
-/// `E[q · R] = Cov(D₀, R)`; `B` per pixel sample by an exponential moving average of `R`
+/// `E[q · R] = Cov(D₀, R)`; `B` per pixel sample by an exponential moving variance of `R`
 /// over frames. That is a frame's variance: the correlation between frames is left out both
 /// ways, the reservoir's positive one (temporal reuse; the lag-one autocorrelation of `R`
 /// measured 0.25–0.43 on the kitchen and the door scenes) and the negative one of camera rays
 /// stratified over a run's frames (`--camera-offsets sobol`). The costs are what the pass
-/// gives: the frame's and the split's share of it, in any unit. Each estimate is a moving average over [`SPLIT_MEMORY`] frames.
-/// Only frames before the one it sizes decide `n`, so a frame's ray count is fixed before its
-/// random numbers are drawn and each frame stays unbiased.
+/// gives: the frame's and the split's share of it, in any unit. Each estimate is an
+/// exponential moving average with weight `1 / min(frames, SPLIT_MEMORY)`; pixel samples
+/// with a non-finite term (counted black by the pass) are left out. Only frames before the
+/// one it sizes decide `n`, so a frame's ray count is fixed before its random numbers are
+/// drawn and each frame stays unbiased.
 #[derive(Clone, Debug)]
 pub struct SplitChooser {
     max: u32,
     /// Per pixel sample: the moving mean of `R` and its moving variance.
     reflected: Vec<(Vec3, f32)>,
-    /// Frames observed since the pixel samples last changed.
+    /// Frames seen since the pixel samples last changed.
     frames: u32,
+    /// Frames taken into the moving averages of the image's estimates.
+    observed: u32,
     /// Moving averages over frames of the image's `A`, `B`, `c₀` and `c₁`.
     a: f64,
     b: f64,
@@ -146,6 +150,7 @@ impl SplitChooser {
             max: max.max(2),
             reflected: Vec::new(),
             frames: 0,
+            observed: 0,
             a: 0.0,
             b: 0.0,
             c0: 0.0,
@@ -171,34 +176,45 @@ impl SplitChooser {
         if rays < 2 || terms.is_empty() {
             return;
         }
+        let finite =
+            |t: &SplitTerms| t.own.is_finite() && t.extras.is_finite() && t.reflected.is_finite();
         if self.reflected.len() != terms.len() {
-            self.reflected = terms.iter().map(|t| (t.reflected, 0.0)).collect();
+            self.reflected = terms
+                .iter()
+                .map(|t| (if finite(t) { t.reflected } else { Vec3::ZERO }, 0.0))
+                .collect();
             self.frames = 1;
+            self.observed = 0;
             return;
         }
         self.frames += 1;
         let w = 1.0 / self.frames.min(SPLIT_MEMORY) as f32;
         let m = (rays - 1) as f64;
-        let (mut qq, mut qr, mut var_r) = (0.0f64, 0.0f64, 0.0f64);
+        let (mut qq, mut qr, mut var_r, mut kept) = (0.0f64, 0.0f64, 0.0f64, 0usize);
         for (t, (mean, var)) in terms.iter().zip(&mut self.reflected) {
-            let q = t.own - t.extras;
-            qq += (q.dot(q) / 3.0) as f64;
-            qr += (q.dot(t.reflected) / 3.0) as f64;
-            let d = t.reflected - *mean;
-            *mean += w * d;
-            *var = (1.0 - w) * (*var + w * d.dot(d) / 3.0);
+            // A sample the pass counted as black (non-finite) tells nothing of the variances.
+            if finite(t) {
+                let q = t.own - t.extras;
+                qq += (q.dot(q) / 3.0) as f64;
+                qr += (q.dot(t.reflected) / 3.0) as f64;
+                let d = t.reflected - *mean;
+                *mean += w * d;
+                *var = (1.0 - w) * (*var + w * d.dot(d) / 3.0);
+                kept += 1;
+            }
             var_r += *var as f64;
         }
-        let count = terms.len() as f64;
+        let count = kept as f64;
         let a = qq / count / (1.0 + 1.0 / m) + 2.0 * qr / count;
-        let b = var_r / count;
+        let b = var_r / terms.len() as f64;
         let c1 = split / m;
         let c0 = (frame - split).max(0.0);
-        if !(a.is_finite() && b.is_finite() && c0.is_finite() && c1.is_finite()) {
+        if kept == 0 || !(a.is_finite() && b.is_finite() && c0.is_finite() && c1.is_finite()) {
             return;
         }
         // The moving averages start with the first frame that has a variance of `R`.
-        let k = 1.0 / (self.frames - 1).min(SPLIT_MEMORY) as f64;
+        self.observed += 1;
+        let k = 1.0 / self.observed.min(SPLIT_MEMORY) as f64;
         self.a += k * (a - self.a);
         self.b += k * (b - self.b);
         self.c0 += k * (c0 - self.c0);
@@ -234,39 +250,69 @@ mod tests {
     }
 
     /// A frame of `n` pixel samples whose gathered light has variance `var_d` (independent
-    /// draws) and whose reflected light has variance `var_r`.
-    fn frame(n: usize, rays: u32, var_d: f32, var_r: f32, seed: u64) -> Vec<SplitTerms> {
+    /// draws) and whose reflected light is `1 + coupling · D₀` plus noise of variance `var_r`
+    /// (so `Cov(D₀, R) = coupling · var_d`).
+    fn frame(
+        n: usize,
+        rays: u32,
+        var_d: f32,
+        var_r: f32,
+        coupling: f32,
+        seed: u64,
+    ) -> Vec<SplitTerms> {
         let mut s = crate::sampler::PixelSampler::new(seed, 0, 0);
-        let mut normal = |var: f32| {
+        let mut noise = |var: f32| {
             // Uniform on [−√(3 var), √(3 var)]: variance var.
             let u = s.next_1d() * 2.0 - 1.0;
             Vec3::splat(u * (3.0 * var).sqrt())
         };
         (0..n)
             .map(|_| {
-                let own = normal(var_d);
+                let own = noise(var_d);
                 let m = (rays - 1) as f32;
-                let extras = (0..rays - 1).map(|_| normal(var_d)).sum::<Vec3>() / m;
+                let extras = (0..rays - 1).map(|_| noise(var_d)).sum::<Vec3>() / m;
                 SplitTerms {
                     own,
                     extras,
-                    reflected: Vec3::ONE + normal(var_r),
+                    reflected: Vec3::ONE + coupling * own + noise(var_r),
                 }
             })
             .collect()
     }
 
-    #[test]
-    fn the_chooser_estimates_the_variances_it_is_shown() {
+    /// The chooser's estimates settle after `frames` frames of `frame(…)`, at a cost of 9 a
+    /// frame and 1 an extra ray.
+    fn settled(frames: u64, var_d: f32, var_r: f32, coupling: f32) -> SplitChooser {
         let mut c = SplitChooser::new(8);
-        for f in 0..64 {
+        for f in 0..frames {
             let rays = c.rays();
             let split = (rays - 1) as f64;
-            c.observe(&frame(4096, rays, 2.0, 0.5, f), rays, 9.0 + split, split);
+            let terms = frame(4096, rays, var_d, var_r, coupling, f);
+            c.observe(&terms, rays, 9.0 + split, split);
         }
+        c
+    }
+
+    /// The path's own gathered light anticorrelated with its reservoir's (`Cov(D₀, R)` =
+    /// −var D): `A` = Var D + 2 Cov is negative, so averaging `D₀` down with more rays loses
+    /// the cancellation and the chooser stays at 2; with the covariance term dropped (the
+    /// control) `A` would be Var D and the choice more rays.
+    #[test]
+    fn the_chooser_counts_the_own_rays_covariance_with_the_reservoir() {
+        let c = settled(48, 2.0, 0.5, -1.0);
+        let (a, b, c0, c1) = c.estimates();
+        assert!((a + 2.0).abs() < 0.15, "A {a} (expected −2)");
+        assert_eq!(c.rays(), 2);
+        // Without the covariance: A = 2, B = 2.5 (the coupled part included) chooses more.
+        assert!(best_split(2.0, b, c0, c1, 8) > 2, "B {b}");
+    }
+
+    #[test]
+    fn the_chooser_estimates_the_variances_it_is_shown() {
+        let c = settled(64, 2.0, 0.5, 0.0);
         let (a, b, c0, c1) = c.estimates();
         assert!((a - 2.0).abs() < 0.1, "A {a}");
-        // The moving variance over 16 frames sees (1 − 1/16) of it, about.
+        // The moving variance with weight 1/16 settles at 2(1 − w)/(2 − w) = 30/31 of it.
         assert!((b - 0.5).abs() < 0.06, "B {b}");
         assert!(
             (c1 - 1.0).abs() < 1e-9 && (c0 - 9.0).abs() < 1e-9,
@@ -275,12 +321,6 @@ mod tests {
         assert_eq!(c.rays(), best_split(a, b, c0, c1, 8));
         assert!(c.rays() >= 4, "rays {}", c.rays());
         // The reflected light's variance dominating: the fewest rays.
-        let mut c = SplitChooser::new(8);
-        for f in 0..32 {
-            let rays = c.rays();
-            let split = (rays - 1) as f64;
-            c.observe(&frame(4096, rays, 0.01, 4.0, f), rays, 9.0 + split, split);
-        }
-        assert_eq!(c.rays(), 2);
+        assert_eq!(settled(32, 0.01, 4.0, 0.0).rays(), 2);
     }
 }
