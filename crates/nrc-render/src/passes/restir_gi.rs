@@ -912,18 +912,11 @@ impl RenderPass for RestirGiPass {
         // pixel's own candidate was found by a ray from it, and a history sample taken there
         // was shadow-tested (`recheck`).
         let t0 = Instant::now();
-        let shaded: Vec<(Vec3, GiReservoir, PathStats, Vec3)> = par_map(n, |i| {
+        let shaded: Vec<(Vec3, GiReservoir, PathStats)> = par_map(n, |i| {
             let (mut r, mut stats) = spatial[i];
             let t = &traced[i];
-            // The emission the camera sees and the light gathered up to x₁ (the path's own, or
-            // with a split the mean of its camera rays'), then the reflected light of the
-            // reservoir at x₁.
-            let n = split.max(1) as f32;
-            let own = if set.split_keeps_own { n } else { 1.0 };
-            let extra = split.saturating_sub(1);
-            let seen = split_emission(&g, i, extra, t.split_seen);
-            let mut l = seen + (own * t.gathered() + t.split) / n;
-            let mut reflected = Vec3::ZERO;
+            // The light before the reservoir, then the reflected light of the reservoir at x₁.
+            let mut l = self.before_reservoir(&g, t, i, split);
             if let Some(sh) = &t.shading {
                 let mut indirect = Vec3::ZERO;
                 if let Some(y) = r.sample {
@@ -939,14 +932,11 @@ impl RenderPass for RestirGiPass {
                     (Some(weight), Some((y, _))) => weight * y.l,
                     _ => Vec3::ZERO,
                 };
-                reflected = sh.throughput * (delta + indirect);
-                l += reflected;
+                l += sh.throughput * (delta + indirect);
             }
-            (l, r, stats, reflected)
+            (l, r, stats)
         });
         times.shading_ms = t0.elapsed().as_secs_f64() * 1e3;
-        let (shaded, reflected): (Vec<_>, Vec<_>) =
-            shaded.into_iter().map(|(l, r, s, refl)| ((l, r, s), refl)).unzip();
 
         // The grid for the next frame: temporal reservoirs keyed at x₁, second samples at x₂
         // (its build is counted in the spatial phase).
@@ -963,9 +953,8 @@ impl RenderPass for RestirGiPass {
             GiReuse::Screen { .. } => None,
         };
         times.spatial_ms += t0.elapsed().as_secs_f64() * 1e3;
-        if let Some(chooser) = &mut self.chooser {
-            let rays = g.rays + shaded.iter().map(|s| s.2.rays()).sum::<u64>();
-            chooser_observe(chooser, &traced, &reflected, split, rays);
+        if self.chooser.is_some() {
+            self.observe_split(&g, &traced, &shaded, split);
         }
         self.spare = traced;
 
@@ -978,31 +967,50 @@ impl RenderPass for RestirGiPass {
     }
 }
 
-/// Gives `chooser` a frame of `split` camera rays a pixel sample: each pixel sample's terms
-/// ([`SplitTerms`]; the emission the rays see is left to the outline's rays,
-/// `--emitter-samples`), and the frame's cost and the split's share of it, counted in rays
-/// traced (so that a seed renders the same frames on any machine; on the kitchen at 160 × 90
-/// the split's share by rays, 0.23 of the rest, is its share by time, 0.25).
-fn chooser_observe(
-    chooser: &mut SplitChooser,
-    traced: &[Traced],
-    reflected: &[Vec3],
-    split: u32,
-    frame_rays: u64,
-) {
-    let m = split.saturating_sub(1).max(1) as f32;
-    let terms: Vec<SplitTerms> = (traced.par_iter().zip(reflected))
-        .map(|(t, &reflected)| SplitTerms {
-            own: t.gathered(),
-            extras: t.split / m,
-            reflected,
-        })
-        .collect();
-    let split_rays: u64 = traced.iter().map(|t| t.split_rays).sum();
-    chooser.observe(&terms, split, frame_rays as f64, split_rays as f64);
-}
-
 impl RestirGiPass {
+    /// The light of pixel sample `i` before the reservoir: the emission the camera sees and
+    /// the light gathered up to `x₁` (the path's own, or with a split of `split` rays the mean
+    /// of its camera rays').
+    fn before_reservoir(&self, g: &GBuffer, t: &Traced, i: usize, split: u32) -> Vec3 {
+        let n = split.max(1) as f32;
+        let own = if self.settings.split_keeps_own { n } else { 1.0 };
+        let seen = split_emission(g, i, split.saturating_sub(1), t.split_seen);
+        seen + (own * t.gathered() + t.split) / n
+    }
+
+    /// Gives the chooser a frame of `split` camera rays a pixel sample: each pixel sample's
+    /// terms ([`SplitTerms`]: its reflected light is its shaded value less the light before
+    /// the reservoir, so the hot path keeps no buffer for it; the emission the rays see is
+    /// left to the outline's rays, `--emitter-samples`), and the frame's cost and the split's
+    /// share of it, counted in rays traced (so that a seed renders the same frames on any
+    /// machine; on the kitchen at 160 × 90 the split's share by rays, 0.23 of the rest, is its
+    /// share by time, 0.25).
+    fn observe_split(
+        &mut self,
+        g: &GBuffer,
+        traced: &[Traced],
+        shaded: &[(Vec3, GiReservoir, PathStats)],
+        split: u32,
+    ) {
+        let m = split.saturating_sub(1).max(1) as f32;
+        let terms: Vec<SplitTerms> = (0..traced.len())
+            .into_par_iter()
+            .map(|i| {
+                let t = &traced[i];
+                SplitTerms {
+                    own: t.gathered(),
+                    extras: t.split / m,
+                    reflected: shaded[i].0 - self.before_reservoir(g, t, i, split),
+                }
+            })
+            .collect();
+        let frame_rays = g.rays + shaded.iter().map(|s| s.2.rays()).sum::<u64>();
+        let split_rays: u64 = traced.iter().map(|t| t.split_rays).sum();
+        if let Some(chooser) = &mut self.chooser {
+            chooser.observe(&terms, split, frame_rays as f64, split_rays as f64);
+        }
+    }
+
     /// The camera rays of the next frame's split: the fixed count, or (`split=0`) the
     /// chooser's.
     fn split(&mut self) -> u32 {
