@@ -145,7 +145,11 @@ impl fmt::Display for SceneSummary {
             self.lights.0, self.lights.1, self.lights.2
         )?;
         if let Some((nodes, depth)) = self.light_tree {
-            writeln!(f, "light tree: {nodes} nodes, depth {depth}")?;
+            writeln!(
+                f,
+                "light tree: {nodes} nodes of up to {} children, depth {depth}",
+                crate::light_tree::WIDTH
+            )?;
         }
         writeln!(
             f,
