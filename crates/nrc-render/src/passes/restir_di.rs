@@ -9,8 +9,9 @@
 //!    on emissive triangles, punctual lights, environment directions; shading-point
 //!    independent, so they can be reused elsewhere), or `tree_light_candidates` where the scene
 //!    samples lights by its light tree (each costs a descent of the tree and already favours
-//!    the lights that matter at the point: 4 measured as good as 32 at an eighth of the cost
-//!    on `many-lights`, RESULTS.md), and `bsdf_candidates` BSDF samples whose
+//!    the lights that matter at the point: on `many-lights` 4 measured as good as 32 at an
+//!    eighth of the cost, and with the eight-wide tree 2 better than 4 at 100 ms, 200 ms and
+//!    1 s a frame, RESULTS.md), and `bsdf_candidates` BSDF samples whose
 //!    ray reaches an emitter or the environment. Each enters with the balance-heuristic RIS
 //!    weight `p̂(y) / (M_l p_l(y) + M_b p_b(y))`, densities in the light's own measure (area for
 //!    triangles, solid angle for the environment, counting for punctual lights), target `p̂`
@@ -96,7 +97,7 @@ impl Default for RestirDiSettings {
     fn default() -> Self {
         Self {
             light_candidates: 32,
-            tree_light_candidates: 4,
+            tree_light_candidates: 2,
             bsdf_candidates: 1,
             temporal: true,
             spatial_neighbours: 5,
