@@ -278,9 +278,21 @@ fn cone_union(a: (Vec3, f32), b: (Vec3, f32)) -> (Vec3, f32) {
 }
 
 /// The Surface Area Orientation Heuristic's cost of a node (Conty Estevez and Kulla 2018,
-/// eq. 2; pbrt-v4's `EvaluateCost`): power × the orientation cone's measure × the box's area,
-/// stretched by how thin the parent is along the split axis.
+/// eq. 2; pbrt-v4's `EvaluateCost`): its [`spread`], stretched by how thin the parent is
+/// along the split axis.
 fn cost(b: &LightBounds, parent: (Vec3, Vec3), dim: usize) -> f32 {
+    let d = parent.1 - parent.0;
+    let kr = if d[dim] > 0.0 {
+        d.max_element() / d[dim]
+    } else {
+        1.0
+    };
+    spread(b) * kr
+}
+
+/// How much light a node spreads over how much of space and direction: power × the
+/// orientation cone's measure × the box's area (the heuristic's measure of a node).
+fn spread(b: &LightBounds) -> f32 {
     let theta_o = b.cos_o.clamp(-1.0, 1.0).acos();
     let theta_e = b.cos_e.clamp(-1.0, 1.0).acos();
     let theta_w = (theta_o + theta_e).min(PI);
@@ -289,13 +301,7 @@ fn cost(b: &LightBounds, parent: (Vec3, Vec3), dim: usize) -> f32 {
         + PI / 2.0
             * (2.0 * theta_w * sin_o - (theta_o - 2.0 * theta_w).cos() - 2.0 * theta_o * sin_o
                 + b.cos_o);
-    let d = parent.1 - parent.0;
-    let kr = if d[dim] > 0.0 {
-        d.max_element() / d[dim]
-    } else {
-        1.0
-    };
-    b.phi * m_omega * kr * b.surface_area()
+    b.phi * m_omega * b.surface_area()
 }
 
 /// A node of the binary tree the build makes before it is collapsed into [`Wide`] nodes.
@@ -335,8 +341,9 @@ impl LightTree {
     /// A tree over `bounded` lights (entries with zero or non-finite power are left out) and
     /// the lights at `infinity`: a binary tree built by the surface area orientation heuristic,
     /// then collapsed into nodes of [`WIDTH`] children, each node taking in turn the children
-    /// of its most powerful interior child until it is full (as wide BVHs are made from
-    /// binary ones). The probabilities are those of a descent over the wide nodes.
+    /// of its interior child of the largest [`spread`] until it is full (as wide BVHs are made
+    /// from binary ones: the loosest bound is replaced by its children's tighter ones first).
+    /// The probabilities are those of a descent over the wide nodes.
     pub fn new(bounded: Vec<(LightSource, LightBounds)>, infinity: Vec<LightSource>) -> Self {
         let mut lights: Vec<(LightSource, LightBounds)> = bounded
             .into_iter()
@@ -373,10 +380,8 @@ impl LightTree {
             let Some(k) = (0..lanes.len())
                 .filter(|&k| !binary[lanes[k]].leaf)
                 .max_by(|&x, &y| {
-                    binary[lanes[x]]
-                        .bounds
-                        .phi
-                        .total_cmp(&binary[lanes[y]].bounds.phi)
+                    let m = |k: usize| spread(&binary[lanes[k]].bounds);
+                    m(x).total_cmp(&m(y))
                 })
             else {
                 break;

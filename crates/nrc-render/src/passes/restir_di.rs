@@ -10,8 +10,8 @@
 //!    independent, so they can be reused elsewhere), or `tree_light_candidates` where the scene
 //!    samples lights by its light tree (each costs a descent of the tree and already favours
 //!    the lights that matter at the point: on `many-lights` 4 measured as good as 32 at an
-//!    eighth of the cost, and with the eight-wide tree 2 better than 4 at 100 ms, 200 ms and
-//!    1 s a frame, RESULTS.md), and `bsdf_candidates` BSDF samples whose
+//!    eighth of the cost, and with the eight-wide tree 2 no worse than 4 at 100 and 200 ms a
+//!    frame, RESULTS.md), and `bsdf_candidates` BSDF samples whose
 //!    ray reaches an emitter or the environment. Each enters with the balance-heuristic RIS
 //!    weight `p̂(y) / (M_l p_l(y) + M_b p_b(y))`, densities in the light's own measure (area for
 //!    triangles, solid angle for the environment, counting for punctual lights), target `p̂`
