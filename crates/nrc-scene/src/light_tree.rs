@@ -625,6 +625,15 @@ mod tests {
         )
     }
 
+    /// The `i`-th of the tests' scattered emitters: `i` as a number, a centre and a unit
+    /// normal.
+    fn scattered(i: u32) -> (f32, Vec3, Vec3) {
+        let f = i as f32;
+        let c = Vec3::new((f * 0.37).sin() * 3.0, (f * 0.71).cos() * 2.0, f * 0.1);
+        let n = Vec3::new((f * 1.3).cos(), (f * 0.4).sin(), 0.5).normalize();
+        (f, c, n)
+    }
+
     /// Every light's probability at a point and the share of draws that find none sum to 1,
     /// and sampling hits each light as often as `pmf` says (exactly: the choices are a partition of
     /// `[0, 1)`, walked here on a fine grid of `u`).
@@ -632,9 +641,7 @@ mod tests {
     fn probabilities_sum_to_one_and_match_sampling() {
         let mut lights = Vec::new();
         for i in 0..40u32 {
-            let f = i as f32;
-            let c = Vec3::new((f * 0.37).sin() * 3.0, (f * 0.71).cos() * 2.0, f * 0.1);
-            let n = Vec3::new((f * 1.3).cos(), (f * 0.4).sin(), 0.5).normalize();
+            let (f, c, n) = scattered(i);
             lights.push(tri_light(i, c, n, 1.0 + (f * 0.9).sin().abs() * 5.0));
         }
         lights.push((LightSource::Punctual(0), LightBounds::point(Vec3::ONE, 3.0)));
@@ -730,9 +737,7 @@ mod tests {
     fn a_wide_node_weighs_each_child_as_the_one_light_bound() {
         let mut bounds = Vec::new();
         for i in 0..24u32 {
-            let f = i as f32;
-            let c = Vec3::new((f * 0.37).sin() * 3.0, (f * 0.71).cos() * 2.0, f * 0.1);
-            let n = Vec3::new((f * 1.3).cos(), (f * 0.4).sin(), 0.5).normalize();
+            let (f, c, n) = scattered(i);
             let half = Vec3::splat(0.05 + 0.3 * (f * 0.5).sin().abs());
             bounds.push(match i % 4 {
                 0 => LightBounds::surface(c - half, c + half, n, 1.0 + f, false),
